@@ -1,0 +1,7 @@
+"""leoc: Locally Enforced Optimal Controllers.
+
+A hybrid controller pi(x) = r(x) G(x) + (1 - r(x)) H(x) that equals an LQR design G near an
+operating point and a learned policy H elsewhere (Zhang & Capel, L4DC 2021).
+"""
+
+__version__ = "0.1.0"
