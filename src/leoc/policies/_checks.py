@@ -1,0 +1,103 @@
+"""Input conversion and validation shared by the policy modules.
+
+Every user-facing argument is converted once and checked by one of these helpers, which raise
+``TypeError`` (wrong kind of object) or ``ValueError`` (right kind, wrong value or shape) with a
+message naming the argument, what was expected and what was found.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+import torch
+from torch import Tensor
+
+__all__ = [
+    "as_float_tensor",
+    "check_finite",
+    "check_last_dim",
+    "check_positive",
+    "check_positive_int",
+    "check_shape",
+    "shape_str",
+]
+
+
+def shape_str(shape: tuple[int, ...] | torch.Size) -> str:
+    """Format a shape as ``(2, 3)``; a 1-tuple as ``(3,)`` and a scalar as ``()``."""
+    return str(tuple(int(size) for size in shape))
+
+
+def as_float_tensor(value: object, name: str, dtype: torch.dtype) -> Tensor:
+    """Convert ``value`` to a fresh floating tensor that does not alias the caller's data.
+
+    Parameters
+    ----------
+    value : array-like, Tensor or number
+        The user's input.
+    name : str
+        Argument name used in error messages.
+    dtype : torch.dtype
+        Floating dtype of the result.
+
+    Returns
+    -------
+    Tensor
+        A detached copy of ``value`` in ``dtype`` (same device if ``value`` is a tensor).
+    """
+    if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise TypeError(f"dtype must be a floating torch.dtype, found {dtype!r}")
+    if isinstance(value, (str, bytes)) or value is None:
+        raise TypeError(f"{name} must be array-like of numbers, found {type(value).__name__}")
+    try:
+        tensor = torch.as_tensor(value, dtype=dtype)
+    except (TypeError, ValueError, RuntimeError) as exc:
+        raise TypeError(
+            f"{name} must be array-like of numbers, found {type(value).__name__}"
+        ) from exc
+    return tensor.detach().clone()
+
+
+def check_shape(tensor: Tensor, name: str, expected: tuple[int, ...], letters: str) -> None:
+    """Raise ``ValueError`` unless ``tensor.shape == expected``.
+
+    ``letters`` names the dimensions, e.g. ``"(F, D)"``, so the message reads
+    ``W must have shape (F, D) = (1, 3), found (3,)``.
+    """
+    if tuple(tensor.shape) != tuple(expected):
+        raise ValueError(
+            f"{name} must have shape {letters} = {shape_str(expected)}, "
+            f"found {shape_str(tensor.shape)}"
+        )
+
+
+def check_finite(tensor: Tensor, name: str) -> None:
+    """Raise ``ValueError`` if any entry of ``tensor`` is NaN or infinite."""
+    if not bool(torch.isfinite(tensor).all()):
+        raise ValueError(f"{name} must be finite, found {tensor.tolist()}")
+
+
+def check_positive(tensor: Tensor, name: str) -> None:
+    """Raise ``ValueError`` unless every entry of ``tensor`` is finite and strictly positive."""
+    if not bool((torch.isfinite(tensor) & (tensor > 0)).all()):
+        raise ValueError(f"{name} must be positive and finite, found {tensor.tolist()}")
+
+
+def check_positive_int(value: object, name: str) -> int:
+    """Return ``value`` as ``int`` if it is a positive integer (``bool`` is rejected)."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)):
+        raise TypeError(f"{name} must be a positive int, found {type(value).__name__}")
+    if int(value) <= 0:
+        raise ValueError(f"{name} must be a positive int, found {int(value)}")
+    return int(value)
+
+
+def check_last_dim(x: Tensor, dim: int, name: str = "x") -> None:
+    """Raise unless ``x`` is a tensor whose last dimension has size ``dim``."""
+    if not isinstance(x, Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor, found {type(x).__name__}")
+    if x.dim() == 0 or x.shape[-1] != dim:
+        raise ValueError(
+            f"{name} must have shape (..., D) with D = {dim}, found {shape_str(x.shape)}"
+        )

@@ -1,0 +1,327 @@
+"""Common machinery of the three benchmark systems.
+
+Every system is described by
+
+* a frozen parameter dataclass (physical constants with units, derived quantities as
+  properties, :meth:`PhysicalParams.scaled` to build perturbed copies);
+* a pure, batched, differentiable step function in torch (float64), the single source of truth
+  used by the gymnasium environment, the linearisation, PILCO and the robustness sweeps;
+* a :class:`System` object that bundles the step function with the observation map, reward,
+  termination test, operating point and start distribution.
+
+Shapes: ``B`` batch, ``S`` state dimension, ``O`` observation dimension, ``A`` action dimension.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar, Literal, NamedTuple
+
+import numpy as np
+import torch
+from torch import Tensor
+
+DTYPE = torch.float64
+DEFAULT_EPISODE_STEPS = 200
+START_KINDS = ("swing_up", "operating_point")
+StartKind = Literal["swing_up", "operating_point"]
+
+
+def wrap_angle(angle: Tensor) -> Tensor:
+    """Wrap an angle to ``[-pi, pi)``, exactly as gymnasium's ``angle_normalize``."""
+    return torch.remainder(angle + math.pi, 2.0 * math.pi) - math.pi
+
+
+def as_state_tensor(value: Any, dim: int, name: str) -> Tensor:
+    """Convert ``value`` to a float64 tensor of shape ``(B, dim)`` (a 1-D input gets ``B = 1``).
+
+    Raises
+    ------
+    ValueError
+        If the trailing dimension is not ``dim`` or the input has more than two dimensions.
+    """
+    tensor = torch.as_tensor(value, dtype=DTYPE)
+    if tensor.ndim == 1:
+        tensor = tensor.unsqueeze(0)
+    if tensor.ndim != 2 or tensor.shape[-1] != dim:
+        raise ValueError(
+            f"{name}: expected shape ({dim},) or (B, {dim}), found {tuple(tensor.shape)}"
+        )
+    return tensor
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicalParams:
+    """Base class of the frozen parameter dataclasses.
+
+    Subclasses declare their constants as fields and list in ``MASS_FIELDS`` the fields that a
+    mass scaling multiplies. Derived quantities (total mass, pole mass-length, ...) are
+    properties, so they are recomputed for every scaled copy.
+    """
+
+    MASS_FIELDS: ClassVar[tuple[str, ...]] = ()
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ValueError(
+                    f"{type(self).__name__}.{field.name}: expected a positive finite number, "
+                    f"found {value!r}"
+                )
+
+    def scaled(self, **factors: float) -> PhysicalParams:
+        """Return a copy with fields multiplied by the given factors.
+
+        ``mass=f`` multiplies every field listed in ``MASS_FIELDS``; any other keyword must name
+        a field (``gravity=2.0`` doubles g). Derived quantities follow automatically.
+
+        Raises
+        ------
+        ValueError
+            On an unknown name or a non-positive factor.
+        """
+        names = {field.name for field in dataclasses.fields(self)}
+        changes: dict[str, float] = {}
+        for key, factor in factors.items():
+            if not isinstance(factor, (int, float)) or not math.isfinite(factor) or factor <= 0:
+                raise ValueError(f"{key}: expected a positive scale factor, found {factor!r}")
+            targets = self.MASS_FIELDS if key == "mass" else (key,)
+            for target in targets:
+                if target not in names:
+                    valid = ", ".join(sorted(names | {"mass"}))
+                    raise ValueError(
+                        f"scaled(): unknown parameter {key!r} for {type(self).__name__}; "
+                        f"expected one of: {valid}"
+                    )
+                changes[target] = changes.get(target, getattr(self, target)) * factor
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain dict of the fields (for JSON reports)."""
+        return dataclasses.asdict(self)
+
+
+class ObsComponent(NamedTuple):
+    """How one observation entry is made from the state: ``kind`` in {"state", "cos", "sin"}."""
+
+    kind: str
+    state_index: int
+
+
+class System:
+    """A control benchmark: dynamics, observation, reward, operating point and starts.
+
+    Subclasses set the class attributes below and implement :meth:`step_fn`,
+    :meth:`reward_fn` and :meth:`continuous_model`.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``pendulum``, ``cartpole``, ``mountaincar``).
+    state_names, obs_layout : tuple
+        Names of the state entries and how each observation entry is built from them.
+    angle_indices : tuple of int
+        State entries that are angles (observed through cos/sin, wrapped in the reward).
+    main_index : int
+        State entry whose deviation is the response "main coordinate".
+    main_in_degrees : bool
+        Whether the main coordinate is reported in degrees (angles) or as is (positions).
+    settling_band : float
+        Settling band of the response metrics, in the units the main coordinate is reported in.
+    start_spread : tuple of float
+        Half-widths of the uniform swing-up start distribution around ``swing_up_centre``.
+    default_q, default_r : tuple
+        Diagonals of the default LQR weights (state and action).
+    """
+
+    name: ClassVar[str]
+    state_names: ClassVar[tuple[str, ...]]
+    obs_layout: ClassVar[tuple[ObsComponent, ...]]
+    angle_indices: ClassVar[tuple[int, ...]]
+    main_index: ClassVar[int]
+    main_label: ClassVar[str]
+    main_in_degrees: ClassVar[bool]
+    settling_band: ClassVar[float]
+    swing_up_centre: ClassVar[tuple[float, ...]]
+    start_spread: ClassVar[tuple[float, ...]]
+    default_q: ClassVar[tuple[float, ...]]
+    default_r: ClassVar[tuple[float, ...]]
+    out_of_bounds_reward: ClassVar[float] = 0.0
+    params_type: ClassVar[type[PhysicalParams]]
+
+    def __init__(self, params: PhysicalParams | None = None, **overrides: float) -> None:
+        if params is None:
+            params = self.params_type(**overrides)
+        elif overrides:
+            params = dataclasses.replace(params, **overrides)
+        if not isinstance(params, self.params_type):
+            raise TypeError(
+                f"params: expected {self.params_type.__name__}, found {type(params).__name__}"
+            )
+        self.params = params
+        self.episode_steps = DEFAULT_EPISODE_STEPS
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.params!r})"
+
+    # ------------------------------------------------------------------ dimensions and constants
+    @property
+    def state_dim(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def obs_dim(self) -> int:
+        return len(self.obs_layout)
+
+    @property
+    def action_dim(self) -> int:
+        return 1
+
+    @property
+    def dt(self) -> float:
+        """Time step in seconds."""
+        return float(self.params.dt)  # type: ignore[attr-defined]
+
+    @property
+    def action_limit(self) -> float:
+        """Actuator limit |u| <= action_limit (N or N m)."""
+        raise NotImplementedError
+
+    @property
+    def operating_state(self) -> np.ndarray:
+        """The operating point a in state coordinates (all our systems: the origin)."""
+        return np.zeros(self.state_dim)
+
+    @property
+    def u_eq(self) -> np.ndarray:
+        """The action that keeps the operating point an equilibrium."""
+        return np.zeros(self.action_dim)
+
+    @property
+    def operating_obs(self) -> np.ndarray:
+        """The operating point in observation coordinates."""
+        return self.observe(torch.as_tensor(self.operating_state, dtype=DTYPE)).numpy()[0]
+
+    # ------------------------------------------------------------------ dynamics
+    def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
+        """Pure batched step ``(B, S), (B, A) -> (B, S)``; the action is clipped inside."""
+        raise NotImplementedError
+
+    def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
+        """Reward ``(B,)`` of taking ``action`` in ``state`` (before the step)."""
+        raise NotImplementedError
+
+    def out_of_bounds(self, state: Tensor) -> Tensor:
+        """Boolean ``(B,)``: the state has left the allowed region (ends the episode)."""
+        return torch.zeros(state.shape[:-1], dtype=torch.bool)
+
+    def continuous_model(self) -> tuple[np.ndarray, np.ndarray]:
+        """Analytic continuous-time linearisation ``(A, B)`` about the operating point."""
+        raise NotImplementedError
+
+    def clip_action(self, action: Tensor) -> Tensor:
+        return torch.clamp(action, -self.action_limit, self.action_limit)
+
+    def step(self, state: Any, action: Any) -> Tensor:
+        """Batched step accepting array-likes; see :meth:`step_fn`."""
+        state_t = as_state_tensor(state, self.state_dim, "state")
+        action_t = as_state_tensor(action, self.action_dim, "action")
+        return self.step_fn(state_t, action_t)
+
+    def observe(self, state: Tensor) -> Tensor:
+        """Observation ``(B, O)`` of a batch of states ``(B, S)`` (1-D input gets B = 1)."""
+        state = as_state_tensor(state, self.state_dim, "state")
+        columns = []
+        for component in self.obs_layout:
+            value = state[..., component.state_index]
+            if component.kind == "cos":
+                value = torch.cos(value)
+            elif component.kind == "sin":
+                value = torch.sin(value)
+            columns.append(value)
+        return torch.stack(columns, dim=-1)
+
+    def state_from_obs(self, obs: Tensor) -> Tensor:
+        """Invert :meth:`observe` (angles by atan2 of their sin and cos)."""
+        obs = as_state_tensor(obs, self.obs_dim, "obs")
+        state = torch.zeros(obs.shape[:-1] + (self.state_dim,), dtype=DTYPE)
+        sines: dict[int, Tensor] = {}
+        cosines: dict[int, Tensor] = {}
+        for column, component in enumerate(self.obs_layout):
+            if component.kind == "state":
+                state[..., component.state_index] = obs[..., column]
+            elif component.kind == "sin":
+                sines[component.state_index] = obs[..., column]
+            else:
+                cosines[component.state_index] = obs[..., column]
+        for index, sine in sines.items():
+            state[..., index] = torch.atan2(sine, cosines[index])
+        return state
+
+    def main_coordinate(self, states: Any) -> np.ndarray:
+        """Deviation of the main coordinate from the operating point, in report units.
+
+        Angles are wrapped to [-pi, pi) and converted to degrees; positions are returned as is.
+        ``states`` has shape ``(T, S)``; the result has shape ``(T,)``.
+        """
+        states_t = torch.as_tensor(np.asarray(states), dtype=DTYPE)
+        deviation = states_t[..., self.main_index] - float(self.operating_state[self.main_index])
+        if self.main_index in self.angle_indices:
+            deviation = wrap_angle(deviation)
+        values = deviation.numpy()
+        return np.degrees(values) if self.main_in_degrees else values
+
+    # ------------------------------------------------------------------ starts
+    def sample_start(
+        self,
+        rng: np.random.Generator,
+        kind: StartKind = "swing_up",
+        offset: Sequence[float] | np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Draw an initial state.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            The only source of randomness (seeded by the caller).
+        kind : {"swing_up", "operating_point"}
+            ``swing_up``: uniform in ``swing_up_centre +/- start_spread``;
+            ``operating_point``: exactly the operating point plus ``offset``.
+        offset : array-like of shape (S,), optional
+            Added to the operating point (only with ``kind="operating_point"``).
+        """
+        if kind == "swing_up":
+            if offset is not None:
+                raise ValueError("offset: only valid with kind='operating_point', found swing_up")
+            centre = np.asarray(self.swing_up_centre, dtype=float)
+            spread = np.asarray(self.start_spread, dtype=float)
+            return centre + rng.uniform(-spread, spread)
+        if kind == "operating_point":
+            state = self.operating_state.copy()
+            if offset is not None:
+                offset_arr = np.asarray(offset, dtype=float)
+                if offset_arr.shape != (self.state_dim,) or not np.all(np.isfinite(offset_arr)):
+                    raise ValueError(
+                        f"offset: expected {self.state_dim} finite numbers "
+                        f"({', '.join(self.state_names)}), found {offset!r}"
+                    )
+                state = state + offset_arr
+            return state
+        raise ValueError(f"kind: expected one of {START_KINDS}, found {kind!r}")
+
+    def with_params(self, **factors: float) -> System:
+        """A copy of this system with scaled parameters (see :meth:`PhysicalParams.scaled`)."""
+        return type(self)(self.params.scaled(**factors))
+
+    def describe(self) -> Mapping[str, Any]:
+        """A JSON-friendly description (for reports)."""
+        return {
+            "name": self.name,
+            "params": self.params.as_dict(),
+            "state_names": list(self.state_names),
+            "operating_state": self.operating_state.tolist(),
+            "u_eq": self.u_eq.tolist(),
+        }

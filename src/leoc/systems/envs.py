@@ -1,0 +1,191 @@
+"""Gymnasium environments built on the pure step functions of :mod:`leoc.systems`.
+
+All three environments share :class:`LeocEnv`: 200-step episodes (a ``TimeLimit`` added by
+``gymnasium.make``), float64 observations, a continuous action clipped to the actuator limit,
+and ``reset(options=...)`` with
+
+* ``{"start": "swing_up"}`` (the default): the swing-up start distribution;
+* ``{"start": "operating_point", "offset": [...]}``: the operating point plus an optional state
+  offset (for response and robustness tests);
+* ``{"state": [...]}``: an explicit initial state.
+
+Rendering is not part of the physics and is not provided.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from leoc.systems.base import DEFAULT_EPISODE_STEPS, DTYPE, START_KINDS, PhysicalParams, System
+from leoc.systems.cartpole import CartPole
+from leoc.systems.mountaincar import MountainCar
+from leoc.systems.pendulum import Pendulum
+
+RESET_OPTION_KEYS = ("start", "offset", "state")
+
+
+class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
+    """A gymnasium view of a :class:`~leoc.systems.base.System`.
+
+    Parameters
+    ----------
+    params : PhysicalParams, optional
+        Physical constants (defaults of the system when omitted).
+    start : {"swing_up", "operating_point"}
+        Default start used when ``reset`` gets no ``start`` option.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    system_type: ClassVar[type[System]]
+
+    def __init__(self, params: PhysicalParams | None = None, start: str = "swing_up") -> None:
+        if start not in START_KINDS:
+            raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
+        self.system = self.system_type(params)
+        self.default_start = start
+        limit = np.float32(self.system.action_limit)
+        self.action_space = gym.spaces.Box(-limit, limit, shape=(1,), dtype=np.float32)
+        high = np.full(self.system.obs_dim, np.inf)
+        for column, component in enumerate(self.system.obs_layout):
+            if component.kind != "state":
+                high[column] = 1.0
+        self.observation_space = gym.spaces.Box(-high, high, dtype=np.float64)
+        self.state: np.ndarray | None = None
+
+    def _obs(self) -> np.ndarray:
+        assert self.state is not None
+        obs = self.system.observe(torch.as_tensor(self.state, dtype=DTYPE))[0].numpy()
+        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - set(RESET_OPTION_KEYS)
+        if unknown:
+            raise ValueError(
+                f"options: unknown keys {sorted(unknown)}; expected some of {RESET_OPTION_KEYS}"
+            )
+        if "state" in options:
+            state = np.asarray(options["state"], dtype=float)
+            if state.shape != (self.system.state_dim,) or not np.all(np.isfinite(state)):
+                raise ValueError(
+                    f"options['state']: expected {self.system.state_dim} finite numbers "
+                    f"({', '.join(self.system.state_names)}), found {options['state']!r}"
+                )
+            self.state = state.copy()
+        else:
+            kind = options.get("start", self.default_start)
+            self.state = self.system.sample_start(self.np_random, kind, options.get("offset"))
+        return self._obs(), {"state": self.state.copy()}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self.state is None:
+            raise RuntimeError("step() called before reset()")
+        action_arr = np.asarray(action, dtype=float).reshape(-1)
+        if action_arr.shape != (1,) or not np.isfinite(action_arr[0]):
+            raise ValueError(f"action: expected one finite number, found {action!r}")
+        state_t = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
+        action_t = torch.as_tensor(action_arr, dtype=DTYPE).unsqueeze(0)
+        with torch.no_grad():
+            reward = float(self.system.reward_fn(state_t, action_t)[0])
+            next_state = self.system.step_fn(state_t, action_t)
+            terminated = bool(self.system.out_of_bounds(next_state)[0])
+        if terminated:
+            reward = float(self.system.out_of_bounds_reward)
+        self.state = next_state[0].numpy()
+        return self._obs(), reward, terminated, False, {"state": self.state.copy()}
+
+
+class PendulumSwingUpEnv(LeocEnv):
+    """Pendulum swing-up (``leoc/PendulumSwingUp-v0``), the dynamics of gymnasium's Pendulum-v1.
+
+    ==============  ===========================================================
+    State           theta (rad, 0 upright, unwrapped), theta_dot (rad/s)
+    Observation     [cos theta, sin theta, theta_dot], float64
+    Action          torque u in N m, |u| <= 2 (clipped)
+    Dynamics        theta_ddot = 3 g / (2 l) sin theta + 3 / (m l^2) u,
+                    semi-implicit Euler, dt = 0.05 s, |theta_dot| <= 8 rad/s
+    Reward          -(theta^2 + 0.1 theta_dot^2 + 0.001 u^2), theta wrapped to [-pi, pi)
+    Start           swing_up: theta = pi +/- 10 deg, theta_dot = 0 +/- 0.1 (uniform);
+                    operating_point: [0, 0] (+ offset)
+    Termination     none; truncation after 200 steps
+    Parameters      g = 10 m/s^2, m = 1 kg, l = 1 m (:class:`PendulumParams`)
+    ==============  ===========================================================
+    """
+
+    system_type = Pendulum
+
+
+class CartPoleSwingUpEnv(LeocEnv):
+    """Cart-pole swing-up with a continuous force (``leoc/CartPoleSwingUp-v0``).
+
+    ==============  ===========================================================
+    State           x (m), x_dot (m/s), theta (rad, 0 upright), theta_dot (rad/s)
+    Observation     [x, x_dot, cos theta, sin theta, theta_dot], float64
+    Action          force F in N on the cart, |F| <= 2.5 (clipped)
+    Dynamics        tmp = (F + m_p l theta_dot^2 sin theta) / (m_c + m_p),
+                    theta_ddot = (g sin theta - cos theta tmp)
+                                 / (l (4/3 - m_p cos^2 theta / (m_c + m_p))),
+                    x_ddot = tmp - m_p l theta_ddot cos theta / (m_c + m_p),
+                    explicit Euler, dt = 0.02 s
+    Reward          -0.1 (5 theta^2 + x^2 + 0.005 F^2), theta wrapped;
+                    -100 on the step that leaves |x| <= 2.4
+    Start           swing_up: [0, 0, pi, 0] +/- [0.1, 0.1, 10 deg, 0.1] (uniform);
+                    operating_point: [0, 0, 0, 0] (+ offset)
+    Termination     |x| > 2.4; truncation after 200 steps
+    Parameters      m_c = 0.05 kg, m_p = 0.005 kg, l = 0.5 m (half-length), g = 9.8 m/s^2
+    ==============  ===========================================================
+    """
+
+    system_type = CartPole
+
+
+class MountainCarHilltopEnv(LeocEnv):
+    """Mountain car that must reach and stay on the hilltop (``leoc/MountainCarHilltop-v0``).
+
+    ==============  ===========================================================
+    State           x (m, hilltop at 0, valley at -pi), x_dot (m/s)
+    Observation     [x, x_dot], float64
+    Action          force F in N, |F| <= 3 (clipped)
+    Dynamics        x_ddot = F / m - g h'(x), h(x) = 1.35 cos x + 1.65,
+                    semi-implicit Euler, dt = 0.02 s
+    Reward          -0.1 (5 x^2 + x_dot^2 + 0.005 F^2); -100 on the step that leaves
+                    [-3.6 - pi/2, 2.2 - pi/2]
+    Start           swing_up: x = -pi +/- 10 deg, x_dot = 0 +/- 0.1 (uniform);
+                    operating_point: [0, 0] (+ offset)
+    Termination     leaving the track; truncation after 200 steps
+    Parameters      m = 0.1 kg, g = 9.8 m/s^2
+    ==============  ===========================================================
+    """
+
+    system_type = MountainCar
+
+
+ENV_IDS = {
+    "pendulum": "leoc/PendulumSwingUp-v0",
+    "cartpole": "leoc/CartPoleSwingUp-v0",
+    "mountaincar": "leoc/MountainCarHilltop-v0",
+}
+ENV_CLASSES: dict[str, type[LeocEnv]] = {
+    "pendulum": PendulumSwingUpEnv,
+    "cartpole": CartPoleSwingUpEnv,
+    "mountaincar": MountainCarHilltopEnv,
+}
+
+
+def register_envs() -> None:
+    """Register the three environments with gymnasium (idempotent)."""
+    for name, env_id in ENV_IDS.items():
+        if env_id not in gym.registry:
+            cls = ENV_CLASSES[name]
+            gym.register(
+                id=env_id,
+                entry_point=f"{cls.__module__}:{cls.__name__}",
+                max_episode_steps=DEFAULT_EPISODE_STEPS,
+            )

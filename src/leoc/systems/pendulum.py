@@ -1,0 +1,137 @@
+"""Pendulum swing-up: the dynamics of gymnasium's ``Pendulum-v1`` as a pure torch function.
+
+Equations of motion (a uniform rod of mass m and length l about its end, theta = 0 upright,
+theta positive anticlockwise, torque u positive in the direction of increasing theta):
+
+.. math::
+
+    \\ddot\\theta = \\frac{3 g}{2 l} \\sin\\theta + \\frac{3}{m l^2} u
+
+integrated by semi-implicit Euler with the speed clipped to ``max_speed``:
+``theta_dot' = clip(theta_dot + dt * theta_ddot)``, ``theta' = theta + dt * theta_dot'``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import ClassVar
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from leoc.systems.base import ObsComponent, PhysicalParams, System, wrap_angle
+
+THETA_WEIGHT = 1.0
+THETA_DOT_WEIGHT = 0.1
+TORQUE_WEIGHT = 0.001
+START_ANGLE_SPREAD = math.radians(10.0)
+START_SPEED_SPREAD = 0.1
+
+
+@dataclasses.dataclass(frozen=True)
+class PendulumParams(PhysicalParams):
+    """Physical constants of the pendulum (defaults: gymnasium ``Pendulum-v1``).
+
+    Attributes
+    ----------
+    gravity : float
+        g in m/s^2.
+    mass : float
+        Rod mass m in kg.
+    length : float
+        Rod length l in m (the pivot is at one end).
+    dt : float
+        Time step in s.
+    max_torque : float
+        Actuator limit in N m.
+    max_speed : float
+        Angular speed limit in rad/s.
+    """
+
+    MASS_FIELDS: ClassVar[tuple[str, ...]] = ("mass",)
+
+    gravity: float = 10.0
+    mass: float = 1.0
+    length: float = 1.0
+    dt: float = 0.05
+    max_torque: float = 2.0
+    max_speed: float = 8.0
+
+    @property
+    def inertia(self) -> float:
+        """Moment of inertia about the pivot, m l^2 / 3, in kg m^2."""
+        return self.mass * self.length**2 / 3.0
+
+
+def pendulum_step(state: Tensor, action: Tensor, params: PendulumParams) -> Tensor:
+    """One step ``(B, 2), (B, 1) -> (B, 2)`` of state ``[theta, theta_dot]``."""
+    theta, theta_dot = state[..., 0], state[..., 1]
+    torque = torch.clamp(action[..., 0], -params.max_torque, params.max_torque)
+    theta_ddot = (
+        3.0 * params.gravity / (2.0 * params.length) * torch.sin(theta)
+        + 3.0 / (params.mass * params.length**2) * torque
+    )
+    new_theta_dot = torch.clamp(
+        theta_dot + theta_ddot * params.dt, -params.max_speed, params.max_speed
+    )
+    new_theta = theta + new_theta_dot * params.dt
+    return torch.stack([new_theta, new_theta_dot], dim=-1)
+
+
+def pendulum_reward(state: Tensor, action: Tensor, params: PendulumParams) -> Tensor:
+    """Reward ``-(theta^2 + 0.1 theta_dot^2 + 0.001 u^2)`` with theta wrapped and u clipped."""
+    theta = wrap_angle(state[..., 0])
+    torque = torch.clamp(action[..., 0], -params.max_torque, params.max_torque)
+    return -(
+        THETA_WEIGHT * theta**2 + THETA_DOT_WEIGHT * state[..., 1] ** 2 + TORQUE_WEIGHT * torque**2
+    )
+
+
+class Pendulum(System):
+    """Pendulum swing-up (state ``[theta, theta_dot]``, observation ``[cos, sin, theta_dot]``).
+
+    The operating point is the upright position ``theta = 0, theta_dot = 0`` with ``u_eq = 0``.
+    """
+
+    name = "pendulum"
+    params_type = PendulumParams
+    state_names = ("theta", "theta_dot")
+    obs_layout = (ObsComponent("cos", 0), ObsComponent("sin", 0), ObsComponent("state", 1))
+    angle_indices = (0,)
+    main_index = 0
+    main_label = "theta [deg]"
+    main_in_degrees = True
+    settling_band = 1.0
+    swing_up_centre = (math.pi, 0.0)
+    start_spread = (START_ANGLE_SPREAD, START_SPEED_SPREAD)
+    default_q = (2.0, 2.0)
+    default_r = (1.0,)
+
+    params: PendulumParams
+
+    @property
+    def action_limit(self) -> float:
+        return float(self.params.max_torque)
+
+    def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
+        return pendulum_step(state, action, self.params)
+
+    def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
+        return pendulum_reward(state, action, self.params)
+
+    def continuous_model(self) -> tuple[np.ndarray, np.ndarray]:
+        """The paper's appendix-B model with l_c = l / 2 and I = m l_c^2 / 3 (rod about its
+        centre), in our sign convention (positive torque raises theta_ddot; the paper writes
+        the input with the opposite sign):
+
+        A = [[0, 1], [m l_c g / (m l_c^2 + I), 0]],  B = [[0], [1 / (m l_c^2 + I)]].
+        """
+        p = self.params
+        centre = p.length / 2.0
+        inertia_centre = p.mass * centre**2 / 3.0
+        pivot_inertia = p.mass * centre**2 + inertia_centre
+        a_matrix = np.array([[0.0, 1.0], [p.mass * centre * p.gravity / pivot_inertia, 0.0]])
+        b_matrix = np.array([[0.0], [1.0 / pivot_inertia]])
+        return a_matrix, b_matrix
