@@ -1,0 +1,25 @@
+"""Policies: linear controller, RBF network, MLP actor, the LEOC hybrid and output saturation.
+
+Plain torch modules (float64 by default) mapping observations (..., D) to actions (..., F).
+:class:`HybridPolicy` blends a :class:`LinearController` G with any nonlinear module H,
+pi(x) = sat(r(x) G(x) + (1 - r(x)) H(x)), so that pi(a) = G(a) and dpi/dx(a) = W at the
+operating point a (Zhang & Capel, L4DC 2021).
+"""
+
+from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy
+from .linear import LinearController
+from .mlp import DEFAULT_HIDDEN_SIZES, MLPActor
+from .rbf import RBFNetwork
+from .saturation import SATURATION_MODES, saturate
+
+__all__ = [
+    "DEFAULT_HIDDEN_SIZES",
+    "SATURATION_MODES",
+    "SMOOTH_SATURATION_ATOL",
+    "HybridOutput",
+    "HybridPolicy",
+    "LinearController",
+    "MLPActor",
+    "RBFNetwork",
+    "saturate",
+]

@@ -93,10 +93,19 @@ def check_positive_int(value: object, name: str) -> int:
     return int(value)
 
 
-def check_last_dim(x: Tensor, dim: int, name: str = "x") -> None:
-    """Raise unless ``x`` is a tensor whose last dimension has size ``dim``."""
+def check_last_dim(x: Tensor, dim: int, dtype: torch.dtype | None = None, name: str = "x") -> None:
+    """Raise unless ``x`` is a tensor (of ``dtype``, if given) whose last dimension is ``dim``.
+
+    Modules do not cast their input silently: a float32 observation fed to a float64 policy
+    is reported here rather than as a matmul dtype error deep inside.
+    """
     if not isinstance(x, Tensor):
         raise TypeError(f"{name} must be a torch.Tensor, found {type(x).__name__}")
+    if dtype is not None and x.dtype != dtype:
+        raise TypeError(
+            f"{name} must have the module's dtype {dtype} (convert with {name}.to({dtype})), "
+            f"found {x.dtype}"
+        )
     if x.dim() == 0 or x.shape[-1] != dim:
         raise ValueError(
             f"{name} must have shape (..., D) with D = {dim}, found {shape_str(x.shape)}"

@@ -85,7 +85,7 @@ class LinearController(nn.Module):
 
         Shapes: ``x`` (..., D) -> (..., F).
         """
-        check_last_dim(x, self.obs_dim)
+        check_last_dim(x, self.obs_dim, self.W.dtype)
         return x @ self.W.T + self.b
 
     def extra_repr(self) -> str:

@@ -102,7 +102,7 @@ class MLPActor(nn.Module):
 
         layers: list[nn.Module] = []
         sizes = [obs_dim, *widths]
-        for width_in, width_out in zip(sizes[:-1], sizes[1:]):
+        for width_in, width_out in zip(sizes[:-1], sizes[1:], strict=True):
             layers.append(nn.Linear(width_in, width_out, dtype=dtype))
             act = activation()
             if not isinstance(act, nn.Module):
@@ -144,7 +144,7 @@ class MLPActor(nn.Module):
 
         Shapes: ``x`` (..., D) -> (..., F).
         """
-        check_last_dim(x, self.obs_dim)
+        check_last_dim(x, self.obs_dim, self.net[0].weight.dtype)
         z = self.net(x)
         if self.action_limit is None:
             return z

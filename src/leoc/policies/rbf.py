@@ -181,7 +181,7 @@ class RBFNetwork(nn.Module):
 
         Shapes: ``x`` (..., D) -> (..., F); intermediates (..., F, N, D).
         """
-        check_last_dim(x, self.obs_dim)
+        check_last_dim(x, self.obs_dim, self.centres.dtype)
         diff = x[..., None, :] - self.centres  # (..., N, D)
         # Scale per output: (..., 1, N, D) / (F, 1, D) -> (..., F, N, D). Dividing the
         # difference (rather than expanding the square) avoids cancellation far from centres.

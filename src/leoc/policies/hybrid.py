@@ -1,0 +1,313 @@
+r"""The LEOC hybrid policy: a linear controller near the operating point, a learned one elsewhere.
+
+Letters: D observation dimension, F action dimension; ``...`` any leading batch shape.
+
+Following Zhang & Capel (L4DC 2021, eq. 4-5),
+
+.. math::
+
+    \pi(x) = \operatorname{sat}\big(r(x)\, G(x) + (1 - r(x))\, H(x)\big), \qquad
+    G(x) = W x + b,
+
+    r(x) = \frac{1}{(1 + d(x))^2}, \qquad
+    d(x) = (x - a)^\top \Lambda^{-1} (x - a) = \sum_{i=1}^{D} \frac{(x_i - a_i)^2}{\lambda_i},
+    \qquad \Lambda = \operatorname{diag}(\lambda),\; \lambda_i > 0,
+
+with operating point :math:`a` (in observation coordinates), linear part :math:`G`
+(:class:`~leoc.policies.LinearController`), any differentiable nonlinear part :math:`H` and an
+actuator saturation :math:`\operatorname{sat}` (:func:`~leoc.policies.saturate`).
+
+Local identities (the paper's stability argument, Sec. 4.1). Since
+:math:`d(a) = 0` and :math:`\nabla d(a) = 2 \Lambda^{-1}(a - a) = 0`,
+
+.. math::
+
+    r(a) = 1, \qquad \nabla r(a) = -\frac{2\, \nabla d(a)}{(1 + d(a))^3} = 0,
+
+so the blend :math:`\beta = r G + (1 - r) H` satisfies
+
+.. math::
+
+    \beta(a) = G(a), \qquad
+    \frac{\partial \beta}{\partial x}(a)
+        = r W + (G - H) \nabla r^\top + (1 - r) \frac{\partial H}{\partial x} \Big|_{a} = W.
+
+The saturation keeps both identities when its value and slope at :math:`G(a)` are the identity's:
+``"clip"`` needs :math:`|G(a)| < u_{max}` (strictly inside the limits), ``"sin"`` and ``"tanh"``
+need :math:`G(a) = 0`. :class:`HybridPolicy` checks this at construction. Then
+:math:`\pi(a) = G(a)` and :math:`\partial \pi / \partial x (a) = W`: the closed loop linearised
+at :math:`a` is the linear design's, so the hybrid inherits its local stability.
+
+Limits in :math:`\Lambda`. For :math:`x \ne a`, as :math:`\max_i \lambda_i \to 0`,
+:math:`d(x) \ge \|x - a\|^2 / \max_i \lambda_i \to \infty`, hence :math:`r(x) \to 0` and
+:math:`\pi(x) \to \operatorname{sat}(H(x))`, with
+:math:`|\beta - H| = r\, |G - H| \le (\max_i \lambda_i / \|x - a\|^2)^2\, |G - H|`.
+As :math:`\min_i \lambda_i \to \infty`, :math:`d \to 0` and :math:`\pi \to \operatorname{sat}(G)`.
+The paper (Sec. 4.2) states the first limit as :math:`\lambda_i \to \infty`; with :math:`d` as
+written in its eq. 5 (weights :math:`1/\lambda_i`) the direction is :math:`\lambda_i \to 0`, which
+is what this module implements and documents. Either way :math:`\pi` can approximate any
+function that :math:`H` can, away from :math:`a`.
+
+References
+----------
+Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
+Classical Control Theory", L4DC 2021, eq. 4-5.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import Tensor, nn
+
+from ._checks import (
+    as_float_tensor,
+    check_finite,
+    check_last_dim,
+    check_positive,
+    check_shape,
+    shape_str,
+)
+from .linear import LinearController
+from .saturation import check_saturation_mode, saturate
+
+__all__ = ["HybridOutput", "HybridPolicy", "SMOOTH_SATURATION_ATOL"]
+
+SMOOTH_SATURATION_ATOL = 1e-9
+r"""Tolerance, relative to :math:`\max(1, u_{max})`, on :math:`|G(a)|` for ``"sin"``/``"tanh"``.
+
+Those saturations preserve value and slope only at 0, so :math:`G(a)` must vanish up to
+round-off for :math:`\pi(a) = G(a)` to hold.
+"""
+
+_SMOOTH_SATURATIONS = ("sin", "tanh")
+
+
+class HybridOutput(NamedTuple):
+    """Action and relevance returned by ``HybridPolicy.forward(x, return_relevance=True)``."""
+
+    action: Tensor
+    """Saturated action :math:`\\pi(x)`, shape (..., F)."""
+    relevance: Tensor
+    """Relevance :math:`r(x)`, shape (..., 1)."""
+
+
+class HybridPolicy(nn.Module):
+    r"""LEOC hybrid policy :math:`\pi(x) = \operatorname{sat}(r G + (1 - r) H)`.
+
+    .. math::
+
+        \pi(x) = \operatorname{sat}\big(r(x) G(x) + (1 - r(x)) H(x)\big), \quad
+        r(x) = (1 + d(x))^{-2}, \quad d(x) = \sum_i (x_i - a_i)^2 / \lambda_i
+
+    Shapes: input (..., D); action (..., F); relevance and distance (..., 1).
+    See the module docstring for the identities :math:`\pi(a) = G(a)`,
+    :math:`\partial\pi/\partial x(a) = W` and the limits in :math:`\Lambda`.
+
+    Parameters
+    ----------
+    linear : LinearController
+        The linear part :math:`G(x) = W x + b`, acting on the observation.
+    nonlinear : nn.Module
+        The nonlinear part :math:`H`, mapping (..., D) to (..., F) (e.g. :class:`MLPActor` or
+        :class:`RBFNetwork`). Must accept a (1, D) tensor of ``linear``'s dtype.
+    operating_point : array-like
+        Operating point :math:`a`, shape (D,), in observation coordinates. Stored as the buffer
+        ``operating_point``.
+    lambda_init : float or array-like
+        Initial :math:`\lambda > 0`, scalar (broadcast to all D) or shape (D,).
+    learn_lambda : bool
+        If True, ``log_lambda`` (shape (D,)) is an ``nn.Parameter``; otherwise a buffer.
+        The log keeps :math:`\lambda = \exp(\text{log\_lambda})` positive while training.
+    action_limit : float or array-like, optional
+        Positive actuator limit :math:`u_{max}`, scalar or shape (F,). ``None``: no saturation.
+        Stored as the buffer ``action_limit``.
+    saturation : {"clip", "sin", "tanh", "none"}
+        How the limit is applied after blending (see :func:`~leoc.policies.saturate`).
+
+    Raises
+    ------
+    TypeError
+        If ``linear`` is not a :class:`LinearController`, ``nonlinear`` is not an
+        ``nn.Module``, or an argument is not numeric.
+    ValueError
+        If shapes disagree, :math:`\lambda` or the limit is not positive and finite, the
+        saturation is unknown, ``nonlinear`` does not map (1, D) to (1, F), or the saturation
+        would break :math:`\pi(a) = G(a)` or :math:`\partial\pi/\partial x(a) = W`.
+    """
+
+    operating_point: Tensor
+    log_lambda: Tensor
+    action_limit: Tensor | None
+
+    def __init__(
+        self,
+        linear: LinearController,
+        nonlinear: nn.Module,
+        operating_point: object,
+        lambda_init: float | object = 1.0,
+        learn_lambda: bool = True,
+        action_limit: float | object | None = None,
+        saturation: str = "clip",
+    ):
+        super().__init__()
+        if not isinstance(linear, LinearController):
+            raise TypeError(f"linear must be a LinearController, found {type(linear).__name__}")
+        if not isinstance(nonlinear, nn.Module):
+            raise TypeError(f"nonlinear must be an nn.Module, found {type(nonlinear).__name__}")
+        if not isinstance(learn_lambda, bool):
+            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        self.saturation = check_saturation_mode(saturation, "saturation")
+        self.linear = linear
+        self.nonlinear = nonlinear
+        obs_dim, act_dim = linear.obs_dim, linear.act_dim
+        dtype, device = linear.W.dtype, linear.W.device
+
+        point = as_float_tensor(operating_point, "operating_point", dtype).to(device)
+        check_shape(point, "operating_point", (obs_dim,), "(D,) with D = linear.obs_dim")
+        check_finite(point, "operating_point")
+        self.register_buffer("operating_point", point)
+
+        log_lambda = torch.log(self._lambda_vector(lambda_init, obs_dim, dtype).to(device))
+        if learn_lambda:
+            self.log_lambda = nn.Parameter(log_lambda)
+        else:
+            self.register_buffer("log_lambda", log_lambda)
+
+        self.register_buffer("action_limit", self._limit_tensor(action_limit, act_dim, dtype))
+        if self.action_limit is not None:
+            self.action_limit = self.action_limit.to(device)
+
+        self._check_nonlinear_output(act_dim)
+        self._check_identities_survive_saturation()
+
+    @staticmethod
+    def _lambda_vector(lambda_init: object, obs_dim: int, dtype: torch.dtype) -> Tensor:
+        lam = as_float_tensor(lambda_init, "lambda_init", dtype)
+        if lam.shape not in (torch.Size([]), (obs_dim,)):
+            raise ValueError(
+                f"lambda_init must be a scalar or have shape (D,) = ({obs_dim},), "
+                f"found {shape_str(lam.shape)}"
+            )
+        check_positive(lam, "lambda_init")
+        return lam.expand(obs_dim).clone()
+
+    @staticmethod
+    def _limit_tensor(action_limit: object, act_dim: int, dtype: torch.dtype) -> Tensor | None:
+        if action_limit is None:
+            return None
+        limit = as_float_tensor(action_limit, "action_limit", dtype)
+        if limit.shape not in (torch.Size([]), (act_dim,)):
+            raise ValueError(
+                f"action_limit must be a scalar or have shape (F,) = ({act_dim},), "
+                f"found {shape_str(limit.shape)}"
+            )
+        check_positive(limit, "action_limit")
+        return limit
+
+    def _check_nonlinear_output(self, act_dim: int) -> None:
+        """Evaluate H once at the operating point and check it maps (1, D) -> (1, F)."""
+        probe = self.operating_point[None, :]
+        try:
+            with torch.no_grad():
+                out = self.nonlinear(probe)
+        except Exception as exc:  # any failure of user code is reported with the shapes
+            raise ValueError(
+                f"nonlinear must map a (1, D) = {shape_str(probe.shape)} tensor of dtype "
+                f"{probe.dtype} to (1, F) = (1, {act_dim}); calling it raised "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+        if not isinstance(out, Tensor):
+            raise ValueError(
+                f"nonlinear must return a Tensor of shape (1, F) = (1, {act_dim}), "
+                f"found {type(out).__name__}"
+            )
+        if tuple(out.shape) != (1, act_dim):
+            raise ValueError(
+                f"nonlinear must map (1, D) = {shape_str(probe.shape)} to (1, F) = "
+                f"(1, {act_dim}) (F = linear.act_dim), found output shape {shape_str(out.shape)}"
+            )
+
+    def _check_identities_survive_saturation(self) -> None:
+        """Reject saturations whose value/slope at G(a) would break pi(a)=G(a), dpi/dx(a)=W."""
+        if self.action_limit is None or self.saturation == "none":
+            return
+        with torch.no_grad():
+            g_a = self.linear(self.operating_point).abs()
+            limit = self.action_limit.expand_as(g_a)
+        if self.saturation in _SMOOTH_SATURATIONS:
+            tol = SMOOTH_SATURATION_ATOL * torch.clamp(limit, min=1.0)
+            if bool((g_a >= tol).any()):
+                raise ValueError(
+                    f"saturation={self.saturation!r} preserves value and slope only at 0, so "
+                    f"the identity pi(a) = G(a) needs G(a) = 0 (|G(a)| < "
+                    f"{SMOOTH_SATURATION_ATOL:g} * max(1, action_limit)); found |G(a)| = "
+                    f"{g_a.tolist()}. Use saturation='clip' or a bias b with G(a) = 0."
+                )
+        elif bool((g_a >= limit).any()):
+            raise ValueError(
+                f"saturation='clip' keeps the identity dpi/dx(a) = W only strictly inside the "
+                f"limits: need |G(a)| < action_limit, found |G(a)| = {g_a.tolist()} and "
+                f"action_limit = {limit.tolist()}"
+            )
+
+    @property
+    def obs_dim(self) -> int:
+        """Observation dimension D."""
+        return self.linear.obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """Action dimension F."""
+        return self.linear.act_dim
+
+    @property
+    def lambda_(self) -> Tensor:
+        r"""Diagonal of :math:`\Lambda`: :math:`\lambda = \exp(\text{log\_lambda})`, shape (D,)."""
+        return torch.exp(self.log_lambda)
+
+    def distance(self, x: Tensor) -> Tensor:
+        r"""Weighted squared distance :math:`d(x) = \sum_i (x_i - a_i)^2 / \lambda_i`.
+
+        Shapes: ``x`` (..., D) -> (..., 1).
+        """
+        check_last_dim(x, self.obs_dim, self.operating_point.dtype)
+        return ((x - self.operating_point).square() / self.lambda_).sum(dim=-1, keepdim=True)
+
+    def relevance(self, x: Tensor) -> Tensor:
+        r"""Relevance :math:`r(x) = 1 / (1 + d(x))^2 \in (0, 1]`, equal to 1 only at :math:`a`.
+
+        Shapes: ``x`` (..., D) -> (..., 1).
+        """
+        return (1.0 + self.distance(x)).square().reciprocal()
+
+    def blend(self, x: Tensor) -> Tensor:
+        r"""Unsaturated blend :math:`r(x) G(x) + (1 - r(x)) H(x)`.
+
+        Shapes: ``x`` (..., D) -> (..., F).
+        """
+        return self._blend(x, self.relevance(x))
+
+    def _blend(self, x: Tensor, r: Tensor) -> Tensor:
+        # Written as r G + (1 - r) H rather than H + r (G - H): at x = a, r = 1 exactly and the
+        # first form returns G(a) bit for bit, while the second would round G - H + H.
+        return r * self.linear(x) + (1.0 - r) * self.nonlinear(x)
+
+    def forward(self, x: Tensor, return_relevance: bool = False) -> Tensor | HybridOutput:
+        r"""Evaluate :math:`\pi(x) = \operatorname{sat}(r G + (1 - r) H)`.
+
+        Shapes: ``x`` (..., D) -> action (..., F); with ``return_relevance`` a
+        :class:`HybridOutput` ``(action, relevance)`` with relevance (..., 1).
+        """
+        r = self.relevance(x)
+        action = saturate(self._blend(x, r), self.action_limit, self.saturation)
+        if return_relevance:
+            return HybridOutput(action, r)
+        return action
+
+    def extra_repr(self) -> str:
+        return (
+            f"obs_dim={self.obs_dim}, act_dim={self.act_dim}, saturation={self.saturation!r}, "
+            f"learn_lambda={isinstance(self.log_lambda, nn.Parameter)}"
+        )
