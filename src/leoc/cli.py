@@ -1,0 +1,213 @@
+"""The ``leoc`` command: LQR design, simulation, training, the paper's experiments and plots.
+
+Run ``leoc --help`` or ``leoc COMMAND --help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+SYSTEM_CHOICES = ("pendulum", "cartpole", "mountaincar")
+ALGO_CHOICES = ("pilco", "ddpg", "td3")
+DEFAULT_RUNS_DIR = Path("runs")
+
+
+def _print_matrix(name: str, matrix: np.ndarray) -> None:
+    text = np.array2string(np.atleast_2d(matrix), precision=6, suppress_small=True)
+    print(f"{name} =\n{text}")
+
+
+def cmd_lqr(args: argparse.Namespace) -> int:
+    from leoc.control import design_lqr
+    from leoc.experiments.linear import design_summary
+    from leoc.systems import make_system
+
+    system = make_system(args.system)
+    design = design_lqr(system, Q=args.q, R=args.r, method=args.method)
+    if args.json:
+        print(json.dumps(design_summary(design), indent=1))
+        return 0
+    print(f"LQR design for {args.system} ({args.method}), dt = {system.dt} s")
+    print(f"state: {', '.join(system.state_names)}")
+    observed = [
+        system.state_names[c.state_index]
+        if c.kind == "state"
+        else f"{c.kind}({system.state_names[c.state_index]})"
+        for c in system.obs_layout
+    ]
+    print(f"observation: {', '.join(observed)}")
+    _print_matrix("A_d", design.A_d)
+    _print_matrix("B_d", design.B_d)
+    _print_matrix("Q", design.Q)
+    _print_matrix("R", design.R)
+    _print_matrix("K (u = u_eq - K (x - a))", design.K)
+    _print_matrix("W (G(o) = W o + b)", design.W)
+    _print_matrix("b", design.b)
+    eig = ", ".join(f"{z:.4f}" for z in design.closed_loop_eigenvalues)
+    print(f"closed-loop eigenvalues: {eig}")
+    print(f"spectral radius: {design.spectral_radius:.6f} (stable: {design.spectral_radius < 1})")
+    margins = design.margins
+    low, high = margins.gain_interval
+    print(
+        f"gain margin: {margins.gain_margin:.4f} (lower margin; loop stable for gain factors in "
+        f"[{low:.4f}, {high:.4f}])"
+    )
+    print(
+        f"phase margin: {margins.phase_margin:.2f} deg at "
+        f"{margins.gain_crossover_frequency:.3f} rad/s"
+    )
+    return 0
+
+
+def load_controller(spec: str, system_name: str, method: str = "discrete"):
+    """``linear`` (the LQR of the system) or a run folder written by ``leoc train``."""
+    from leoc.control import design_lqr
+    from leoc.policies import LinearController
+    from leoc.systems import make_system
+
+    if spec == "linear":
+        design = design_lqr(make_system(system_name), method=method)
+        return LinearController(design.W, design.b)
+    from leoc.experiments.controllers import load_trained_controller
+
+    return load_trained_controller(Path(spec))
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from leoc.evaluation.plots import plot_responses
+    from leoc.evaluation.rollout import response_test
+    from leoc.systems import make_system
+
+    system = make_system(args.system)
+    controller = load_controller(args.controller, args.system, args.method)
+    result = response_test(system, controller, args.test, steps=args.steps)
+    metrics = result.metrics
+    unit = "deg" if system.main_in_degrees else "m"
+    settling = "not settled" if metrics.settling_time is None else f"{metrics.settling_time} steps"
+    print(f"{args.test} response of {args.controller} on {args.system} ({args.steps} steps)")
+    print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
+    print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")
+    print(f"  settling time:      {settling} (band {metrics.band} {unit})")
+    print(f"  return:             {result.trajectory.total_reward:.4f}")
+    if args.plot:
+        label = "linear" if args.controller == "linear" else Path(args.controller).name
+        path = plot_responses({args.system: {args.test: {label: [result]}}}, args.plot)
+        print(f"figure written to {path}")
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    kind = "hybrid" if args.hybrid else "baseline"
+    run_dir = args.out or DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}_seed{args.seed}"
+    if args.algo == "pilco":
+        from leoc.pilco.train import train_pilco
+
+        result = train_pilco(
+            args.system,
+            hybrid=args.hybrid,
+            seed=args.seed,
+            run_dir=run_dir,
+            iterations=args.iterations,
+            progress=not args.quiet,
+        )
+    else:
+        from leoc.ddpg.train import train_ddpg
+
+        result = train_ddpg(
+            args.system,
+            algo=args.algo,
+            hybrid=args.hybrid,
+            seed=args.seed,
+            run_dir=run_dir,
+            total_steps=args.steps,
+            progress=not args.quiet,
+        )
+    print(f"run folder: {result.run_dir}")
+    return 0
+
+
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    from leoc.experiments.linear import write_linear_report
+
+    out = Path(args.out)
+    path = write_linear_report(out, method=args.method)
+    print(path.read_text())
+    print(f"report written to {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="leoc",
+        description="LEOC hybrid controllers: LQR near the operating point, a learned policy "
+        "elsewhere (Zhang & Capel, L4DC 2021).",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    lqr = commands.add_parser("lqr", help="design the LQR of a system and print it")
+    lqr.add_argument("system", choices=SYSTEM_CHOICES)
+    lqr.add_argument(
+        "--method",
+        choices=("discrete", "continuous"),
+        default="discrete",
+        help="discrete: dlqr on the autodiff linearisation (default); continuous: lqr on the "
+        "paper's analytic model",
+    )
+    lqr.add_argument("--q", type=float, nargs="+", help="diagonal of Q (default per system)")
+    lqr.add_argument("--r", type=float, nargs="+", help="diagonal of R (default 1)")
+    lqr.add_argument("--json", action="store_true", help="print the design as JSON")
+    lqr.set_defaults(func=cmd_lqr)
+
+    simulate = commands.add_parser(
+        "simulate", help="impulse or step response of a controller from the operating point"
+    )
+    simulate.add_argument("system", choices=SYSTEM_CHOICES)
+    simulate.add_argument(
+        "--controller",
+        default="linear",
+        help="'linear' (the LQR) or a run folder written by 'leoc train' (default: linear)",
+    )
+    simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
+    simulate.add_argument("--steps", type=int, default=200, help="episode length (default 200)")
+    simulate.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
+    simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    simulate.set_defaults(func=cmd_simulate)
+
+    train = commands.add_parser("train", help="train a baseline or hybrid controller")
+    train.add_argument("system", choices=SYSTEM_CHOICES)
+    train.add_argument("--algo", choices=ALGO_CHOICES, required=True)
+    train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--out", type=Path, help="run folder (default runs/SYSTEM_ALGO_KIND_seedN)")
+    train.add_argument("--iterations", type=int, help="PILCO iterations (default per system)")
+    train.add_argument("--steps", type=int, help="DDPG/TD3 environment steps (default per system)")
+    train.add_argument("--quiet", action="store_true", help="no progress output")
+    train.set_defaults(func=cmd_train)
+
+    reproduce = commands.add_parser(
+        "reproduce", help="run the paper's experiments and write the report"
+    )
+    reproduce.add_argument("--out", default=str(DEFAULT_RUNS_DIR / "reproduce"))
+    reproduce.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
+    reproduce.set_defaults(func=cmd_reproduce)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (ValueError, FileNotFoundError) as error:
+        print(f"leoc {args.command}: error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

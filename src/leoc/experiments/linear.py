@@ -1,0 +1,150 @@
+"""The linear-controller report: LQR design and impulse/step metrics of every system.
+
+This is the first stage of ``leoc reproduce``: it needs no training and runs in seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leoc.control import LQRDesign, design_lqr
+from leoc.evaluation.metrics import ResponseMetrics
+from leoc.evaluation.plots import plot_responses
+from leoc.evaluation.rollout import RESPONSE_TESTS, ResponseResult, response_test
+from leoc.experiments.paper import PAPER_IMPULSE_METRICS
+from leoc.policies import LinearController
+from leoc.systems import SYSTEM_NAMES, make_system
+
+NUMBER_FORMAT = "{:.3g}"
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename (never half-written)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.tmp")
+    temporary.write_text(text)
+    os.replace(temporary, path)
+
+
+def design_summary(design: LQRDesign) -> dict[str, Any]:
+    """JSON-friendly view of an LQR design."""
+    margins = design.margins
+    return {
+        "method": design.method,
+        "K": design.K.tolist(),
+        "W": design.W.tolist(),
+        "b": design.b.tolist(),
+        "A_d": design.A_d.tolist(),
+        "B_d": design.B_d.tolist(),
+        "Q": design.Q.tolist(),
+        "R": design.R.tolist(),
+        "closed_loop_eigenvalues": [[z.real, z.imag] for z in design.closed_loop_eigenvalues],
+        "spectral_radius": design.spectral_radius,
+        "gain_margin": margins.gain_margin,
+        "phase_margin_deg": margins.phase_margin,
+        "stable_gain_interval": list(margins.gain_interval),
+    }
+
+
+def format_settling(metrics: ResponseMetrics) -> str:
+    return "not settled" if metrics.settling_time is None else str(metrics.settling_time)
+
+
+def linear_responses(
+    systems: Sequence[str] = SYSTEM_NAMES, method: str = "discrete"
+) -> tuple[dict[str, LQRDesign], dict[str, dict[str, ResponseResult]]]:
+    """Design the LQR of every system and run its impulse and step responses."""
+    designs: dict[str, LQRDesign] = {}
+    responses: dict[str, dict[str, ResponseResult]] = {}
+    for name in systems:
+        system = make_system(name)
+        design = design_lqr(system, method=method)  # type: ignore[arg-type]
+        controller = LinearController(design.W, design.b)
+        designs[name] = design
+        responses[name] = {test: response_test(system, controller, test) for test in RESPONSE_TESTS}
+    return designs, responses
+
+
+def metrics_table(responses: dict[str, dict[str, ResponseResult]], test: str) -> list[str]:
+    """Markdown rows: ours (linear) beside the paper's "Linear" row (impulse only)."""
+    rows = [
+        "| system | unit | steady-state error | overshoot | settling time [steps] "
+        "| paper: steady-state error | paper: overshoot | paper: settling time |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, by_test in responses.items():
+        metrics = by_test[test].metrics
+        unit = "deg" if make_system(name).main_in_degrees else "m"
+        paper = PAPER_IMPULSE_METRICS[name]["linear"] if test == "impulse" else None
+        paper_cells = (
+            [
+                NUMBER_FORMAT.format(paper.steady_state_error[0]),
+                NUMBER_FORMAT.format(paper.overshoot[0]) if paper.overshoot else "-",
+                NUMBER_FORMAT.format(paper.settling_time[0]),
+            ]
+            if paper
+            else ["n/a", "n/a", "n/a"]
+        )
+        rows.append(
+            f"| {name} | {unit} | {NUMBER_FORMAT.format(metrics.steady_state_error)} "
+            f"| {NUMBER_FORMAT.format(metrics.overshoot)} | {format_settling(metrics)} | "
+            + " | ".join(paper_cells)
+            + " |"
+        )
+    return rows
+
+
+def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
+    """Write ``linear_report.md``, ``linear.json`` and ``linear_responses.png`` to ``out_dir``.
+
+    Returns the markdown path.
+    """
+    out = Path(out_dir)
+    designs, responses = linear_responses(method=method)
+    plot_responses(
+        {
+            name: {test: {"linear": [r]} for test, r in by_test.items()}
+            for name, by_test in responses.items()
+        },
+        out / "linear_responses.png",
+    )
+    data = {
+        name: {
+            "design": design_summary(designs[name]),
+            "responses": {
+                test: {**result.metrics._asdict(), "deviation": result.deviation.tolist()}
+                for test, result in responses[name].items()
+            },
+        }
+        for name in designs
+    }
+    write_text_atomic(out / "linear.json", json.dumps(data, indent=1))
+    lines = ["# Linear (LQR) controllers", "", f"Design method: {method}.", ""]
+    lines += [
+        "## Gains",
+        "",
+        "| system | K (state) | W (observation) | spectral radius "
+        "| gain margin | phase margin [deg] | stable gain interval |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, design in designs.items():
+        low, high = design.margins.gain_interval
+        lines.append(
+            f"| {name} | {np.array2string(design.K[0], precision=4)} "
+            f"| {np.array2string(design.W[0], precision=4)} | {design.spectral_radius:.4f} "
+            f"| {design.margins.gain_margin:.3f} | {design.margins.phase_margin:.1f} "
+            f"| [{low:.3f}, {high:.3f}] |"
+        )
+    for test in RESPONSE_TESTS:
+        lines += ["", f"## {test.capitalize()} response (from the operating point)", ""]
+        lines += metrics_table(responses, test)
+    lines += ["", "![responses](linear_responses.png)", ""]
+    path = out / "linear_report.md"
+    write_text_atomic(path, "\n".join(lines))
+    return path

@@ -1,0 +1,57 @@
+"""Tests of the ``leoc`` command line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from leoc.cli import main
+from leoc.control import design_lqr
+from leoc.systems import make_system
+
+
+def test_lqr_json_matches_the_library(capsys) -> None:
+    assert main(["lqr", "cartpole", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    design = design_lqr(make_system("cartpole"))
+    np.testing.assert_allclose(printed["K"], design.K)
+    np.testing.assert_allclose(printed["W"], design.W)
+    assert printed["spectral_radius"] < 1
+
+
+def test_lqr_with_custom_weights_and_bad_weights(capsys) -> None:
+    assert main(["lqr", "pendulum", "--q", "1", "1", "--r", "2"]) == 0
+    assert "spectral radius" in capsys.readouterr().out
+    assert main(["lqr", "pendulum", "--q", "1", "1", "1"]) == 2
+    assert "Q: expected shape" in capsys.readouterr().err
+
+
+def test_unknown_system_lists_the_valid_names(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["lqr", "acrobot"])
+    assert "pendulum" in capsys.readouterr().err
+
+
+def test_simulate_writes_a_png_and_prints_metrics(tmp_path, capsys) -> None:
+    figure = tmp_path / "impulse.png"
+    assert main(["simulate", "mountaincar", "--test", "impulse", "--plot", str(figure)]) == 0
+    out = capsys.readouterr().out
+    assert "settling time" in out and "overshoot" in out
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_simulate_with_a_missing_run_folder_is_a_clear_error(tmp_path, capsys) -> None:
+    assert main(["simulate", "pendulum", "--controller", str(tmp_path / "nope")]) == 2
+    assert "run folder" in capsys.readouterr().err
+
+
+def test_help_of_every_command() -> None:
+    for command in ["lqr", "simulate", "train", "reproduce"]:
+        result = subprocess.run(
+            [sys.executable, "-m", "leoc.cli", command, "--help"], capture_output=True, text=True
+        )
+        assert result.returncode == 0 and "usage" in result.stdout

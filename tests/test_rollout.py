@@ -1,0 +1,121 @@
+"""Tests of the closed-loop rollouts and the response tests."""
+
+from __future__ import annotations
+
+import control
+import numpy as np
+import pytest
+import torch
+
+from leoc.control import design_lqr
+from leoc.evaluation.metrics import response_metrics
+from leoc.evaluation.rollout import (
+    IMPULSE_MAGNITUDE,
+    STEP_MAGNITUDE,
+    hold_step,
+    response_offsets,
+    response_test,
+    rollout,
+)
+from leoc.policies import HybridPolicy, LinearController, MLPActor
+from leoc.systems import SYSTEM_NAMES, make_system
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+@pytest.mark.parametrize("test", ["impulse", "step"])
+def test_small_response_follows_the_linearised_closed_loop(name, test) -> None:
+    """The nonlinear response to a small disturbance matches the discrete linear closed loop
+    x' = (A_d - B_d K) x + B_d w simulated with python-control, to second order."""
+    system = make_system(name)
+    design = design_lqr(system)
+    result = response_test(system, LinearController(design.W, design.b), test, steps=200)
+    offsets = response_offsets(test, 200)[:, 0]
+    closed = control.ss(
+        design.A_d - design.B_d @ design.K, design.B_d, np.eye(system.state_dim), 0, system.dt
+    )
+    linear = control.forced_response(closed, U=offsets, X0=np.zeros(system.state_dim))
+    main = linear.states[system.main_index]
+    main = np.degrees(main) if system.main_in_degrees else main
+    peak = np.max(np.abs(main))
+    # the nonlinear terms are O(peak^2) relative: compare with a tolerance of that order
+    np.testing.assert_allclose(result.deviation[:200], main, atol=0.05 * peak)
+
+
+def test_impulse_and_step_offsets() -> None:
+    impulse = response_offsets("impulse", 5)
+    step = response_offsets("step", 5)
+    np.testing.assert_array_equal(impulse[:, 0], [IMPULSE_MAGNITUDE, 0, 0, 0, 0])
+    np.testing.assert_array_equal(step[:, 0], [STEP_MAGNITUDE] * 5)
+    with pytest.raises(ValueError, match="test: expected one of"):
+        response_offsets("ramp", 5)
+
+
+def test_the_response_applies_the_disturbance_to_the_action() -> None:
+    system = make_system("pendulum")
+    zero = LinearController(np.zeros((1, 3)))
+    result = response_test(system, zero, "step", steps=3)
+    np.testing.assert_allclose(result.trajectory.actions[:, 0], [STEP_MAGNITUDE] * 3)
+    result = response_test(system, zero, "impulse", steps=3)
+    np.testing.assert_allclose(result.trajectory.actions[:, 0], [IMPULSE_MAGNITUDE, 0, 0])
+    # deviation in degrees after the first step of -1 N m: theta_1 = dt^2 * 3 u / (m l^2)
+    assert result.deviation[1] == pytest.approx(np.degrees(0.05**2 * 3 * IMPULSE_MAGNITUDE))
+
+
+def test_rollout_records_relevance_of_a_hybrid_and_reward_matches_the_env() -> None:
+    system = make_system("pendulum")
+    design = design_lqr(system)
+    torch.manual_seed(0)
+    hybrid = HybridPolicy(
+        LinearController(design.W, design.b),
+        MLPActor(3, 1, (16,)),
+        system.operating_obs,
+        action_limit=system.action_limit,
+    )
+    start = np.array([0.5, 0.0])
+    trajectory = rollout(system, hybrid, start, steps=20)
+    assert trajectory.relevance is not None and trajectory.relevance.shape == (20,)
+    obs = torch.as_tensor(trajectory.observations[:20])
+    np.testing.assert_allclose(trajectory.relevance, hybrid.relevance(obs).detach().numpy()[:, 0])
+    from leoc.systems import make_env
+
+    env = make_env("pendulum")
+    env.reset(options={"state": start})
+    rewards = [env.step(a)[1] for a in trajectory.actions]
+    np.testing.assert_allclose(trajectory.rewards, rewards, rtol=1e-12)
+
+
+def test_hybrid_response_equals_linear_response_to_first_order() -> None:
+    """The paper's claim: at the operating point the hybrid responds like the LQR."""
+    system = make_system("pendulum")
+    design = design_lqr(system)
+    linear = LinearController(design.W, design.b)
+    torch.manual_seed(1)
+    hybrid = HybridPolicy(
+        linear,
+        MLPActor(3, 1, (32,)),
+        system.operating_obs,
+        lambda_init=1.0,
+        action_limit=system.action_limit,
+    )
+    ours = response_test(system, hybrid, "impulse")
+    reference = response_test(system, linear, "impulse")
+    peak = np.max(np.abs(reference.deviation))
+    assert np.max(np.abs(ours.deviation - reference.deviation)) < 0.1 * peak
+    assert abs(ours.metrics.steady_state_error) < 1e-6
+
+
+def test_hold_step() -> None:
+    system = make_system("mountaincar")
+    states = np.zeros((10, 2))
+    states[:4, 0] = 1.0
+    assert hold_step(system, states) == 4
+    assert hold_step(system, np.zeros((5, 2))) == 0
+    states[-1, 0] = 1.0
+    assert hold_step(system, states) is None
+
+
+def test_metrics_of_response_use_the_system_band() -> None:
+    system = make_system("cartpole")
+    design = design_lqr(system)
+    result = response_test(system, LinearController(design.W, design.b), "impulse")
+    assert result.metrics == response_metrics(result.deviation, system.settling_band)
