@@ -50,7 +50,7 @@ DEFAULT_FINAL_WINDOW = 20
 MIN_SAMPLES = 2
 """Shortest record accepted: one sample cannot show a deviation and a final value."""
 
-OVERSHOOT_REL_TOLERANCE = 1e-6
+OVERSHOOT_REL_TOLERANCE = 0.01
 """Fraction of :math:`\\max_t |e[t] - e_f|` a sample must exceed to fix the initial direction."""
 
 OVERSHOOT_ABS_TOLERANCE = 1e-12
