@@ -177,16 +177,18 @@ def test_distance_and_relevance_match_numpy_loops(lambda_shape):
 
 
 def test_blend_forward_and_return_relevance_are_consistent():
-    rng, W, b, a, lam = random_setup(5, 3, 2)
+    rng, W, b, a, _ = random_setup(5, 3, 2)
+    lam = np.array([10.0, 3.0, 30.0])
     nonlinear = make_nonlinear("mlp", 3, 2, 5)
     limit = np.array([0.5, 3.0])
     b = 0.4 * np.tanh(b) - W @ a  # |G(a)| < limit, required by "clip"
     policy = HybridPolicy(LinearController(W, b), nonlinear, a, lam, action_limit=limit)
-    x = t(a + rng.standard_normal((20, 3)))
+    x = t(a + 2.0 * rng.standard_normal((20, 3)))
     r_np = 1.0 / (1.0 + numpy_distance(x.numpy(), a, lam)) ** 2
     g_np = x.numpy() @ W.T + b
     h_np = nonlinear(x).detach().numpy()
     blend_np = r_np * g_np + (1.0 - r_np) * h_np
+    assert np.any(np.abs(blend_np) > limit) and np.any(np.abs(blend_np) < limit)  # clip matters
     np.testing.assert_allclose(policy.blend(x).detach().numpy(), blend_np, atol=VALUE_ATOL)
     out = policy(x, return_relevance=True)
     assert isinstance(out, HybridOutput)

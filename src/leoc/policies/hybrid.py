@@ -245,7 +245,7 @@ class HybridPolicy(nn.Module):
                     f"{SMOOTH_SATURATION_ATOL:g} * max(1, action_limit)); found |G(a)| = "
                     f"{g_a.tolist()}. Use saturation='clip' or a bias b with G(a) = 0."
                 )
-        elif False:
+        elif bool((g_a >= limit).any()):
             raise ValueError(
                 f"saturation='clip' keeps the identity dpi/dx(a) = W only strictly inside the "
                 f"limits: need |G(a)| < action_limit, found |G(a)| = {g_a.tolist()} and "
