@@ -97,7 +97,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     print(f"  return:             {result.trajectory.total_reward:.4f}")
     if args.plot:
         label = "linear" if args.controller == "linear" else Path(args.controller).name
-        path = plot_responses({args.system: {args.test: {label: [result]}}}, args.plot)
+        path = plot_responses({args.system: {args.test: {label: [result.deviation]}}}, args.plot)
         print(f"figure written to {path}")
     return 0
 
@@ -133,12 +133,26 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from leoc.experiments.linear import write_linear_report
+    from leoc.experiments.reproduce import reproduce
 
-    out = Path(args.out)
-    path = write_linear_report(out, method=args.method)
+    path = reproduce(
+        args.out,
+        profile_name=args.profile,
+        jobs=args.jobs,
+        seeds=args.seeds,
+        systems=args.systems,
+        controllers=args.controllers,
+    )
     print(path.read_text())
     print(f"report written to {path}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from leoc.experiments.report import write_report
+
+    path = write_report(args.run_dir)
+    print(f"figures and report regenerated: {path}")
     return 0
 
 
@@ -190,18 +204,46 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(func=cmd_train)
 
+    from leoc.experiments.profiles import CONTROLLERS, PROFILE_NAMES
+
     reproduce = commands.add_parser(
-        "reproduce", help="run the paper's experiments and write the report"
+        "reproduce",
+        help="train and evaluate every controller of the paper and write the report",
+        description="Train (or design) linear, DDPG baseline/hybrid and PILCO baseline/hybrid "
+        "controllers on the three systems over seeds, in parallel workers, then evaluate "
+        "responses, robustness and relevance and write report.md with CSV/JSON/PNG. Finished "
+        "runs are kept: rerunning the same command resumes.",
     )
-    reproduce.add_argument("--out", default=str(DEFAULT_RUNS_DIR / "reproduce"))
-    reproduce.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
+    reproduce.add_argument(
+        "--profile",
+        choices=PROFILE_NAMES,
+        default="quick",
+        help="quick (default: 1 seed, reduced budgets) or paper (paper budgets, 3 seeds)",
+    )
+    reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
+    reproduce.add_argument("--jobs", type=int, help="worker processes (default: CPU count)")
+    reproduce.add_argument("--seeds", type=int, help="number of seeds (default per profile)")
+    reproduce.add_argument(
+        "--systems", nargs="+", choices=SYSTEM_CHOICES, default=list(SYSTEM_CHOICES)
+    )
+    reproduce.add_argument(
+        "--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS)
+    )
     reproduce.set_defaults(func=cmd_reproduce)
+
+    plot = commands.add_parser(
+        "plot", help="regenerate the figures and report of a reproduce folder from saved numbers"
+    )
+    plot.add_argument("run_dir", type=Path)
+    plot.set_defaults(func=cmd_plot)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command == "reproduce" and args.out is None:
+        args.out = str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}")
     try:
         return int(args.func(args))
     except (ValueError, FileNotFoundError) as error:

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from leoc.evaluation.rollout import ResponseResult
 from leoc.systems import make_system
 
 CONTROLLER_COLOURS = {
@@ -55,15 +54,15 @@ def save_figure(figure, path: str | Path) -> Path:
 
 
 def plot_responses(
-    responses: Mapping[str, Mapping[str, Mapping[str, Sequence[ResponseResult]]]],
+    responses: Mapping[str, Mapping[str, Mapping[str, Sequence[np.ndarray]]]],
     path: str | Path,
 ) -> Path:
     """Grid of responses: rows = tests (impulse, step), columns = systems.
 
     Parameters
     ----------
-    responses : mapping system -> test -> controller label -> list of ResponseResult (seeds)
-        Every seed is drawn as a thin line in the controller's colour.
+    responses : mapping system -> test -> controller label -> list of deviations e(t) (seeds)
+        Every seed is drawn as a line in the controller's colour.
     path : output PNG path
     """
     plt = _pyplot()
@@ -79,12 +78,12 @@ def plot_responses(
         system = make_system(system_name)
         for row, test in enumerate(tests):
             axis = axes[row][column]
-            for label, results in responses[system_name].get(test, {}).items():
-                for index, result in enumerate(results):
-                    time = np.arange(len(result.deviation)) * system.dt
+            for label, deviations in responses[system_name].get(test, {}).items():
+                for index, deviation in enumerate(deviations):
+                    time = np.arange(len(deviation)) * system.dt
                     axis.plot(
                         time,
-                        result.deviation,
+                        deviation,
                         color=controller_colour(label),
                         linestyle=CONTROLLER_STYLES.get(label, "-"),
                         linewidth=1.2,

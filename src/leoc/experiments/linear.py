@@ -109,7 +109,7 @@ def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
     designs, responses = linear_responses(method=method)
     plot_responses(
         {
-            name: {test: {"linear": [r]} for test, r in by_test.items()}
+            name: {test: {"linear": [r.deviation]} for test, r in by_test.items()}
             for name, by_test in responses.items()
         },
         out / "linear_responses.png",

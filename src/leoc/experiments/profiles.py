@@ -1,0 +1,113 @@
+"""Typed settings of the paper's experiments: controllers, profiles and run specifications."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, NamedTuple
+
+from leoc.systems import SYSTEM_NAMES
+
+CONTROLLERS = ("linear", "ddpg_baseline", "ddpg_hybrid", "pilco_baseline", "pilco_hybrid")
+TRAINED_CONTROLLERS = CONTROLLERS[1:]
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    """Budgets of one ``leoc reproduce`` profile.
+
+    Attributes
+    ----------
+    name : str
+    seeds : tuple of int
+        Training seeds; every controller of every system is trained once per seed.
+    pilco_iterations : dict system -> int
+        PILCO iterations after the random rollouts (None entries: the PILCO default).
+    ddpg_steps : dict system -> int
+        DDPG environment steps (None entries: the DDPG default, the paper's 10k / 15k).
+    pilco_overrides, ddpg_overrides : dict
+        Further keyword settings passed to the trainers.
+    """
+
+    name: str
+    seeds: tuple[int, ...]
+    pilco_iterations: dict[str, int | None]
+    ddpg_steps: dict[str, int | None]
+    pilco_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
+    ddpg_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
+    description: str = ""
+
+
+PROFILES: dict[str, Profile] = {
+    "quick": Profile(
+        name="quick",
+        seeds=(0,),
+        pilco_iterations={"pendulum": 4, "cartpole": 4, "mountaincar": 3},
+        ddpg_steps={"pendulum": 6000, "cartpole": 8000, "mountaincar": 5000},
+        description=(
+            "quick profile: one seed and reduced training budgets (real training, not the "
+            "paper's budgets); numbers are indicative, not a reproduction of the paper's"
+        ),
+    ),
+    "paper": Profile(
+        name="paper",
+        seeds=(0, 1, 2),
+        pilco_iterations={name: None for name in SYSTEM_NAMES},
+        ddpg_steps={name: None for name in SYSTEM_NAMES},
+        description="paper profile: the paper's budgets (appendix C) over three seeds",
+    ),
+}
+PROFILE_NAMES = tuple(PROFILES)
+
+
+def get_profile(name: str, seeds: int | None = None) -> Profile:
+    """The named profile, optionally with its seeds replaced by ``0 .. seeds - 1``."""
+    if name not in PROFILES:
+        raise ValueError(f"profile: expected one of {', '.join(PROFILES)}, found {name!r}")
+    profile = PROFILES[name]
+    if seeds is not None:
+        if seeds < 1:
+            raise ValueError(f"seeds: expected a positive integer, found {seeds}")
+        profile = dataclasses.replace(profile, seeds=tuple(range(seeds)))
+    return profile
+
+
+class RunSpec(NamedTuple):
+    """One unit of work: a controller of a system, for one seed."""
+
+    system: str
+    controller: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.system}/{self.controller}/seed{self.seed}"
+
+    @property
+    def framework(self) -> str:
+        return self.controller.split("_")[0]
+
+    @property
+    def hybrid(self) -> bool:
+        return self.controller.endswith("hybrid")
+
+
+def run_specs(
+    profile: Profile,
+    systems: tuple[str, ...] = SYSTEM_NAMES,
+    controllers: tuple[str, ...] = CONTROLLERS,
+) -> list[RunSpec]:
+    """Every run of a profile, the longest first (cart-pole, PILCO) to balance the workers."""
+    for name in systems:
+        if name not in SYSTEM_NAMES:
+            raise ValueError(f"systems: unknown {name!r}; expected some of {SYSTEM_NAMES}")
+    for name in controllers:
+        if name not in CONTROLLERS:
+            raise ValueError(f"controllers: unknown {name!r}; expected some of {CONTROLLERS}")
+    specs = [
+        RunSpec(system, controller, seed)
+        for system in systems
+        for controller in controllers
+        for seed in (profile.seeds if controller != "linear" else (0,))
+    ]
+    cost = {"pilco": 2, "ddpg": 1, "linear": 0}
+    return sorted(specs, key=lambda spec: -cost[spec.framework])

@@ -1,0 +1,297 @@
+"""``leoc reproduce``: train (or design) and evaluate every controller of the paper, in parallel
+worker processes, resumable, and write the report.
+
+Layout of an output folder ``OUT``::
+
+    OUT/runs/SYSTEM/CONTROLLER/seedN/train/        the trainer's own run folder
+    OUT/runs/SYSTEM/CONTROLLER/seedN/train.log     the worker's output (progress)
+    OUT/runs/SYSTEM/CONTROLLER/seedN/evaluation.json   written last, atomically: the run is done
+    OUT/results.json, *.csv, *.png, report.md      the aggregated report (see report.py)
+
+A run whose ``evaluation.json`` exists is skipped on rerun; an interrupted run is started again
+(PILCO resumes from its own checkpoint). Nothing is ever half-written: every file goes through a
+temporary file and ``os.replace``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from leoc.evaluation.robustness import relevance_trace, robustness_sweep
+from leoc.evaluation.rollout import RESPONSE_TESTS, hold_step, response_test, rollout
+from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
+from leoc.systems import SYSTEM_NAMES, make_system
+
+EVALUATION_FILE = "evaluation.json"
+LOG_FILE = "train.log"
+META_FILE = "meta.json"
+PROGRESS_INTERVAL_S = 15.0
+WORKER_THREADS = 1
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write ``data`` as JSON through a temporary file and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    temporary.write_text(json.dumps(data, indent=1, default=_json_default))
+    os.replace(temporary, path)
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def run_dir_of(out_dir: Path, spec: RunSpec) -> Path:
+    return out_dir / "runs" / spec.system / spec.controller / f"seed{spec.seed}"
+
+
+def versions() -> dict[str, str]:
+    """Versions of Python and of the libraries that shape the numbers."""
+    import gymnasium
+
+    import leoc
+
+    found = {"python": platform.python_version(), "leoc": leoc.__version__}
+    found.update({"numpy": np.__version__, "torch": torch.__version__})
+    found["gymnasium"] = gymnasium.__version__
+    for module in ("scipy", "control", "stable_baselines3"):
+        with contextlib.suppress(ImportError):
+            found[module] = __import__(module).__version__
+    return found
+
+
+# ---------------------------------------------------------------------------------- training
+def _curve(seconds: Sequence[float], returns: Sequence[float]) -> dict[str, list[float]]:
+    return {"seconds": [float(s) for s in seconds], "returns": [float(r) for r in returns]}
+
+
+def train_controller(
+    spec: RunSpec, profile: Profile, train_dir: Path
+) -> tuple[torch.nn.Module, dict[str, list[float]] | None]:
+    """Design (linear) or train one controller; returns it and its learning curve."""
+    system = make_system(spec.system)
+    if spec.controller == "linear":
+        from leoc.control import design_lqr
+        from leoc.policies import LinearController
+
+        design = design_lqr(system)
+        return LinearController(design.W, design.b), None
+    if spec.framework == "pilco":
+        from leoc.pilco.train import train_pilco
+
+        result = train_pilco(
+            spec.system,
+            hybrid=spec.hybrid,
+            seed=spec.seed,
+            run_dir=train_dir,
+            iterations=profile.pilco_iterations.get(spec.system),
+            progress=True,
+            **profile.pilco_overrides,
+        )
+        log = result.log
+        return result.policy, _curve(
+            [row["interaction_seconds"] for row in log], [row["return"] for row in log]
+        )
+    from leoc.ddpg.train import train_ddpg
+
+    result = train_ddpg(
+        spec.system,
+        algo="ddpg",
+        hybrid=spec.hybrid,
+        seed=spec.seed,
+        run_dir=train_dir,
+        total_steps=profile.ddpg_steps.get(spec.system),
+        progress=False,
+        **profile.ddpg_overrides,
+    )
+    curve = result.curve
+    return result.policy, _curve(
+        [row["interaction_seconds"] for row in curve], [row["mean_return"] for row in curve]
+    )
+
+
+def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str, Any]:
+    """Responses, robustness, swing-up and relevance trace of one controller."""
+    system = make_system(spec.system)
+    responses = {}
+    for test in RESPONSE_TESTS:
+        result = response_test(system, controller, test)
+        responses[test] = {
+            "metrics": result.metrics._asdict(),
+            "deviation": result.deviation.tolist(),
+            "total_reward": result.trajectory.total_reward,
+        }
+    start = system.sample_start(np.random.default_rng(spec.seed), "swing_up")
+    swing = rollout(system, controller, start)
+    trace = relevance_trace(spec.system, controller, spec.seed)
+    return {
+        "responses": responses,
+        "robustness": [point._asdict() for point in robustness_sweep(spec.system, controller)],
+        "swing_up": {
+            "total_reward": swing.total_reward,
+            "hold_step": hold_step(system, swing.states),
+            "terminated": swing.terminated,
+        },
+        "relevance": None if trace is None else {k: v.tolist() for k, v in trace._asdict().items()},
+    }
+
+
+def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any]:
+    """Worker body: train/design, evaluate, write ``evaluation.json``; returns its contents.
+
+    The worker's stdout and stderr go to ``train.log`` in the run folder.
+    """
+    run_dir = run_dir_of(out_dir, spec)
+    done = run_dir / EVALUATION_FILE
+    if done.is_file():
+        return json.loads(done.read_text())
+    run_dir.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(WORKER_THREADS)
+    started = time.perf_counter()
+    with (
+        open(run_dir / LOG_FILE, "a", buffering=1) as log,
+        contextlib.redirect_stdout(log),
+        contextlib.redirect_stderr(log),
+    ):
+        print(f"== {spec.key} ({profile.name} profile)", flush=True)
+        controller, curve = train_controller(spec, profile, run_dir / "train")
+        trained = time.perf_counter() - started
+        print(f"trained in {trained:.1f} s; evaluating", flush=True)
+        evaluation = evaluate_controller(spec, controller)
+    evaluation.update(
+        spec=spec._asdict(),
+        curve=curve,
+        train_wall_seconds=trained,
+        wall_seconds=time.perf_counter() - started,
+    )
+    write_json_atomic(done, evaluation)
+    return evaluation
+
+
+def _last_line(path: Path) -> str:
+    try:
+        with open(path, "rb") as handle:
+            handle.seek(0, os.SEEK_END)
+            handle.seek(max(0, handle.tell() - 2048))
+            lines = handle.read().decode(errors="replace").replace("\r", "\n").splitlines()
+    except OSError:
+        return "starting"
+    lines = [line.strip() for line in lines if line.strip()]
+    return lines[-1][:120] if lines else "starting"
+
+
+def run_all(
+    specs: Sequence[RunSpec],
+    profile: Profile,
+    out_dir: Path,
+    jobs: int,
+    echo: Callable[[str], None] = print,
+) -> None:
+    """Execute the pending runs on ``jobs`` worker processes, printing progress."""
+    pending = [
+        spec for spec in specs if not (run_dir_of(out_dir, spec) / EVALUATION_FILE).is_file()
+    ]
+    skipped = len(specs) - len(pending)
+    echo(f"{len(specs)} runs: {skipped} already done, {len(pending)} to run on {jobs} workers")
+    if not pending:
+        return
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    finished = 0
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        futures: dict[Future, RunSpec] = {
+            pool.submit(execute_run, spec, profile, out_dir): spec for spec in pending
+        }
+        started = {spec: time.perf_counter() for spec in pending}
+        try:
+            remaining = set(futures)
+            while remaining:
+                done, remaining = wait(remaining, PROGRESS_INTERVAL_S, FIRST_COMPLETED)
+                for future in done:
+                    spec = futures[future]
+                    finished += 1
+                    error = future.exception()
+                    status = "done" if error is None else f"FAILED: {error!r}"
+                    elapsed = time.perf_counter() - started[spec]
+                    echo(f"[{finished}/{len(pending)}] {spec.key} {status} ({elapsed:.0f} s)")
+                    if error is not None:
+                        echo(f"  see {run_dir_of(out_dir, spec) / LOG_FILE}")
+                for future in remaining:
+                    if future.running():
+                        spec = futures[future]
+                        log = run_dir_of(out_dir, spec) / LOG_FILE
+                        echo(f"  running {spec.key}: {_last_line(log)}")
+        except KeyboardInterrupt:
+            echo("interrupted: finished runs are kept; rerun the same command to resume")
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def reproduce(
+    out_dir: str | Path,
+    profile_name: str = "quick",
+    jobs: int | None = None,
+    seeds: int | None = None,
+    systems: Sequence[str] = SYSTEM_NAMES,
+    controllers: Sequence[str] = CONTROLLERS,
+    echo: Callable[[str], None] = print,
+) -> Path:
+    """Run (or resume) a profile and write the report; returns the path of ``report.md``."""
+    from leoc.experiments.report import write_report
+
+    out = Path(out_dir)
+    profile = get_profile(profile_name, seeds)
+    jobs = jobs or os.cpu_count() or 1
+    if jobs < 1:
+        raise ValueError(f"jobs: expected a positive integer, found {jobs}")
+    meta_path = out / META_FILE
+    if meta_path.is_file():
+        previous = json.loads(meta_path.read_text())
+        if previous.get("profile") != profile.name:
+            raise ValueError(
+                f"out: {out} holds a {previous.get('profile')!r} run; use another folder for "
+                f"the {profile.name!r} profile"
+            )
+    specs = run_specs(profile, tuple(systems), tuple(controllers))
+    started = time.perf_counter()
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    meta.update(
+        profile=profile.name,
+        description=profile.description,
+        seeds=list(profile.seeds),
+        settings={
+            "pilco_iterations": profile.pilco_iterations,
+            "ddpg_steps": profile.ddpg_steps,
+            "pilco_overrides": profile.pilco_overrides,
+            "ddpg_overrides": profile.ddpg_overrides,
+        },
+        systems=list(systems),
+        controllers=list(controllers),
+        jobs=jobs,
+        versions=versions(),
+        command=" ".join(sys.argv),
+    )
+    write_json_atomic(meta_path, meta)
+    run_all(specs, profile, out, jobs, echo)
+    meta["wall_seconds_last_invocation"] = time.perf_counter() - started
+    write_json_atomic(meta_path, meta)
+    return write_report(out)
