@@ -1,0 +1,104 @@
+"""Tests of the reproduce pipeline: report contents, resume after an interruption, leoc plot."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from leoc.cli import main
+from leoc.control import design_lqr
+from leoc.evaluation.rollout import response_test
+from leoc.experiments.profiles import get_profile, run_specs
+from leoc.experiments.reproduce import EVALUATION_FILE, reproduce, run_dir_of
+from leoc.policies import LinearController
+from leoc.systems import make_system
+
+RUN_TIMEOUT_S = 300
+
+
+def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> None:
+    report = reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
+    text = report.read_text()
+    assert "Profile: quick" in text and "## Impulse response" in text
+    results = json.loads((tmp_path / "results.json").read_text())
+    system = make_system("cartpole")
+    design = design_lqr(system)
+    direct = response_test(system, LinearController(design.W, design.b), "impulse").metrics
+    row = next(
+        r
+        for r in results["responses"]
+        if (r["system"], r["test"], r["controller"]) == ("cartpole", "impulse", "linear")
+    )
+    assert row["overshoot_mean"] == pytest.approx(direct.overshoot, rel=1e-12)
+    assert row["settling_time_mean"] == direct.settling_time
+    assert row["n_settled"] == row["n_runs"] == 1
+    for name in ["responses.png", "robustness.png", "responses.csv", "robustness.csv"]:
+        assert (tmp_path / name).stat().st_size > 0
+    # the linear controller keeps every scaled system at its equilibrium (G(a) = u_eq)
+    held = [r["fraction_held"] for r in results["robustness"]]
+    assert np.all(np.array(held) == 1.0)
+
+
+def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> None:
+    reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
+    done = run_dir_of(tmp_path, run_specs(get_profile("quick"), ("pendulum",), ("linear",))[0])
+    stamp = (done / EVALUATION_FILE).stat().st_mtime_ns
+    messages: list[str] = []
+    reproduce(tmp_path, controllers=["linear"], jobs=1, echo=messages.append)
+    assert "3 already done, 0 to run" in messages[0]
+    assert (done / EVALUATION_FILE).stat().st_mtime_ns == stamp
+    (tmp_path / "responses.png").unlink()
+    assert main(["plot", str(tmp_path)]) == 0
+    assert (tmp_path / "responses.png").is_file()
+
+
+def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path) -> None:
+    command = [
+        sys.executable,
+        "-m",
+        "leoc.cli",
+        "reproduce",
+        "--controllers",
+        "linear",
+        "--jobs",
+        "1",
+        "--out",
+        str(tmp_path),
+    ]
+    process = subprocess.Popen(
+        command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
+    deadline = time.monotonic() + RUN_TIMEOUT_S
+    while not list(tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}")):
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)  # the harshest interruption: no clean-up at all
+    process.wait()
+    finished = {p: p.read_bytes() for p in tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}")}
+    assert 1 <= len(finished) < 3
+    for content in finished.values():
+        json.loads(content)  # never half-written
+    result = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    assert result.returncode == 0, result.stderr
+    assert f"{len(finished)} already done" in result.stdout
+    for path, content in finished.items():
+        assert path.read_bytes() == content
+    assert len(list(tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"))) == 3
+    assert (tmp_path / "report.md").is_file()
+
+
+def test_profile_and_option_errors(tmp_path) -> None:
+    with pytest.raises(ValueError, match="profile: expected one of quick, paper"):
+        get_profile("fast")
+    with pytest.raises(ValueError, match="controllers: unknown"):
+        run_specs(get_profile("quick"), controllers=("lqr",))
+    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    with pytest.raises(ValueError, match="holds a 'quick' run"):
+        reproduce(tmp_path, profile_name="paper", controllers=["linear"], jobs=1)
