@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,10 +96,50 @@ def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path)
 
 
 def test_profile_and_option_errors(tmp_path) -> None:
-    with pytest.raises(ValueError, match="profile: expected one of quick, paper"):
+    with pytest.raises(ValueError, match="profile: expected one of quick, smoke, paper"):
         get_profile("fast")
     with pytest.raises(ValueError, match="controllers: unknown"):
         run_specs(get_profile("quick"), controllers=("lqr",))
     reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
     with pytest.raises(ValueError, match="holds a 'quick' run"):
         reproduce(tmp_path, profile_name="paper", controllers=["linear"], jobs=1)
+
+
+def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
+    reproduce(out, profile_name="smoke", systems=systems, jobs=2, echo=lambda _: None)
+    results = json.loads((out / "results.json").read_text())
+    for name in ["learning_curves.png", "relevance.png", "responses.png", "robustness.png"]:
+        assert (out / name).stat().st_size > 0
+    for system in systems:
+        runs = {
+            controller: json.loads(
+                (out / "runs" / system / controller / "seed0" / EVALUATION_FILE).read_text()
+            )
+            for controller in ("linear", "ddpg_hybrid", "pilco_hybrid", "ddpg_baseline")
+        }
+        band = make_system(system).settling_band
+        for hybrid in ("ddpg_hybrid", "pilco_hybrid"):
+            # whatever H is, pi(a) = G(a) keeps the equilibrium and dpi/dx(a) = W its local
+            # stability: the hybrid returns to the operating point like the LQR
+            response = runs[hybrid]["responses"]["impulse"]
+            assert response["metrics"]["settled"], (system, hybrid)
+            assert abs(response["metrics"]["steady_state_error"]) < 0.1 * band, (system, hybrid)
+            assert runs[hybrid]["relevance"] is not None
+        assert runs["ddpg_baseline"]["relevance"] is None
+        assert runs["ddpg_hybrid"]["curve"]["seconds"]
+    assert {row["controller"] for row in results["responses"]} == {
+        "linear",
+        "ddpg_baseline",
+        "ddpg_hybrid",
+        "pilco_baseline",
+        "pilco_hybrid",
+    }
+
+
+def test_smoke_profile_end_to_end_on_the_pendulum(tmp_path) -> None:
+    _smoke_end_to_end(tmp_path, ["pendulum"])
+
+
+@pytest.mark.slow
+def test_smoke_profile_end_to_end_on_all_systems(tmp_path) -> None:
+    _smoke_end_to_end(tmp_path, ["pendulum", "cartpole", "mountaincar"])

@@ -218,7 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--profile",
         choices=PROFILE_NAMES,
         default="quick",
-        help="quick (default: 1 seed, reduced budgets) or paper (paper budgets, 3 seeds)",
+        help="quick (default: 1 seed, reduced budgets), paper (paper budgets, 3 seeds) or "
+        "smoke (a tiny pipeline check)",
     )
     reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
     reproduce.add_argument("--jobs", type=int, help="worker processes (default: CPU count)")

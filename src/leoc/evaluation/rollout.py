@@ -1,13 +1,12 @@
 """Closed-loop rollouts on the pure step functions, and the impulse/step response tests.
 
 A *controller* is any callable mapping a float64 observation batch ``(B, O)`` to physical
-actions ``(B, A)`` (a torch module such as :class:`~leoc.policies.HybridPolicy`). When it
-accepts ``return_relevance=True`` the relevance r(x) along the rollout is recorded too.
+actions ``(B, A)`` (a torch module such as :class:`~leoc.policies.HybridPolicy`). When it has a
+``relevance(x)`` method (and no ``is_hybrid = False``), r(x) along the rollout is recorded too.
 """
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable
 from typing import Literal, NamedTuple
 
@@ -63,12 +62,13 @@ class ResponseResult(NamedTuple):
     metrics: ResponseMetrics
 
 
-def _accepts_relevance(controller: Controller) -> bool:
-    target = controller.forward if isinstance(controller, torch.nn.Module) else controller
-    try:
-        return "return_relevance" in inspect.signature(target).parameters
-    except (TypeError, ValueError):
-        return False
+def relevance_function(controller: Controller) -> Callable[[Tensor], Tensor] | None:
+    """The controller's ``relevance(x)`` method if it is a hybrid (has ``relevance`` and does
+    not declare ``is_hybrid = False``), else None."""
+    relevance = getattr(controller, "relevance", None)
+    if callable(relevance) and getattr(controller, "is_hybrid", True):
+        return relevance
+    return None
 
 
 def rollout(
@@ -103,18 +103,16 @@ def rollout(
     offsets = np.zeros((steps, system.action_dim))
     if action_offsets is not None:
         offsets = np.asarray(action_offsets, dtype=float).reshape(steps, system.action_dim)
-    with_relevance = _accepts_relevance(controller)
+    relevance_of = relevance_function(controller)
     states, observations, actions, rewards, relevance = [state], [], [], [], []
     terminated = False
     with torch.no_grad():
         for index in range(steps):
             obs = system.observe(state)
             observations.append(obs)
-            if with_relevance:
-                action, rel = controller(obs, return_relevance=True)  # type: ignore[call-arg]
-                relevance.append(float(rel.reshape(-1)[0]))
-            else:
-                action = controller(obs)
+            action = controller(obs)
+            if relevance_of is not None:
+                relevance.append(float(relevance_of(obs).reshape(-1)[0]))
             action = torch.as_tensor(action, dtype=DTYPE).reshape(1, system.action_dim)
             action = system.clip_action(action + torch.as_tensor(offsets[index], dtype=DTYPE))
             rewards.append(float(system.reward_fn(state, action)[0]))
@@ -131,7 +129,7 @@ def rollout(
         torch.cat(observations).numpy(),
         torch.cat(actions).numpy(),
         np.asarray(rewards),
-        np.asarray(relevance) if with_relevance else None,
+        np.asarray(relevance) if relevance_of is not None else None,
         terminated,
     )
 

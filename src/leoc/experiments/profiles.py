@@ -48,6 +48,29 @@ PROFILES: dict[str, Profile] = {
             "paper's budgets); numbers are indicative, not a reproduction of the paper's"
         ),
     ),
+    "smoke": Profile(
+        name="smoke",
+        seeds=(0,),
+        pilco_iterations={name: 1 for name in SYSTEM_NAMES},
+        ddpg_steps={name: 400 for name in SYSTEM_NAMES},
+        pilco_overrides={
+            "horizon": 10,
+            "num_basis": 5,
+            "policy_iterations": 3,
+            "initial_rollouts": 1,
+        },
+        ddpg_overrides={
+            "learning_starts": 100,
+            "eval_interval": 200,
+            "eval_episodes": 1,
+            "actor_hidden": (32, 32),
+            "critic_hidden": (32, 32),
+        },
+        description=(
+            "smoke profile: a tiny end-to-end check of the pipeline (a few hundred steps of "
+            "training); its controllers are not trained and its numbers mean nothing"
+        ),
+    ),
     "paper": Profile(
         name="paper",
         seeds=(0, 1, 2),
