@@ -1,0 +1,62 @@
+"""Stable-Baselines3 integration: LEOC hybrid actor/policies for DDPG and TD3, training glue.
+
+Use the hybrid in plain SB3::
+
+    from stable_baselines3 import DDPG
+    from leoc.ddpg import HybridTD3Policy, hybrid_policy_kwargs
+    model = DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs("pendulum"))
+
+or train with the paper's settings through :func:`train_ddpg` (``leoc train SYSTEM --algo ddpg
+--hybrid``).
+"""
+
+from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
+from leoc.ddpg.callbacks import LearningCurveCallback
+from leoc.ddpg.config import ALGOS, HOLD_BAND_BY_SYSTEM, TOTAL_STEPS_BY_SYSTEM, DDPGConfig
+from leoc.ddpg.noise import SeededOUNoise
+from leoc.ddpg.physical import AffineOutput, PhysicalPolicy, physical_policy
+from leoc.ddpg.policies import (
+    HybridActor,
+    HybridDDPGPolicy,
+    HybridTD3Policy,
+    action_box,
+    hybrid_policy_kwargs,
+)
+from leoc.ddpg.rollout import EvaluationResult, evaluate_policy, hold_start, run_episode
+from leoc.ddpg.train import (
+    DDPGResult,
+    build_model,
+    held_and_reached,
+    load_ddpg_controller,
+    load_ddpg_model,
+    train_ddpg,
+)
+
+__all__ = [
+    "ALGOS",
+    "HOLD_BAND_BY_SYSTEM",
+    "TOTAL_STEPS_BY_SYSTEM",
+    "AffineOutput",
+    "DDPGConfig",
+    "DDPGResult",
+    "EvaluationResult",
+    "HybridActor",
+    "HybridDDPGPolicy",
+    "HybridTD3Policy",
+    "LearningCurveCallback",
+    "LeocDDPG",
+    "LeocTD3",
+    "PhysicalPolicy",
+    "SeededOUNoise",
+    "action_box",
+    "build_model",
+    "evaluate_policy",
+    "held_and_reached",
+    "hold_start",
+    "hybrid_policy_kwargs",
+    "load_ddpg_controller",
+    "load_ddpg_model",
+    "physical_policy",
+    "run_episode",
+    "train_ddpg",
+]

@@ -1,0 +1,53 @@
+"""PILCO (Deisenroth & Rasmussen, ICML 2011) for the RBF baseline and the LEOC hybrid.
+
+- :mod:`~leoc.pilco.gp`: GP dynamics model (exact, FITC beyond ``max_full_points`` data);
+- :mod:`~leoc.pilco.moments`: exact moment matching (GP, RBF, linear, sin squash, cos/sin
+  augmentation) and Gauss-Hermite quadrature for the hybrid;
+- :mod:`~leoc.pilco.cost`: saturating cost and its expectation;
+- :mod:`~leoc.pilco.propagate`: long-term prediction over the horizon;
+- :mod:`~leoc.pilco.rollout`: real rollouts and the hold test;
+- :mod:`~leoc.pilco.train`: configuration, training loop, save/load/resume.
+"""
+
+from leoc.pilco.cost import expected_saturating_cost, saturating_cost
+from leoc.pilco.gp import CholeskyError, GPPosterior, GPSettings, fit_gp, gp_predict
+from leoc.pilco.moments import (
+    MomentMatch,
+    gp_moments,
+    linear_moments,
+    observation_moments,
+    quadrature_moments,
+    rbf_moments,
+    sin_squash_moments,
+)
+from leoc.pilco.propagate import SaturatedPolicy, action_moments, predict
+from leoc.pilco.train import (
+    PilcoConfig,
+    PilcoResult,
+    load_pilco_controller,
+    train_pilco,
+)
+
+__all__ = [
+    "CholeskyError",
+    "GPPosterior",
+    "GPSettings",
+    "MomentMatch",
+    "PilcoConfig",
+    "PilcoResult",
+    "SaturatedPolicy",
+    "action_moments",
+    "expected_saturating_cost",
+    "fit_gp",
+    "gp_moments",
+    "gp_predict",
+    "linear_moments",
+    "load_pilco_controller",
+    "observation_moments",
+    "predict",
+    "quadrature_moments",
+    "rbf_moments",
+    "saturating_cost",
+    "sin_squash_moments",
+    "train_pilco",
+]

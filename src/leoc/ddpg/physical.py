@@ -1,0 +1,134 @@
+r"""float64 policies in physical units, built from a trained SB3 actor's weights.
+
+SB3 actors work in float32 and output normalised actions in [-1, 1]. For evaluation (responses,
+robustness sweeps, region of attraction) we want a plain torch module mapping float64
+observations (B, D) to physical actions (B, F). :func:`physical_policy` builds it:
+
+* baseline actor: :math:`\pi(x) = c + h \odot \tanh(\mathrm{MLP}(x))`;
+* hybrid actor: :math:`\pi(x) = \operatorname{clip}_{[u_{low}, u_{high}]}(r G + (1 - r) H)`
+  with :math:`G(x) = W x + b` from the actor's float64 buffers (the LQR design itself, not its
+  float32 rescaling) and :math:`H = c + h \odot \tanh(\mathrm{MLP})`, so that
+  :math:`\pi(a) = G(a)` and :math:`\partial\pi/\partial x(a) = W` hold to float64 round-off.
+
+The MLP weights and :math:`\lambda` are the actor's, converted to float64; the result agrees
+with the SB3 actor to float32 precision.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import torch
+from stable_baselines3.td3.policies import Actor
+from torch import Tensor, nn
+
+from leoc.ddpg.policies import HybridActor, action_box
+from leoc.policies import HybridPolicy, LinearController
+
+__all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
+
+DTYPE = torch.float64
+
+
+class AffineOutput(nn.Module):
+    """``c + h * module(x)``: a normalised-action module mapped to physical units.
+
+    Shapes: (B, D) -> (B, F); ``centre`` and ``half_width`` are (F,) buffers.
+    """
+
+    centre: Tensor
+    half_width: Tensor
+
+    def __init__(self, module: nn.Module, centre: np.ndarray, half_width: np.ndarray) -> None:
+        super().__init__()
+        self.module = module
+        self.register_buffer("centre", torch.as_tensor(centre, dtype=DTYPE))
+        self.register_buffer("half_width", torch.as_tensor(half_width, dtype=DTYPE))
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.centre + self.half_width * self.module(x)
+
+
+class PhysicalPolicy(nn.Module):
+    r"""Deterministic policy in physical units: float64 (B, D) observations -> (B, F) actions.
+
+    ``core`` computes the unsaturated action; the output is clipped to the action box
+    :math:`[u_{low}, u_{high}]` (the identity strictly inside it). For a hybrid, ``hybrid`` is
+    the float64 :class:`~leoc.policies.HybridPolicy` (for relevance traces) and ``core`` is its
+    unsaturated blend.
+
+    Attributes
+    ----------
+    low, high : Tensor
+        (F,) float64 action bounds.
+    hybrid : HybridPolicy or None
+        The blend for a hybrid actor, ``None`` for a baseline.
+    """
+
+    low: Tensor
+    high: Tensor
+
+    def __init__(
+        self,
+        core: nn.Module,
+        low: np.ndarray,
+        high: np.ndarray,
+        hybrid: HybridPolicy | None = None,
+    ) -> None:
+        super().__init__()
+        self.core = core
+        self.hybrid = hybrid
+        self.register_buffer("low", torch.as_tensor(low, dtype=DTYPE))
+        self.register_buffer("high", torch.as_tensor(high, dtype=DTYPE))
+
+    @property
+    def is_hybrid(self) -> bool:
+        return self.hybrid is not None
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Physical action ``(B, F)`` of float64 observations ``(B, D)``."""
+        unsaturated = self.hybrid.blend(x) if self.hybrid is not None else self.core(x)
+        return torch.minimum(torch.maximum(unsaturated, self.low), self.high)
+
+    def relevance(self, x: Tensor) -> Tensor:
+        """Relevance ``r(x)`` (B, 1) of the linear part; zeros for a baseline policy."""
+        if self.hybrid is None:
+            return torch.zeros(x.shape[:-1] + (1,), dtype=x.dtype)
+        return self.hybrid.relevance(x)
+
+
+def physical_policy(actor: Actor) -> PhysicalPolicy:
+    """float64 physical-units copy of an SB3 TD3/DDPG actor (baseline or :class:`HybridActor`).
+
+    The copy shares nothing with ``actor`` (later training does not change it) and has no
+    trainable parameters (all ``requires_grad`` off; gradients with respect to the *input* still
+    flow, so autograd Jacobians work).
+
+    Raises
+    ------
+    TypeError
+        If ``actor`` is not an SB3 TD3/DDPG actor.
+    """
+    if not isinstance(actor, Actor):
+        raise TypeError(f"actor: expected an SB3 TD3/DDPG Actor, found {type(actor).__name__}")
+    centre, half = action_box(actor.action_space)
+    low = np.asarray(actor.action_space.low, dtype=np.float64).reshape(-1)
+    high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
+    if isinstance(actor, HybridActor):
+        mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
+        hybrid = HybridPolicy(
+            LinearController(actor.physical_gain.detach().cpu(), actor.physical_bias.cpu()),
+            AffineOutput(mlp, centre, half),
+            actor.operating_obs.detach().cpu(),
+            lambda_init=actor.hybrid.lambda_.detach().cpu().to(DTYPE),
+            learn_lambda=False,
+            action_limit=None,
+            saturation="none",
+        )
+        policy = PhysicalPolicy(hybrid, low, high, hybrid=hybrid)
+    else:
+        mlp = copy.deepcopy(actor.mu).to(device="cpu", dtype=DTYPE)
+        policy = PhysicalPolicy(AffineOutput(mlp, centre, half), low, high)
+    policy.requires_grad_(False)
+    return policy.eval()

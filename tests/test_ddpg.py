@@ -1,0 +1,396 @@
+"""Tests of leoc.ddpg: the LEOC hybrid actor inside Stable-Baselines3's DDPG and TD3.
+
+References are independent of the code under test: the LQR design recomputed with
+``design_lqr``, the blend recomputed from its formula, autograd Jacobians, closed forms.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+from stable_baselines3 import DDPG, TD3
+from stable_baselines3.common.torch_layers import FlattenExtractor
+
+from leoc.control import design_lqr
+from leoc.ddpg import (
+    DDPGConfig,
+    HybridActor,
+    HybridTD3Policy,
+    LeocDDPG,
+    LeocTD3,
+    SeededOUNoise,
+    held_and_reached,
+    hold_start,
+    hybrid_policy_kwargs,
+    load_ddpg_controller,
+    physical_policy,
+    train_ddpg,
+)
+from leoc.systems import SYSTEM_NAMES, make_env, make_system
+
+SMALL_NET = [32, 32]
+F64_ATOL = 1e-12
+F32_RTOL = 1e-5
+F32_ATOL = 1e-5
+# A tiny but complete training run (seconds, not minutes).
+TINY_RUN = {
+    "total_steps": 240,
+    "learning_starts": 60,
+    "actor_hidden": (16, 16),
+    "critic_hidden": (16, 16),
+    "eval_interval": 120,
+    "eval_episodes": 1,
+    "progress": False,
+}
+
+
+@pytest.fixture(autouse=True)
+def _single_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def _hybrid_model(system_name: str, algo=DDPG, learn_lambda: bool = True, seed: int = 0, **kw):
+    env = make_env(system_name)
+    policy_kwargs = hybrid_policy_kwargs(system_name, learn_lambda=learn_lambda, net_arch=SMALL_NET)
+    return algo(HybridTD3Policy, env, policy_kwargs=policy_kwargs, seed=seed, device="cpu", **kw)
+
+
+def _randomise(actor: HybridActor, generator: torch.Generator) -> None:
+    """Random H (MLP weights far from their initialisation) and random positive Lambda."""
+    with torch.no_grad():
+        for param in actor.hybrid.nonlinear.parameters():
+            param.copy_(torch.randn(param.shape, generator=generator))
+        log_lambda = torch.randn(actor.hybrid.log_lambda.shape, generator=generator)
+        actor.hybrid.log_lambda.copy_(log_lambda)
+
+
+@pytest.mark.parametrize("system_name", SYSTEM_NAMES)
+def test_identity_at_operating_point_in_physical_units(system_name):
+    system = make_system(system_name)
+    design = design_lqr(system)  # independent reference for G(x) = W x + b
+    model = _hybrid_model(system_name)
+    _randomise(model.actor, torch.Generator().manual_seed(7))
+    policy = physical_policy(model.actor)
+    point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
+
+    value = policy(point[None, :])[0]
+    expected = design.W @ system.operating_obs + design.b
+    np.testing.assert_allclose(value.numpy(), expected, rtol=0, atol=F64_ATOL)
+
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None, :])[0], point)
+    np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=F64_ATOL)
+
+    # The float32 actor inside SB3 has the same identities in normalised units u / u_max.
+    limit = system.action_limit
+    point32 = point.float()
+    actor_value = model.actor(point32[None, :])[0].detach().double() * limit
+    np.testing.assert_allclose(actor_value.numpy(), expected, rtol=F32_RTOL, atol=F32_ATOL)
+    actor_jac = torch.autograd.functional.jacobian(lambda x: model.actor(x[None, :])[0], point32)
+    np.testing.assert_allclose(
+        actor_jac.double().numpy() * limit, design.W, rtol=F32_RTOL, atol=F32_ATOL
+    )
+
+
+def test_blend_away_from_operating_point_matches_formula():
+    system = make_system("cartpole")
+    design = design_lqr(system)
+    model = _hybrid_model("cartpole")
+    generator = torch.Generator().manual_seed(3)
+    _randomise(model.actor, generator)
+    obs = torch.randn(64, system.obs_dim, generator=generator, dtype=torch.float64)
+    lam = torch.exp(model.actor.hybrid.log_lambda.detach()).double()
+    point = torch.as_tensor(system.operating_obs)
+    distance = ((obs - point) ** 2 / lam).sum(dim=1, keepdim=True)
+    relevance = 1.0 / (1.0 + distance) ** 2
+    linear = obs @ torch.as_tensor(design.W).T + torch.as_tensor(design.b)
+    with torch.no_grad():
+        mlp_out = model.actor.hybrid.nonlinear(obs.float()).double()  # tanh(MLP), normalised
+        expected = (relevance * linear + (1 - relevance) * system.action_limit * mlp_out).clamp(
+            -system.action_limit, system.action_limit
+        )
+        physical = physical_policy(model.actor)(obs)
+        inside_sb3 = model.actor(obs.float()).double() * system.action_limit
+    np.testing.assert_allclose(physical.numpy(), expected.numpy(), rtol=F32_RTOL, atol=F32_ATOL)
+    np.testing.assert_allclose(inside_sb3.numpy(), expected.numpy(), rtol=F32_RTOL, atol=F32_ATOL)
+    assert float((expected.abs() >= system.action_limit - 1e-9).float().mean()) > 0  # clip used
+
+
+def test_fused_actor_forward_equals_hybrid_policy():
+    model = _hybrid_model("mountaincar")
+    generator = torch.Generator().manual_seed(11)
+    _randomise(model.actor, generator)
+    obs = 2.0 * torch.randn(128, 2, generator=generator)
+    with torch.no_grad():
+        reference = model.actor.hybrid(obs)  # leoc.policies.HybridPolicy, clip saturation
+        fused = model.actor(obs)
+    np.testing.assert_allclose(fused.numpy(), reference.numpy(), rtol=1e-6, atol=1e-6)
+
+
+def test_identity_with_asymmetric_action_box():
+    obs_space = spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float64)
+    act_space = spaces.Box(
+        np.array([-1.0, 0.5], dtype=np.float32), np.array([3.0, 2.5], dtype=np.float32)
+    )
+    rng = np.random.default_rng(0)
+    gain = rng.normal(size=(2, 3))
+    point = rng.normal(size=3)
+    bias = np.array([1.2, 1.4]) - gain @ point  # G(a) strictly inside the box
+    actor = HybridActor(
+        obs_space,
+        act_space,
+        SMALL_NET,
+        FlattenExtractor(obs_space),
+        3,
+        lqr_gain=gain,
+        lqr_bias=bias,
+        operating_obs=point,
+        lambda_init=[0.3, 2.0, 0.7],
+    )
+    _randomise(actor, torch.Generator().manual_seed(1))
+    policy = physical_policy(actor)
+    point_t = torch.as_tensor(point)
+    np.testing.assert_allclose(
+        policy(point_t[None, :])[0].numpy(), gain @ point + bias, rtol=0, atol=F64_ATOL
+    )
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None, :])[0], point_t)
+    np.testing.assert_allclose(jacobian.numpy(), gain, rtol=0, atol=F64_ATOL)
+    far = policy(torch.full((1, 3), 50.0, dtype=torch.float64))[0].numpy()
+    assert np.all(far >= act_space.low - 1e-12) and np.all(far <= act_space.high + 1e-12)
+
+
+@pytest.mark.parametrize("algo", [DDPG, TD3])
+def test_target_actor_is_hybrid_and_matches(algo):
+    model = _hybrid_model("pendulum", algo=algo)
+    assert isinstance(model.actor, HybridActor)
+    assert isinstance(model.actor_target, HybridActor)
+    assert model.actor_target is not model.actor
+    for key, value in model.actor.state_dict().items():
+        torch.testing.assert_close(model.actor_target.state_dict()[key], value, rtol=0, atol=0)
+    names = {name for name, _ in model.actor.named_parameters()}
+    assert "hybrid.log_lambda" in names
+    assert not any(name.endswith(("linear.W", "linear.b", "operating_point")) for name in names)
+    buffers = {name for name, _ in model.actor.named_buffers()}
+    assert {"hybrid.linear.W", "hybrid.linear.b", "hybrid.operating_point"} <= buffers
+
+
+def _actor_loss_grads(model, obs: torch.Tensor) -> dict[str, torch.Tensor]:
+    """SB3's DDPG/TD3 actor loss, -Q(x, pi(x)), back-propagated once."""
+    model.actor.optimizer.zero_grad()
+    loss = -model.critic.q1_forward(obs, model.actor(obs)).mean()
+    loss.backward()
+    return {name: p.grad for name, p in model.actor.named_parameters()}
+
+
+def test_gradient_flows_to_mlp_and_log_lambda():
+    system = make_system("pendulum")
+    model = _hybrid_model("pendulum")
+    # Mid-range observations: relevance strictly between 0 and 1, actions inside the limits.
+    angles = torch.linspace(0.3, 1.2, 32)
+    obs = torch.stack([torch.cos(angles), torch.sin(angles), 0.5 * torch.ones(32)], dim=1)
+    grads = _actor_loss_grads(model, obs)
+    assert grads["hybrid.log_lambda"] is not None
+    assert torch.all(torch.isfinite(grads["hybrid.log_lambda"]))
+    assert float(grads["hybrid.log_lambda"].abs().sum()) > 0
+    mlp_grads = [g for name, g in grads.items() if name.startswith("hybrid.nonlinear")]
+    assert mlp_grads and all(g is not None and float(g.abs().sum()) > 0 for g in mlp_grads)
+    # At the operating point r = 1 and grad r = 0: the MLP gets no gradient there.
+    point = torch.as_tensor(system.operating_obs, dtype=torch.float32)[None, :].repeat(4, 1)
+    grads_at_point = _actor_loss_grads(model, point)
+    for name, grad in grads_at_point.items():
+        if name.startswith("hybrid.nonlinear"):
+            assert float(grad.abs().max()) == 0.0
+
+
+def test_training_updates_lambda_and_target_lambda():
+    model = _hybrid_model("pendulum", learning_starts=50, batch_size=32)
+    initial = model.actor.hybrid.log_lambda.detach().clone()
+    model.learn(total_timesteps=120)
+    learned = model.actor.hybrid.log_lambda.detach()
+    target = model.actor_target.hybrid.log_lambda.detach()
+    assert not torch.equal(learned, initial)
+    assert not torch.equal(target, initial)  # soft-updated along with the MLP
+
+
+def test_frozen_lambda_is_a_buffer_and_never_changes():
+    model = _hybrid_model("pendulum", learn_lambda=False, learning_starts=50, batch_size=32)
+    names = {name for name, _ in model.actor.named_parameters()}
+    assert "hybrid.log_lambda" not in names
+    assert "hybrid.log_lambda" in dict(model.actor.named_buffers())
+    initial = model.actor.hybrid.log_lambda.clone()
+    model.learn(total_timesteps=120)
+    torch.testing.assert_close(model.actor.hybrid.log_lambda, initial, rtol=0, atol=0)
+    np.testing.assert_allclose(model.actor.hybrid.lambda_.numpy(), 1.0, rtol=1e-7)
+
+
+def test_actor_learning_rate_and_target_update_interval():
+    polyak_full = 1.0  # a full copy makes "updated or not" exact
+    interval = 3
+    env = make_env("pendulum")
+    model = LeocDDPG(
+        "MlpPolicy",
+        env,
+        learning_rate=1e-3,
+        actor_learning_rate=5e-4,
+        target_update_interval=interval,
+        tau=polyak_full,
+        learning_starts=40,
+        batch_size=16,
+        policy_kwargs={"net_arch": SMALL_NET},
+        seed=0,
+        device="cpu",
+    )
+    model.learn(total_timesteps=40)  # fills the buffer, no update yet
+    assert model._n_updates == 0
+    for _ in range(2 * interval):
+        model.train(gradient_steps=1, batch_size=16)
+        same = all(
+            torch.equal(p, q)
+            for p, q in zip(model.actor.parameters(), model.actor_target.parameters(), strict=True)
+        )
+        assert same == (model._n_updates % interval == 0)
+    assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(5e-4)
+    assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(1e-3)
+    assert model.tau == polyak_full
+
+
+def test_ou_noise_seeded_and_stationary_std():
+    theta, sigma = 0.15, 0.2
+    first = SeededOUNoise(1, theta, sigma, seed=5)
+    second = SeededOUNoise(1, theta, sigma, seed=5)
+    draws_a = np.array([first() for _ in range(20)])
+    draws_b = np.array([second() for _ in range(20)])
+    np.testing.assert_array_equal(draws_a, draws_b)
+    long = SeededOUNoise(1, theta, sigma, seed=1)
+    samples = np.array([long()[0] for _ in range(100_000)])[1_000:]
+    expected_std = sigma / math.sqrt(theta * (2.0 - theta))  # AR(1) stationary std
+    assert samples.std() == pytest.approx(expected_std, rel=0.05)
+    long.reset()
+    np.testing.assert_array_equal(long.state, [0.0])
+
+
+def test_hold_start_and_held_steps_known_answers():
+    assert hold_start([10.0, 3.0, 9.0, 1.0, -2.0, 0.5], 5.0) == 3
+    assert hold_start([1.0, 2.0], 5.0) == 0
+    assert hold_start([1.0, 6.0], 5.0) is None
+    curve = [
+        {"steps": s, "held_fraction": f} for s, f in [(0, 0), (1, 1), (2, 0.5), (3, 1), (4, 1)]
+    ]
+    assert held_and_reached(curve) == (3, 1)
+    assert held_and_reached(curve[:3]) == (None, 1)
+
+
+def test_config_defaults_and_overrides():
+    assert DDPGConfig.for_system("cartpole").total_steps == 15_000
+    pendulum = DDPGConfig.for_system("pendulum", "td3", actor_hidden=[64, 64])
+    assert pendulum.total_steps == 10_000 and pendulum.algo == "td3"
+    assert pendulum.actor_hidden == (64, 64)
+    assert (pendulum.actor_learning_rate, pendulum.critic_learning_rate) == (5e-4, 1e-3)
+    assert (pendulum.discount, pendulum.batch_size, pendulum.buffer_size) == (0.995, 64, 100_000)
+    with pytest.raises(ValueError, match="unknown DDPGConfig fields"):
+        DDPGConfig.for_system("pendulum", bogus=1)
+    with pytest.raises(ValueError, match="algo"):
+        DDPGConfig.for_system("pendulum", "sac")
+    assert DDPGConfig.from_dict(pendulum.as_dict()) == pendulum
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3"])
+def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo):
+    runs = [
+        train_ddpg("pendulum", algo, hybrid=True, seed=3, run_dir=tmp_path / f"r{k}", **TINY_RUN)
+        for k in range(2)
+    ]
+    state_a = runs[0].model.policy.state_dict()
+    state_b = runs[1].model.policy.state_dict()
+    assert state_a.keys() == state_b.keys()
+    for key in state_a:
+        torch.testing.assert_close(state_a[key], state_b[key], rtol=0, atol=0)
+    assert runs[0].curve == runs[1].curve
+    if algo == "ddpg":  # a different seed gives a different run (checked once, for time)
+        other = train_ddpg(
+            "pendulum", algo, hybrid=True, seed=4, run_dir=tmp_path / "o", **TINY_RUN
+        )
+        assert any(
+            not torch.equal(value, other.model.policy.state_dict()[key])
+            for key, value in state_a.items()
+            if value.is_floating_point() and "target" not in key and value.numel() > 1
+        )
+    files = {p.name for p in (tmp_path / "r0").iterdir()}
+    expected = {"config.json", "model.zip", "best_model.zip", "curve.json", "curve.csv"}
+    assert expected | {"learning_curve.png"} <= files
+    assert not any(name.endswith(".tmp") for name in files)
+    config = json.loads((tmp_path / "r0" / "config.json").read_text())
+    assert config["seed"] == 3 and config["hybrid"] is True and config["algo"] == algo
+    rows = runs[0].curve
+    assert [row["steps"] for row in rows] == [0, 120, 240]
+    assert rows[1]["interaction_seconds"] == pytest.approx(120 * make_system("pendulum").dt)
+
+
+def test_save_load_round_trip_in_fresh_process(tmp_path):
+    result = train_ddpg(
+        "cartpole", "td3", hybrid=True, seed=1, run_dir=tmp_path / "run", **TINY_RUN
+    )
+    generator = torch.Generator().manual_seed(0)
+    obs = torch.randn(8, 5, generator=generator, dtype=torch.float64)
+    final = physical_policy(result.model.actor)
+    expected = final(obs).detach().numpy()
+    expected_lambda = result.model.actor.hybrid.lambda_.detach().double().numpy()
+    script = (
+        "import json, sys, torch\n"
+        "from leoc.ddpg import load_ddpg_controller, load_ddpg_model\n"
+        "run, obs = sys.argv[1], torch.tensor(json.loads(sys.argv[2]), dtype=torch.float64)\n"
+        "policy = load_ddpg_controller(run, 'final')\n"
+        "model = load_ddpg_model(run, 'final')\n"
+        "print(json.dumps({'actions': policy(obs).tolist(),\n"
+        "  'lambda': model.actor.hybrid.lambda_.double().tolist(),\n"
+        "  'target_hybrid': type(model.actor_target).__name__,\n"
+        "  'hybrid': policy.is_hybrid}))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script, str(result.run_dir), json.dumps(obs.tolist())],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    np.testing.assert_allclose(np.array(loaded["actions"]), expected, rtol=0, atol=F64_ATOL)
+    np.testing.assert_allclose(np.array(loaded["lambda"]), expected_lambda, rtol=0, atol=0)
+    assert loaded["target_hybrid"] == "HybridActor" and loaded["hybrid"] is True
+    best = load_ddpg_controller(result.run_dir)  # the best model, in this process
+    np.testing.assert_allclose(best(obs).numpy(), result.policy(obs).numpy(), rtol=0, atol=F64_ATOL)
+
+
+def test_baseline_physical_policy_matches_sb3_predict():
+    env = make_env("mountaincar")
+    model = LeocTD3("MlpPolicy", env, policy_kwargs={"net_arch": SMALL_NET}, seed=0, device="cpu")
+    obs = np.random.default_rng(0).normal(size=(16, 2))
+    sb3_actions, _ = model.predict(obs, deterministic=True)
+    physical = physical_policy(model.actor)(torch.as_tensor(obs)).numpy()
+    np.testing.assert_allclose(physical, sb3_actions, rtol=F32_RTOL, atol=F32_ATOL)
+    assert not physical_policy(model.actor).is_hybrid
+
+
+@pytest.mark.slow
+def test_hybrid_ddpg_learns_to_hold_pendulum(tmp_path):
+    result = train_ddpg(
+        "pendulum",
+        "ddpg",
+        hybrid=True,
+        seed=0,
+        run_dir=tmp_path,
+        total_steps=3000,
+        eval_interval=500,
+        progress=False,
+    )
+    assert result.reached_steps is not None
+    assert result.best_return > -600.0  # swing-up in a few seconds, then balanced
