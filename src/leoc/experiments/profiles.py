@@ -41,8 +41,9 @@ PROFILES: dict[str, Profile] = {
     "quick": Profile(
         name="quick",
         seeds=(0,),
-        pilco_iterations={"pendulum": 4, "cartpole": 4, "mountaincar": 3},
-        ddpg_steps={"pendulum": 6000, "cartpole": 8000, "mountaincar": 5000},
+        pilco_iterations={"pendulum": 5, "cartpole": 4, "mountaincar": 3},
+        ddpg_steps={"pendulum": 5000, "cartpole": 8000, "mountaincar": 6000},
+        pilco_overrides={"policy_iterations": 40},
         description=(
             "quick profile: one seed and reduced training budgets (real training, not the "
             "paper's budgets); numbers are indicative, not a reproduction of the paper's"
