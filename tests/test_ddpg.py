@@ -27,7 +27,6 @@ from leoc.ddpg import (
     LeocTD3,
     SeededOUNoise,
     held_and_reached,
-    hold_start,
     hybrid_policy_kwargs,
     load_ddpg_controller,
     physical_policy,
@@ -278,10 +277,7 @@ def test_ou_noise_seeded_and_stationary_std():
     np.testing.assert_array_equal(long.state, [0.0])
 
 
-def test_hold_start_and_held_steps_known_answers():
-    assert hold_start([10.0, 3.0, 9.0, 1.0, -2.0, 0.5], 5.0) == 3
-    assert hold_start([1.0, 2.0], 5.0) == 0
-    assert hold_start([1.0, 6.0], 5.0) is None
+def test_held_steps_known_answers():
     curve = [
         {"steps": s, "held_fraction": f} for s, f in [(0, 0), (1, 1), (2, 0.5), (3, 1), (4, 1)]
     ]

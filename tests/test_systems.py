@@ -241,3 +241,17 @@ def test_state_from_obs_inverts_observe(name) -> None:
         recovered[:, index] = torch.remainder(recovered[:, index], 2 * math.pi)
         states[:, index] = torch.remainder(states[:, index], 2 * math.pi)
     torch.testing.assert_close(recovered, states, rtol=0, atol=1e-12)
+
+
+def test_hold_step_known_answers() -> None:
+    system = MountainCar()  # main coordinate: x in metres, hold band 0.05
+    states = np.zeros((6, 2))
+    states[:, 0] = [1.0, 0.01, 0.9, 0.01, -0.02, 0.005]
+    assert system.hold_step(states) == 3
+    assert system.hold_step(states, band=0.001) is None  # outside at the end
+    assert system.hold_step(states, min_steps=3) == 3
+    assert system.hold_step(states, min_steps=4) is None  # inside for only 3 steps
+    assert system.hold_step(np.zeros((4, 2))) == 0
+    pendulum = Pendulum()  # angles are wrapped and in degrees: 2 pi + 1 degree is 1 degree
+    angles = np.array([[math.pi, 0.0], [2 * math.pi + math.radians(1.0), 0.0]])
+    assert pendulum.hold_step(angles) == 1

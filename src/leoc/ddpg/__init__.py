@@ -22,7 +22,7 @@ from leoc.ddpg.policies import (
     action_box,
     hybrid_policy_kwargs,
 )
-from leoc.ddpg.rollout import EvaluationResult, evaluate_policy, hold_start, run_episode
+from leoc.ddpg.rollout import EvaluationResult, evaluate_policy, run_episode
 from leoc.ddpg.train import (
     DDPGResult,
     build_model,
@@ -52,7 +52,6 @@ __all__ = [
     "build_model",
     "evaluate_policy",
     "held_and_reached",
-    "hold_start",
     "hybrid_policy_kwargs",
     "load_ddpg_controller",
     "load_ddpg_model",

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["EpisodeResult", "EvaluationResult", "evaluate_policy", "hold_start", "run_episode"]
+__all__ = ["EpisodeResult", "EvaluationResult", "evaluate_policy", "run_episode"]
 
 DTYPE = torch.float64
 
@@ -54,18 +54,6 @@ class EvaluationResult(NamedTuple):
         return bool(self.held) and all(self.held)
 
 
-def hold_start(main_coordinate: Sequence[float] | np.ndarray, band: float) -> int | None:
-    """First index from which ``|main_coordinate|`` stays ``<= band`` to the end, else ``None``.
-
-    Shapes: ``main_coordinate`` (T,).
-    """
-    inside = np.abs(np.asarray(main_coordinate, dtype=float)) <= band
-    if inside.size == 0 or not inside[-1]:
-        return None
-    outside = np.flatnonzero(~inside)
-    return int(outside[-1] + 1) if outside.size else 0
-
-
 def run_episode(policy: nn.Module, env: Any, seed: int) -> EpisodeResult:
     """Roll out ``policy`` (float64 (1, D) -> physical (1, F)) on ``env`` from ``reset(seed)``."""
     obs, info = env.reset(seed=seed)
@@ -94,13 +82,11 @@ def evaluate_policy(
     held: list[bool] = []
     for seed in seeds:
         episode = run_episode(policy, env, int(seed))
-        start = hold_start(system.main_coordinate(episode.states), hold_band)
-        length = len(episode.states)
+        start = system.hold_step(episode.states, hold_band, min_hold_steps)
         ok = (
             not episode.terminated
-            and length >= system.episode_steps
+            and len(episode.states) >= system.episode_steps
             and start is not None
-            and start <= length - min_hold_steps
         )
         returns.append(episode.episode_return)
         starts.append(start if ok else None)

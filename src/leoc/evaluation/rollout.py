@@ -23,8 +23,6 @@ ResponseTest = Literal["impulse", "step"]
 IMPULSE_MAGNITUDE = -1.0  # added to the first action only
 STEP_MAGNITUDE = -0.2  # added to every action
 RESPONSE_STEPS = 200
-# Hold criterion: the main coordinate stays inside this band (report units) to the end.
-HOLD_BANDS = {"pendulum": 5.0, "cartpole": 5.0, "mountaincar": 0.05}
 
 
 class Trajectory(NamedTuple):
@@ -169,12 +167,7 @@ def response_test(
 
 
 def hold_step(system: System, states: np.ndarray, band: float | None = None) -> int | None:
-    """First step from which the main coordinate stays within ``band`` of the operating point
-    until the end of ``states`` (None if it is outside at the end). Default band:
-    :data:`HOLD_BANDS` (5 degrees for the angle systems, 0.05 m for mountain car)."""
-    band = HOLD_BANDS[system.name] if band is None else band
-    inside = np.abs(system.main_coordinate(states)) <= band
-    if not inside[-1]:
-        return None
-    outside = np.flatnonzero(~inside)
-    return 0 if outside.size == 0 else int(outside[-1] + 1)
+    """First step from which the main coordinate stays within ``band`` (default
+    ``system.hold_band``: 5 degrees for the angle systems, 0.05 m for mountain car) until the
+    end of ``states``; None if it is outside at the end (see :meth:`System.hold_step`)."""
+    return system.hold_step(states, band)

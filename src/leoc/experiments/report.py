@@ -26,7 +26,7 @@ from leoc.evaluation.plots import (
     save_figure,
 )
 from leoc.evaluation.robustness import SCALED_PARAMETERS
-from leoc.evaluation.rollout import HOLD_BANDS, RESPONSE_TESTS
+from leoc.evaluation.rollout import RESPONSE_TESTS
 from leoc.experiments.linear import write_text_atomic
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import CONTROLLERS
@@ -430,7 +430,7 @@ def render_markdown(
     ]
     lines += response_table(responses, "impulse")
     lines += ["", "## Step response", ""] + response_table(responses, "step")
-    bands = ", ".join(f"{s} {b}" for s, b in HOLD_BANDS.items())
+    bands = ", ".join(f"{s} {make_system(s).hold_band}" for s in SYSTEM_NAMES)
     lines += [
         "",
         "## Robustness",

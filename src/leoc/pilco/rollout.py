@@ -108,9 +108,4 @@ def hold_start(
     """
     if rollout.terminated or rollout.steps < episode_steps:
         return None
-    errors = np.abs(system.main_coordinate(rollout.states[1:]))
-    outside = np.nonzero(errors > band)[0]
-    first = 0 if outside.size == 0 else int(outside[-1]) + 1
-    if rollout.steps - first < min_steps:
-        return None
-    return first
+    return system.hold_step(rollout.states[1:], band, min_steps)

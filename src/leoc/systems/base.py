@@ -131,6 +131,8 @@ class System:
         Whether the main coordinate is reported in degrees (angles) or as is (positions).
     settling_band : float
         Settling band of the response metrics, in the units the main coordinate is reported in.
+    hold_band : float
+        Band of the "reached and held the operating point" test (:meth:`hold_step`), same units.
     start_spread : tuple of float
         Half-widths of the uniform swing-up start distribution around ``swing_up_centre``.
     default_q, default_r : tuple
@@ -145,6 +147,7 @@ class System:
     main_label: ClassVar[str]
     main_in_degrees: ClassVar[bool]
     settling_band: ClassVar[float]
+    hold_band: ClassVar[float]
     swing_up_centre: ClassVar[tuple[float, ...]]
     start_spread: ClassVar[tuple[float, ...]]
     default_q: ClassVar[tuple[float, ...]]
@@ -273,6 +276,19 @@ class System:
             deviation = wrap_angle(deviation)
         values = deviation.numpy()
         return np.degrees(values) if self.main_in_degrees else values
+
+    def hold_step(self, states: Any, band: float | None = None, min_steps: int = 0) -> int | None:
+        """First step from which the main coordinate stays within ``band`` of the operating
+        point until the end of ``states`` ``(T, S)``; None if it is outside at the end or stays
+        inside for fewer than ``min_steps`` steps. Default band: :attr:`hold_band`.
+        """
+        band = self.hold_band if band is None else band
+        inside = np.abs(self.main_coordinate(states)) <= band
+        if inside.size == 0 or not inside[-1]:
+            return None
+        outside = np.flatnonzero(~inside)
+        first = 0 if outside.size == 0 else int(outside[-1] + 1)
+        return first if inside.size - first >= min_steps else None
 
     # ------------------------------------------------------------------ starts
     def sample_start(

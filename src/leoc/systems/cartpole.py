@@ -130,6 +130,7 @@ class CartPole(System):
     main_label = "theta [deg]"
     main_in_degrees = True
     settling_band = 1.0
+    hold_band = 5.0
     swing_up_centre = (0.0, 0.0, math.pi, 0.0)
     start_spread = START_SPREAD
     default_q = (2.0, 0.3, 2.0, 0.3)

@@ -101,6 +101,7 @@ class MountainCar(System):
     main_label = "x [m]"
     main_in_degrees = False
     settling_band = 0.001
+    hold_band = 0.05
     swing_up_centre = (-math.pi, 0.0)
     start_spread = START_SPREAD
     default_q = (2.0, 0.3)

@@ -104,6 +104,7 @@ class Pendulum(System):
     main_label = "theta [deg]"
     main_in_degrees = True
     settling_band = 1.0
+    hold_band = 5.0
     swing_up_centre = (math.pi, 0.0)
     start_spread = (START_ANGLE_SPREAD, START_SPEED_SPREAD)
     default_q = (2.0, 2.0)
