@@ -70,7 +70,7 @@ from ._checks import (
     shape_str,
 )
 from .linear import LinearController
-from .saturation import check_saturation_mode, saturate
+from .saturation import apply_saturation, check_saturation_mode
 
 __all__ = ["HybridOutput", "HybridPolicy", "SMOOTH_SATURATION_ATOL"]
 
@@ -301,7 +301,13 @@ class HybridPolicy(nn.Module):
         :class:`HybridOutput` ``(action, relevance)`` with relevance (..., 1).
         """
         r = self.relevance(x)
-        action = saturate(self._blend(x, r), self.action_limit, self.saturation)
+        blended = self._blend(x, r)
+        # limit and mode were validated at construction: skip the per-call checks (hot path)
+        action = (
+            blended
+            if self.action_limit is None
+            else apply_saturation(blended, self.action_limit, self.saturation)
+        )
         if return_relevance:
             return HybridOutput(action, r)
         return action

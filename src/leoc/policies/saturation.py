@@ -83,6 +83,15 @@ def saturate(u: Tensor, limit: Tensor | float | None, mode: str = "clip") -> Ten
         return u
     limit_t = torch.as_tensor(limit, dtype=u.dtype, device=u.device)
     check_positive(limit_t, "limit")
+    return apply_saturation(u, limit_t, mode)
+
+
+def apply_saturation(u: Tensor, limit: Tensor, mode: str) -> Tensor:
+    """:func:`saturate` without its input checks, for hot paths whose ``limit`` (a positive
+    tensor of ``u``'s dtype) and ``mode`` were validated once at construction."""
+    limit_t = limit
+    if mode == "none":
+        return u
     if mode == "clip":
         return torch.minimum(torch.maximum(u, -limit_t), limit_t)
     if mode == "sin":
