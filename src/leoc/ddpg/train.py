@@ -17,11 +17,8 @@ point; ``held_steps`` the first evaluation from which every later evaluation hol
 
 from __future__ import annotations
 
-import csv
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -34,6 +31,13 @@ from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, hybrid_policy_kwargs
+from leoc.io import (
+    save_figure_atomic,
+    write_bytes_atomic,
+    write_csv_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
 
 __all__ = [
     "DDPGResult",
@@ -87,26 +91,10 @@ class DDPGResult(NamedTuple):
     model: Any
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "wb") as file:
-            file.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    _atomic_write_bytes(path, text.encode("utf-8"))
-
-
 def _atomic_save_model(model: Any, path: Path) -> None:
     buffer = io.BytesIO()
     model.save(buffer)
-    _atomic_write_bytes(path, buffer.getvalue())
+    write_bytes_atomic(path, buffer.getvalue())
 
 
 def held_and_reached(curve: list[dict[str, Any]]) -> tuple[int | None, int | None]:
@@ -186,21 +174,12 @@ def _plot_curve(curve: list[dict[str, Any]], title: str, path: Path) -> None:
     axis.set_ylabel("evaluation return")
     axis.set_title(title)
     axis.grid(True, alpha=0.3)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    _atomic_write_bytes(path, buffer.getvalue())
+    save_figure_atomic(fig, path)
 
 
 def _write_curve(run_dir: Path, curve: list[dict[str, Any]], summary: dict[str, Any]) -> None:
-    _atomic_write_text(
-        run_dir / "curve.json", json.dumps({"curve": curve, "summary": summary}, indent=2)
-    )
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=CURVE_COLUMNS, extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(curve)
-    _atomic_write_text(run_dir / "curve.csv", text.getvalue())
+    write_json_atomic(run_dir / "curve.json", {"curve": curve, "summary": summary}, indent=2)
+    write_csv_atomic(run_dir / "curve.csv", curve, CURVE_COLUMNS)
 
 
 def _versions() -> dict[str, str]:
@@ -259,7 +238,7 @@ def train_ddpg(
     run_path = Path(run_dir or DEFAULT_RUN_ROOT / f"{system}-{algo}-{kind}-seed{seed}")
     run_path.mkdir(parents=True, exist_ok=True)
     config_dict = {**config.as_dict(), "seed": seed}
-    _atomic_write_text(
+    write_text_atomic(
         run_path / "config.json",
         json.dumps({**config_dict, "versions": _versions()}, indent=2),
     )

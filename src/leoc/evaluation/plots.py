@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from leoc.io import save_figure_atomic
 from leoc.systems import make_system
 
 CONTROLLER_COLOURS = {
@@ -41,16 +42,8 @@ def _pyplot():
 
 
 def save_figure(figure, path: str | Path) -> Path:
-    """Save ``figure`` to ``path`` atomically (temporary file, then rename) and close it."""
-    import os
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    figure.savefig(temporary, dpi=FIGURE_DPI, bbox_inches="tight")
-    os.replace(temporary, path)
-    _pyplot().close(figure)
-    return path
+    """Save ``figure`` to ``path`` atomically and close it."""
+    return save_figure_atomic(figure, path, dpi=FIGURE_DPI)
 
 
 def plot_responses(

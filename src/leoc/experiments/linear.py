@@ -5,8 +5,6 @@ This is the first stage of ``leoc reproduce``: it needs no training and runs in 
 
 from __future__ import annotations
 
-import json
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,18 +16,11 @@ from leoc.evaluation.metrics import ResponseMetrics
 from leoc.evaluation.plots import plot_responses
 from leoc.evaluation.rollout import RESPONSE_TESTS, ResponseResult, response_test
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
+from leoc.io import write_json_atomic, write_text_atomic
 from leoc.policies import LinearController
 from leoc.systems import SYSTEM_NAMES, make_system
 
 NUMBER_FORMAT = "{:.3g}"
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename (never half-written)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.tmp")
-    temporary.write_text(text)
-    os.replace(temporary, path)
 
 
 def design_summary(design: LQRDesign) -> dict[str, Any]:
@@ -124,7 +115,7 @@ def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
         }
         for name in designs
     }
-    write_text_atomic(out / "linear.json", json.dumps(data, indent=1))
+    write_json_atomic(out / "linear.json", data)
     lines = ["# Linear (LQR) controllers", "", f"Design method: {method}.", ""]
     lines += [
         "## Gains",

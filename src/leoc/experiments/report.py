@@ -8,8 +8,6 @@ Outputs in the reproduce folder: ``results.json`` (every aggregated number), ``r
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 from collections import defaultdict
@@ -27,10 +25,10 @@ from leoc.evaluation.plots import (
 )
 from leoc.evaluation.robustness import SCALED_PARAMETERS
 from leoc.evaluation.rollout import RESPONSE_TESTS
-from leoc.experiments.linear import write_text_atomic
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import CONTROLLERS
-from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, write_json_atomic
+from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE
+from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 
 CURVE_GRID_POINTS = 50
@@ -112,16 +110,6 @@ def curve_summary(runs: list[dict[str, Any]]) -> dict[str, list[float]] | None:
         "std": values.std(0).tolist(),
         "n_seeds": len(curves),
     }
-
-
-def _csv(rows: list[dict[str, Any]]) -> str:
-    if not rows:
-        return ""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    return buffer.getvalue()
 
 
 # ------------------------------------------------------------------------------------ figures
@@ -332,15 +320,15 @@ def write_report(out_dir: str | Path) -> Path:
             "summed_run_wall_seconds": train_seconds,
         },
     )
-    write_text_atomic(out / "responses.csv", _csv(responses))
-    write_text_atomic(out / "robustness.csv", _csv(robustness))
+    write_csv_atomic(out / "responses.csv", responses)
+    write_csv_atomic(out / "robustness.csv", robustness)
     curve_rows = [
         {"system": s, "controller": c, "seconds": t, "mean": m, "std": d}
         for s, by_c in curves.items()
         for c, curve in by_c.items()
         for t, m, d in zip(curve["seconds"], curve["mean"], curve["std"], strict=True)
     ]
-    write_text_atomic(out / "learning_curves.csv", _csv(curve_rows))
+    write_csv_atomic(out / "learning_curves.csv", curve_rows)
     figures = []
     if evaluations:
         plot_responses(

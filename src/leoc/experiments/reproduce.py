@@ -32,6 +32,7 @@ import torch
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, hold_step, response_test, rollout
 from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
+from leoc.io import write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 
 EVALUATION_FILE = "evaluation.json"
@@ -39,24 +40,6 @@ LOG_FILE = "train.log"
 META_FILE = "meta.json"
 PROGRESS_INTERVAL_S = 15.0
 WORKER_THREADS = 1
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write ``data`` as JSON through a temporary file and a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    temporary.write_text(json.dumps(data, indent=1, default=_json_default))
-    os.replace(temporary, path)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def run_dir_of(out_dir: Path, spec: RunSpec) -> Path:
@@ -236,9 +219,11 @@ def run_all(
                     if error is not None:
                         echo(f"  see {run_dir_of(out_dir, spec) / LOG_FILE}")
                 for future in remaining:
-                    if future.running():
-                        spec = futures[future]
-                        log = run_dir_of(out_dir, spec) / LOG_FILE
+                    spec = futures[future]
+                    log = run_dir_of(out_dir, spec) / LOG_FILE
+                    # the pool marks queued calls as running: a run has started once its log
+                    # exists (stale logs of an interrupted earlier attempt say so themselves)
+                    if future.running() and log.is_file():
                         echo(f"  running {spec.key}: {_last_line(log)}")
         except KeyboardInterrupt:
             echo("interrupted: finished runs are kept; rerun the same command to resume")

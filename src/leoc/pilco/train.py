@@ -18,11 +18,9 @@ resume, written atomically).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
-import os
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -31,6 +29,13 @@ import numpy as np
 import torch
 from torch import nn
 
+from leoc.io import (
+    save_figure_atomic,
+    save_torch_atomic,
+    write_csv_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
 from leoc.pilco.gp import GPHyper, GPPosterior, GPSettings, fit_gp
 from leoc.pilco.propagate import Prediction, SaturatedPolicy, predict
 from leoc.pilco.rollout import (
@@ -348,28 +353,9 @@ class _RunState(NamedTuple):
     hyper: GPHyper | None
 
 
-def _atomic_save(obj: Any, path: Path) -> None:
-    """torch.save to a temporary file, then os.replace: a crash never leaves half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
-def _write_text_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def _write_logs(run_dir: Path, log: list[dict[str, Any]]) -> None:
-    _write_text_atomic(run_dir / "log.json", json.dumps(log, indent=2))
-    tmp = run_dir / "log.csv.tmp"
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=LOG_FIELDS)
-        writer.writeheader()
-        for row in log:
-            writer.writerow({k: row.get(k) for k in LOG_FIELDS})
-    os.replace(tmp, run_dir / "log.csv")
+    write_json_atomic(run_dir / "log.json", log, indent=2)
+    write_csv_atomic(run_dir / "log.csv", log, LOG_FIELDS)
 
 
 def plot_learning_curve(log: list[dict[str, Any]], path: Path, title: str) -> None:
@@ -398,8 +384,7 @@ def plot_learning_curve(log: list[dict[str, Any]], path: Path, title: str) -> No
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure_atomic(fig, path)
 
 
 def _log_row(
@@ -474,7 +459,7 @@ def _save_checkpoint(
     model: GPPosterior | None,
     generator: torch.Generator,
 ) -> None:
-    _atomic_save(
+    save_torch_atomic(
         {
             "config": config.to_dict(),
             "iteration": state.iteration,
@@ -490,7 +475,7 @@ def _save_checkpoint(
         },
         run_dir / CHECKPOINT_NAME,
     )
-    _atomic_save(
+    save_torch_atomic(
         {
             "config": config.to_dict(),
             "policy_state": policy.state_dict(),
@@ -634,7 +619,7 @@ def train_pilco(
         state, _, _ = _initial_state(plant, config, rng)
         policy = build_policy(plant, config, generator, state.inputs[:, : plant.obs_dim])
         state = state._replace(rng_state=rng.bit_generator.state)
-        _write_text_atomic(run_path / "config.json", json.dumps(config.to_dict(), indent=2))
+        write_text_atomic(run_path / "config.json", json.dumps(config.to_dict(), indent=2))
         _save_checkpoint(run_path, config, state, policy, None, generator)
         if progress:
             print(_progress_line(state.log[0], config.iterations), flush=True)
