@@ -204,7 +204,6 @@ def run_all(
         futures: dict[Future, RunSpec] = {
             pool.submit(execute_run, spec, profile, out_dir): spec for spec in pending
         }
-        started = {spec: time.perf_counter() for spec in pending}
         try:
             remaining = set(futures)
             while remaining:
@@ -213,9 +212,11 @@ def run_all(
                     spec = futures[future]
                     finished += 1
                     error = future.exception()
-                    status = "done" if error is None else f"FAILED: {error!r}"
-                    elapsed = time.perf_counter() - started[spec]
-                    echo(f"[{finished}/{len(pending)}] {spec.key} {status} ({elapsed:.0f} s)")
+                    if error is None:
+                        status = f"done ({future.result()['wall_seconds']:.0f} s)"
+                    else:
+                        status = f"FAILED: {error!r}"
+                    echo(f"[{finished}/{len(pending)}] {spec.key} {status}")
                     if error is not None:
                         echo(f"  see {run_dir_of(out_dir, spec) / LOG_FILE}")
                 for future in remaining:
