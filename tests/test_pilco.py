@@ -442,11 +442,12 @@ def test_pendulum_hybrid_swings_up_and_holds(tmp_path) -> None:
         hybrid=True,
         seed=0,
         run_dir=tmp_path,
-        iterations=4,
+        iterations=10,  # the paper's budget; seed 0 first held at iteration 5 in our runs
         progress=False,
         stop_after_held=2,
     )
-    assert result.log[-1]["held_operating_point"]
+    # training stops once two consecutive iterations held the operating point
+    assert result.log[-1]["held_operating_point"] and result.log[-2]["held_operating_point"]
 
 
 def test_recomputing_bilinear_exp_has_the_plain_gradients() -> None:

@@ -110,3 +110,20 @@ def check_last_dim(x: Tensor, dim: int, dtype: torch.dtype | None = None, name: 
         raise ValueError(
             f"{name} must have shape (..., D) with D = {dim}, found {shape_str(x.shape)}"
         )
+
+
+def positive_scalar_or_vector(
+    value: object, name: str, size: int, size_label: str, dtype: torch.dtype
+) -> Tensor:
+    """``value`` as a positive finite tensor of shape () or (size,), checked once.
+
+    ``size_label`` names the dimension in the message ("D" or "F").
+    """
+    tensor = as_float_tensor(value, name, dtype)
+    if tensor.shape not in (torch.Size([]), (size,)):
+        raise ValueError(
+            f"{name} must be a scalar or have shape ({size_label},) = ({size},), "
+            f"found {shape_str(tensor.shape)}"
+        )
+    check_positive(tensor, name)
+    return tensor

@@ -65,8 +65,8 @@ from ._checks import (
     as_float_tensor,
     check_finite,
     check_last_dim,
-    check_positive,
     check_shape,
+    positive_scalar_or_vector,
     shape_str,
 )
 from .linear import LinearController
@@ -184,27 +184,14 @@ class HybridPolicy(nn.Module):
 
     @staticmethod
     def _lambda_vector(lambda_init: object, obs_dim: int, dtype: torch.dtype) -> Tensor:
-        lam = as_float_tensor(lambda_init, "lambda_init", dtype)
-        if lam.shape not in (torch.Size([]), (obs_dim,)):
-            raise ValueError(
-                f"lambda_init must be a scalar or have shape (D,) = ({obs_dim},), "
-                f"found {shape_str(lam.shape)}"
-            )
-        check_positive(lam, "lambda_init")
+        lam = positive_scalar_or_vector(lambda_init, "lambda_init", obs_dim, "D", dtype)
         return lam.expand(obs_dim).clone()
 
     @staticmethod
     def _limit_tensor(action_limit: object, act_dim: int, dtype: torch.dtype) -> Tensor | None:
         if action_limit is None:
             return None
-        limit = as_float_tensor(action_limit, "action_limit", dtype)
-        if limit.shape not in (torch.Size([]), (act_dim,)):
-            raise ValueError(
-                f"action_limit must be a scalar or have shape (F,) = ({act_dim},), "
-                f"found {shape_str(limit.shape)}"
-            )
-        check_positive(limit, "action_limit")
-        return limit
+        return positive_scalar_or_vector(action_limit, "action_limit", act_dim, "F", dtype)
 
     def _check_nonlinear_output(self, act_dim: int) -> None:
         """Evaluate H once at the operating point and check it maps (1, D) -> (1, F)."""

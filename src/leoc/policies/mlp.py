@@ -20,7 +20,11 @@ from collections.abc import Callable, Sequence
 import torch
 from torch import Tensor, nn
 
-from ._checks import as_float_tensor, check_last_dim, check_positive, check_positive_int, shape_str
+from ._checks import (
+    check_last_dim,
+    check_positive_int,
+    positive_scalar_or_vector,
+)
 
 __all__ = ["MLPActor"]
 
@@ -118,13 +122,7 @@ class MLPActor(nn.Module):
 
         limit = None
         if action_limit is not None:
-            limit = as_float_tensor(action_limit, "action_limit", dtype)
-            if limit.shape not in (torch.Size([]), (act_dim,)):
-                raise ValueError(
-                    f"action_limit must be a scalar or have shape (F,) = ({act_dim},), "
-                    f"found {shape_str(limit.shape)}"
-                )
-            check_positive(limit, "action_limit")
+            limit = positive_scalar_or_vector(action_limit, "action_limit", act_dim, "F", dtype)
         self.register_buffer("action_limit", limit)
         self._obs_dim = obs_dim
         self._act_dim = act_dim
