@@ -37,6 +37,16 @@ class _PaperSettingsMixin:
     target_update_interval: int
     polyak: float
 
+    def __init__(
+        self,
+        *args: Any,
+        actor_learning_rate: float | None = None,
+        target_update_interval: int = 1,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(*args, **kwargs)  # the SB3 algorithm after this mixin in the MRO
+        self._init_paper_settings(actor_learning_rate, target_update_interval)
+
     def _init_paper_settings(
         self, actor_learning_rate: float | None, target_update_interval: int
     ) -> None:
@@ -81,26 +91,6 @@ class _PaperSettingsMixin:
 class LeocDDPG(_PaperSettingsMixin, DDPG):
     """SB3 ``DDPG`` plus ``actor_learning_rate`` and ``target_update_interval`` (see module)."""
 
-    def __init__(
-        self,
-        *args: Any,
-        actor_learning_rate: float | None = None,
-        target_update_interval: int = 1,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(*args, **kwargs)
-        self._init_paper_settings(actor_learning_rate, target_update_interval)
-
 
 class LeocTD3(_PaperSettingsMixin, TD3):
     """SB3 ``TD3`` plus ``actor_learning_rate`` and ``target_update_interval`` (see module)."""
-
-    def __init__(
-        self,
-        *args: Any,
-        actor_learning_rate: float | None = None,
-        target_update_interval: int = 1,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(*args, **kwargs)
-        self._init_paper_settings(actor_learning_rate, target_update_interval)

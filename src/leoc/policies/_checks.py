@@ -112,18 +112,24 @@ def check_last_dim(x: Tensor, dim: int, dtype: torch.dtype | None = None, name: 
         )
 
 
-def positive_scalar_or_vector(
+def scalar_or_vector(
     value: object, name: str, size: int, size_label: str, dtype: torch.dtype
 ) -> Tensor:
-    """``value`` as a positive finite tensor of shape () or (size,), checked once.
-
-    ``size_label`` names the dimension in the message ("D" or "F").
-    """
+    """``value`` as a tensor of shape () or (size,); ``size_label`` names the dimension in the
+    message ("D" or "F")."""
     tensor = as_float_tensor(value, name, dtype)
     if tensor.shape not in (torch.Size([]), (size,)):
         raise ValueError(
             f"{name} must be a scalar or have shape ({size_label},) = ({size},), "
             f"found {shape_str(tensor.shape)}"
         )
+    return tensor
+
+
+def positive_scalar_or_vector(
+    value: object, name: str, size: int, size_label: str, dtype: torch.dtype
+) -> Tensor:
+    """:func:`scalar_or_vector`, positive and finite."""
+    tensor = scalar_or_vector(value, name, size, size_label, dtype)
     check_positive(tensor, name)
     return tensor

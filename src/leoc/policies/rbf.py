@@ -29,6 +29,7 @@ from ._checks import (
     check_positive,
     check_positive_int,
     check_shape,
+    scalar_or_vector,
     shape_str,
 )
 
@@ -147,12 +148,7 @@ class RBFNetwork(nn.Module):
 
     @staticmethod
     def _vector_or_scalar(value: object, name: str, size: int, dtype: torch.dtype) -> Tensor:
-        tensor = as_float_tensor(value, name, dtype)
-        if tensor.shape not in (torch.Size([]), (size,)):
-            raise ValueError(
-                f"{name} must be a scalar or have shape (D,) = ({size},), "
-                f"found {shape_str(tensor.shape)}"
-            )
+        tensor = scalar_or_vector(value, name, size, "D", dtype)
         check_finite(tensor, name)
         return tensor
 
