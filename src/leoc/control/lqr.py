@@ -36,7 +36,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 import torch
 
-from leoc.systems.base import DTYPE, System
+from leoc.systems.base import DTYPE, System, check_repeat
 
 DESIGN_METHODS = ("discrete", "continuous")
 DesignMethod = Literal["discrete", "continuous"]
@@ -81,7 +81,7 @@ class LQRDesign(NamedTuple):
 
     ``K`` acts on the state deviation, ``(W, b)`` on the observation: ``G(o) = W o + b``.
     ``closed_loop_eigenvalues`` are those of ``A_d - B_d K`` (discrete, on the simulator's exact
-    linearisation, whatever the design method).
+    linearisation of the ``action_repeat``-step held map, whatever the design method).
     """
 
     K: np.ndarray  # (A, S)
@@ -95,6 +95,7 @@ class LQRDesign(NamedTuple):
     b: np.ndarray  # (A,)
     method: str
     margins: StabilityMargins
+    action_repeat: int = 1  # control period the design is for, in simulator steps
 
     @property
     def spectral_radius(self) -> float:
@@ -102,9 +103,12 @@ class LQRDesign(NamedTuple):
 
 
 def linearise(
-    system: System, state: np.ndarray | None = None, action: np.ndarray | None = None
+    system: System,
+    state: np.ndarray | None = None,
+    action: np.ndarray | None = None,
+    action_repeat: int = 1,
 ) -> Linearisation:
-    """Jacobians of ``system.step_fn`` by autodiff (default: at the operating point).
+    """Jacobians of the control-period map by autodiff (default: at the operating point).
 
     Parameters
     ----------
@@ -113,7 +117,11 @@ def linearise(
         Defaults to ``system.operating_state``.
     action : array of shape (A,), optional
         Defaults to ``system.u_eq``.
+    action_repeat : int
+        Simulator steps per decision: the map linearised is ``System.step_held`` (the
+        ``action_repeat``-step map with the action held); 1 is ``step_fn`` itself.
     """
+    repeat = check_repeat(action_repeat)
     state_np = system.operating_state if state is None else np.asarray(state, dtype=float)
     action_np = system.u_eq if action is None else np.asarray(action, dtype=float)
     if state_np.shape != (system.state_dim,):
@@ -122,7 +130,7 @@ def linearise(
         raise ValueError(f"action: expected shape ({system.action_dim},), found {action_np.shape}")
 
     def step_single(x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        return system.step_fn(x.unsqueeze(0), u.unsqueeze(0))[0]
+        return system.step_held(x.unsqueeze(0), u.unsqueeze(0), repeat)[0]
 
     jac_x, jac_u = torch.autograd.functional.jacobian(
         step_single,
@@ -272,8 +280,9 @@ def design_lqr(
     Q: object | None = None,
     R: object | None = None,
     method: DesignMethod = "discrete",
+    action_repeat: int = 1,
 ) -> LQRDesign:
-    """Design the LQR of ``system`` about its operating point.
+    """Design the LQR of ``system`` about its operating point, for a control period.
 
     Parameters
     ----------
@@ -285,6 +294,12 @@ def design_lqr(
     method : {"discrete", "continuous"}
         ``discrete`` (default): ``dlqr`` on the autodiff linearisation of the step map.
         ``continuous``: ``lqr`` on the paper's analytic continuous-time ``A, B``.
+    action_repeat : int
+        Control period in simulator steps: the controller decides every ``action_repeat``
+        steps and holds its action (PILCO: 3). The discrete design linearises that held map
+        (``A_d, B_d`` of ``System.step_held``), so the gain is the LQR of the closed loop the
+        controller actually runs; ``Q`` and ``R`` weigh one decision. Eigenvalues and margins
+        are those of the held map (sample time ``action_repeat * dt``).
 
     Returns
     -------
@@ -301,7 +316,8 @@ def design_lqr(
         raise ValueError(f"method: expected one of {DESIGN_METHODS}, found {method!r}")
     q_matrix = _weight_matrix(system.default_q if Q is None else Q, system.state_dim, "Q", False)
     r_matrix = _weight_matrix(system.default_r if R is None else R, system.action_dim, "R", True)
-    lin = linearise(system)
+    lin = linearise(system, action_repeat=action_repeat)
+    lin_repeat = check_repeat(action_repeat)
     if method == "discrete":
         check_stabilisable(lin.A_d, lin.B_d, discrete=True)
         K, P, _ = control.dlqr(lin.A_d, lin.B_d, q_matrix, r_matrix)
@@ -312,7 +328,7 @@ def design_lqr(
     K = np.asarray(K, dtype=float)
     eigenvalues = np.linalg.eigvals(lin.A_d - lin.B_d @ K)
     W, b = observation_gain(system, K)
-    margins = loop_margins(lin.A_d, lin.B_d, K, system.dt)
+    margins = loop_margins(lin.A_d, lin.B_d, K, system.dt * lin_repeat)
     return LQRDesign(
         K,
         np.asarray(P, dtype=float),
@@ -325,4 +341,5 @@ def design_lqr(
         b,
         method,
         margins,
+        lin_repeat,
     )

@@ -6,6 +6,7 @@ pi(x) = sat(r(x) G(x) + (1 - r(x)) H(x)), so that pi(a) = G(a) and dpi/dx(a) = W
 operating point a (Zhang & Capel, L4DC 2021).
 """
 
+from .held import HeldPolicy, lqr_controller, with_control_period
 from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy
 from .linear import LinearController
 from .mlp import DEFAULT_HIDDEN_SIZES, MLPActor
@@ -16,10 +17,13 @@ __all__ = [
     "DEFAULT_HIDDEN_SIZES",
     "SATURATION_MODES",
     "SMOOTH_SATURATION_ATOL",
+    "HeldPolicy",
     "HybridOutput",
     "HybridPolicy",
     "LinearController",
     "MLPActor",
     "RBFNetwork",
+    "lqr_controller",
     "saturate",
+    "with_control_period",
 ]

@@ -34,6 +34,13 @@ def wrap_angle(angle: Tensor) -> Tensor:
     return torch.remainder(angle + math.pi, 2.0 * math.pi) - math.pi
 
 
+def check_repeat(repeat: Any) -> int:
+    """A control period in simulator steps: a positive integer (raises naming ``action_repeat``)."""
+    if isinstance(repeat, bool) or not isinstance(repeat, (int, np.integer)) or repeat < 1:
+        raise ValueError(f"action_repeat: expected a positive integer, found {repeat!r}")
+    return int(repeat)
+
+
 def as_state_tensor(value: Any, dim: int, name: str) -> Tensor:
     """Convert ``value`` to a float64 tensor of shape ``(B, dim)`` (a 1-D input gets ``B = 1``).
 
@@ -133,6 +140,12 @@ class System:
         Settling band of the response metrics, in the units the main coordinate is reported in.
     hold_band : float
         Band of the "reached and held the operating point" test (:meth:`hold_step`), same units.
+    hold_min_steps : int
+        Fewest final simulator steps inside ``hold_band`` that count as holding: the one minimum
+        duration of the hold test, used by both trainers, the swing-up table and robustness.
+    operating_region : tuple of float
+        Half-widths (state units) of the box around the operating point from which robustness
+        episodes start (:meth:`sample_operating_region`).
     start_spread : tuple of float
         Half-widths of the uniform swing-up start distribution around ``swing_up_centre``.
     default_q, default_r : tuple
@@ -148,6 +161,8 @@ class System:
     main_in_degrees: ClassVar[bool]
     settling_band: ClassVar[float]
     hold_band: ClassVar[float]
+    hold_min_steps: ClassVar[int]
+    operating_region: ClassVar[tuple[float, ...]]
     swing_up_centre: ClassVar[tuple[float, ...]]
     start_spread: ClassVar[tuple[float, ...]]
     default_q: ClassVar[tuple[float, ...]]
@@ -228,6 +243,13 @@ class System:
     def clip_action(self, action: Tensor) -> Tensor:
         return torch.clamp(action, -self.action_limit, self.action_limit)
 
+    def step_held(self, state: Tensor, action: Tensor, repeat: int) -> Tensor:
+        """The ``repeat``-step map: ``step_fn`` applied ``repeat`` times with the action held
+        (zero-order hold), ``(B, S), (B, A) -> (B, S)``. ``repeat = 1`` is :meth:`step_fn`."""
+        for _ in range(check_repeat(repeat)):
+            state = self.step_fn(state, action)
+        return state
+
     def step(self, state: Any, action: Any) -> Tensor:
         """Batched step accepting array-likes; see :meth:`step_fn`."""
         state_t = as_state_tensor(state, self.state_dim, "state")
@@ -277,12 +299,25 @@ class System:
         values = deviation.numpy()
         return np.degrees(values) if self.main_in_degrees else values
 
-    def hold_step(self, states: Any, band: float | None = None, min_steps: int = 0) -> int | None:
-        """First step from which the main coordinate stays within ``band`` of the operating
-        point until the end of ``states`` ``(T, S)``; None if it is outside at the end or stays
-        inside for fewer than ``min_steps`` steps. Default band: :attr:`hold_band`.
+    def hold_step(
+        self,
+        states: Any,
+        band: float | None = None,
+        min_steps: int | None = None,
+        terminated: bool = False,
+    ) -> int | None:
+        """The one "reached and held the operating point" test.
+
+        Returns the first step from which the main coordinate stays within ``band`` of the
+        operating point until the end of ``states`` ``(T, S)``, or None when the episode does
+        not hold: it terminated (left the allowed region), its last state is outside the band,
+        or it stayed inside for fewer than ``min_steps`` steps. Defaults: :attr:`hold_band` and
+        :attr:`hold_min_steps`.
         """
         band = self.hold_band if band is None else band
+        min_steps = self.hold_min_steps if min_steps is None else int(min_steps)
+        if terminated:
+            return None
         inside = np.abs(self.main_coordinate(states)) <= band
         if inside.size == 0 or not inside[-1]:
             return None
@@ -327,6 +362,12 @@ class System:
                 state = state + offset_arr
             return state
         raise ValueError(f"kind: expected one of {START_KINDS}, found {kind!r}")
+
+    def sample_operating_region(self, rng: np.random.Generator, count: int) -> np.ndarray:
+        """``count`` starts ``(count, S)`` uniform in the operating point +/- ``operating_region``
+        (the region robustness episodes start from)."""
+        spread = np.asarray(self.operating_region, dtype=float)
+        return self.operating_state + rng.uniform(-spread, spread, size=(count, self.state_dim))
 
     def with_params(self, **factors: float) -> System:
         """A copy of this system with scaled parameters (see :meth:`PhysicalParams.scaled`)."""

@@ -33,6 +33,12 @@ FORCE_WEIGHT = 0.005
 OUT_OF_BOUNDS_REWARD = -100.0
 FOUR_THIRDS = 4.0 / 3.0
 START_SPREAD = (0.1, 0.1, math.radians(10.0), 0.1)
+# Hold test: 50 steps (1 s) inside the hold band at the end of the episode.
+HOLD_MIN_STEPS = 50
+# Robustness starts: x +/- 0.2 m, x_dot +/- 0.2 m/s, theta +/- 0.15 rad (8.6 deg),
+# theta_dot +/- 0.2 rad/s; the nominal LQR (at dt and at PILCO's 3-step period) recovers from
+# every corner.
+OPERATING_REGION = (0.2, 0.2, 0.15, 0.2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,6 +137,8 @@ class CartPole(System):
     main_in_degrees = True
     settling_band = 1.0
     hold_band = 5.0
+    hold_min_steps = HOLD_MIN_STEPS
+    operating_region = OPERATING_REGION
     swing_up_centre = (0.0, 0.0, math.pi, 0.0)
     start_spread = START_SPREAD
     default_q = (2.0, 0.3, 2.0, 0.3)

@@ -29,6 +29,11 @@ SPEED_WEIGHT = 1.0
 FORCE_WEIGHT = 0.005
 OUT_OF_BOUNDS_REWARD = -100.0
 START_SPREAD = (math.radians(10.0), 0.1)
+# Hold test: 50 steps (1 s) inside the hold band at the end of the episode.
+HOLD_MIN_STEPS = 50
+# Robustness starts: x +/- 0.1 m, x_dot +/- 0.1 m/s around the hilltop; the nominal LQR (at dt
+# and at PILCO's 3-step period) recovers from every corner.
+OPERATING_REGION = (0.1, 0.1)
 # The track of the original experiments, [-3.6, 2.2] in a frame whose hilltop is at pi / 2.
 TRACK_LOW = -3.6 - math.pi / 2.0
 TRACK_HIGH = 2.2 - math.pi / 2.0
@@ -102,6 +107,8 @@ class MountainCar(System):
     main_in_degrees = False
     settling_band = 0.001
     hold_band = 0.05
+    hold_min_steps = HOLD_MIN_STEPS
+    operating_region = OPERATING_REGION
     swing_up_centre = (-math.pi, 0.0)
     start_spread = START_SPREAD
     default_q = (2.0, 0.3)

@@ -1,0 +1,276 @@
+"""The one closed-loop simulation of a :class:`~leoc.systems.base.System`, batched over starts.
+
+Every rollout in leoc goes through :func:`simulate`: the response tests and robustness sweeps of
+:mod:`leoc.evaluation`, PILCO's data collection, the DDPG/TD3 evaluation episodes and the
+empirical basins of attraction. So every one of them runs the same closed loop.
+
+Control period. A controller is any callable mapping a float64 observation batch ``(B, O)`` to
+actions ``(B, A)``. It decides every :func:`control_period` simulator steps (its
+``action_repeat`` attribute, default 1) and its action is held in between (zero-order hold):
+a controller keeps the period it was trained at wherever it is evaluated. Disturbances
+(``action_offsets``) act on every simulator step, on top of the held action, before the
+actuator clip.
+
+Termination. A start whose state leaves the allowed region (``System.out_of_bounds``) gets the
+system's ``out_of_bounds_reward`` for that step and is frozen from then on (no further reward,
+its state repeated), exactly as a gymnasium episode that ends there.
+
+Shapes: ``B`` starts, ``T`` simulator steps, ``S`` state, ``O`` observation, ``A`` action.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from leoc.systems.base import DTYPE, System, check_repeat
+
+Controller = Callable[[Tensor], Tensor]
+
+
+class Trajectory(NamedTuple):
+    """One closed-loop episode (``T`` steps taken; fewer than requested if it terminated).
+
+    Attributes
+    ----------
+    states : (T + 1, S) array
+    observations : (T + 1, O) array
+    actions : (T, A) array of the actions applied (held controller output plus offset, clipped)
+    rewards : (T,) array
+    relevance : (T,) array of r(x) at the last decision, for hybrid controllers; else None
+    terminated : bool
+    action_repeat : int
+        The control period the episode ran at (simulator steps per decision).
+    """
+
+    states: np.ndarray
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    relevance: np.ndarray | None
+    terminated: bool
+    action_repeat: int = 1
+
+    @property
+    def total_reward(self) -> float:
+        return float(np.sum(self.rewards))
+
+    @property
+    def steps(self) -> int:
+        return int(self.actions.shape[0])
+
+
+class BatchTrajectory(NamedTuple):
+    """``B`` episodes run together; entries after a start's termination are frozen copies.
+
+    Attributes
+    ----------
+    states : (B, T + 1, S) array
+    observations : (B, T + 1, O) array
+    actions : (B, T, A) array
+    rewards : (B, T) array (0 after termination)
+    relevance : (B, T) array or None
+    terminated : (B,) bool array
+    lengths : (B,) int array of the steps each episode took before it ended
+    action_repeat : int
+    """
+
+    states: np.ndarray
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    relevance: np.ndarray | None
+    terminated: np.ndarray
+    lengths: np.ndarray
+    action_repeat: int
+
+    @property
+    def total_rewards(self) -> np.ndarray:
+        return self.rewards.sum(axis=1)
+
+    def episode(self, index: int) -> Trajectory:
+        """Episode ``index`` cut at its own length."""
+        length = int(self.lengths[index])
+        return Trajectory(
+            self.states[index, : length + 1],
+            self.observations[index, : length + 1],
+            self.actions[index, :length],
+            self.rewards[index, :length],
+            None if self.relevance is None else self.relevance[index, :length],
+            bool(self.terminated[index]),
+            self.action_repeat,
+        )
+
+
+def control_period(controller: Any) -> int:
+    """Simulator steps per decision of ``controller``: its ``action_repeat``, default 1."""
+    return check_repeat(getattr(controller, "action_repeat", 1))
+
+
+def relevance_function(controller: Any) -> Callable[[Tensor], Tensor] | None:
+    """The controller's ``relevance(x)`` method if it is a hybrid (has ``relevance`` and does
+    not declare ``is_hybrid = False``), else None."""
+    relevance = getattr(controller, "relevance", None)
+    if callable(relevance) and getattr(controller, "is_hybrid", True):
+        return relevance
+    return None
+
+
+def _check_inputs(
+    system: System, starts: Any, steps: int, action_offsets: Any
+) -> tuple[Tensor, Tensor]:
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise ValueError(f"steps: expected a positive integer, found {steps!r}")
+    state = torch.as_tensor(np.asarray(starts, dtype=float), dtype=DTYPE)
+    if state.ndim == 1:
+        state = state.unsqueeze(0)
+    if state.ndim != 2 or state.shape[-1] != system.state_dim:
+        raise ValueError(
+            f"starts: expected shape ({system.state_dim},) or (B, {system.state_dim}) "
+            f"({', '.join(system.state_names)}), found {tuple(state.shape)}"
+        )
+    if not torch.all(torch.isfinite(state)):
+        raise ValueError("starts: expected finite numbers, found NaN or inf")
+    offsets = torch.zeros(steps, system.action_dim, dtype=DTYPE)
+    if action_offsets is not None:
+        given = np.asarray(action_offsets, dtype=float)
+        if given.size != steps * system.action_dim:
+            raise ValueError(
+                f"action_offsets: expected {steps} x {system.action_dim} numbers, "
+                f"found shape {given.shape}"
+            )
+        offsets = torch.as_tensor(given.reshape(steps, system.action_dim), dtype=DTYPE)
+    return state, offsets
+
+
+def simulate(
+    system: System,
+    controller: Controller,
+    starts: Any,
+    steps: int | None = None,
+    action_offsets: Any = None,
+    action_repeat: int | None = None,
+) -> BatchTrajectory:
+    """Run ``controller`` on ``system`` from every start at once.
+
+    Parameters
+    ----------
+    system : System
+    controller : callable
+        Observation ``(B, O)`` float64 tensor -> action ``(B, A)``.
+    starts : (B, S) or (S,) array
+    steps : int, optional
+        Simulator steps (default ``system.episode_steps``).
+    action_offsets : (steps, A) array, optional
+        Disturbance added to the held action at every simulator step, before the clip.
+    action_repeat : int, optional
+        Simulator steps per decision; default the controller's own (:func:`control_period`).
+
+    Returns
+    -------
+    BatchTrajectory
+    """
+    steps = system.episode_steps if steps is None else steps
+    state, offsets = _check_inputs(system, starts, steps, action_offsets)
+    repeat = control_period(controller) if action_repeat is None else check_repeat(action_repeat)
+    relevance_of = relevance_function(controller)
+    batch = state.shape[0]
+    alive = torch.ones(batch, dtype=torch.bool)
+    lengths = torch.full((batch,), steps, dtype=torch.long)
+    states, observations, actions, rewards, relevance = [state], [system.observe(state)], [], [], []
+    held = torch.zeros(batch, system.action_dim, dtype=DTYPE)
+    held_relevance = torch.zeros(batch, dtype=DTYPE)
+    with torch.no_grad():
+        for index in range(steps):
+            if index % repeat == 0:
+                obs = observations[-1]
+                held = torch.as_tensor(controller(obs), dtype=DTYPE).reshape(
+                    batch, system.action_dim
+                )
+                if relevance_of is not None:
+                    held_relevance = torch.as_tensor(relevance_of(obs), dtype=DTYPE).reshape(batch)
+            action = system.clip_action(held + offsets[index])
+            reward = system.reward_fn(state, action)
+            stepped = system.step_fn(state, action)
+            leaving = alive & system.out_of_bounds(stepped)
+            reward = torch.where(leaving, torch.as_tensor(system.out_of_bounds_reward), reward)
+            rewards.append(torch.where(alive, reward, torch.zeros_like(reward)))
+            actions.append(torch.where(alive[:, None], action, torch.zeros_like(action)))
+            relevance.append(held_relevance)
+            state = torch.where(alive[:, None], stepped, state)
+            lengths = torch.where(leaving, torch.as_tensor(index + 1), lengths)
+            alive = alive & ~leaving
+            states.append(state)
+            observations.append(system.observe(state))
+            if not bool(alive.any()):
+                break
+    taken = len(actions)
+    if taken < steps:  # every start ended early: pad the frozen tail
+        pad = steps - taken
+        states += [state] * pad
+        observations += [observations[-1]] * pad
+        actions += [torch.zeros_like(actions[-1])] * pad
+        rewards += [torch.zeros_like(rewards[-1])] * pad
+        relevance += [relevance[-1]] * pad
+    return BatchTrajectory(
+        torch.stack(states, dim=1).numpy(),
+        torch.stack(observations, dim=1).numpy(),
+        torch.stack(actions, dim=1).numpy(),
+        torch.stack(rewards, dim=1).numpy(),
+        torch.stack(relevance, dim=1).numpy() if relevance_of is not None else None,
+        (~alive).numpy(),
+        lengths.numpy(),
+        repeat,
+    )
+
+
+def rollout(
+    system: System,
+    controller: Controller,
+    initial_state: Any,
+    steps: int | None = None,
+    action_offsets: Any = None,
+    action_repeat: int | None = None,
+) -> Trajectory:
+    """One episode of :func:`simulate` from ``initial_state`` ``(S,)``, cut where it ended."""
+    start = np.asarray(initial_state, dtype=float)
+    if start.ndim != 1:
+        raise ValueError(
+            f"initial_state: expected shape ({system.state_dim},), found {start.shape}"
+        )
+    batch = simulate(system, controller, start[None], steps, action_offsets, action_repeat)
+    return batch.episode(0)
+
+
+def holds(system: System, trajectory: Trajectory) -> bool:
+    """Whether an episode reached and held the operating point (:meth:`System.hold_step` on its
+    states after each step, with the system's band and minimum duration)."""
+    return hold_step(system, trajectory) is not None
+
+
+def hold_step(system: System, trajectory: Trajectory) -> int | None:
+    """First step from which the episode holds the operating point, or None (terminated, out of
+    the band at the end, or inside for fewer than ``system.hold_min_steps`` steps)."""
+    return system.hold_step(trajectory.states[1:], terminated=trajectory.terminated)
+
+
+class RandomController:
+    """Uniform random actions within the actuator limits, from a seeded numpy generator
+    (PILCO's initial rollouts). Decides at the given control period like any controller."""
+
+    is_hybrid = False
+
+    def __init__(self, system: System, rng: np.random.Generator, action_repeat: int = 1):
+        self.limit = system.action_limit
+        self.action_dim = system.action_dim
+        self.rng = rng
+        self.action_repeat = check_repeat(action_repeat)
+
+    def __call__(self, obs: Tensor) -> Tensor:
+        batch = obs.shape[0]
+        values = self.rng.uniform(-self.limit, self.limit, size=(batch, self.action_dim))
+        return torch.as_tensor(values, dtype=DTYPE)
