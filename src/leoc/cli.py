@@ -65,18 +65,21 @@ def cmd_lqr(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_controller(spec: str, system_name: str, method: str = "discrete"):
-    """``linear`` (the LQR of the system) or a run folder written by ``leoc train``."""
+def load_controller(
+    spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1
+):
+    """``linear`` (the LQR of the system, designed for and run at ``action_repeat``) or a run
+    folder written by ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
     from leoc.control import design_lqr
-    from leoc.policies import LinearController
+    from leoc.policies import lqr_controller
     from leoc.systems import make_system
 
     if spec == "linear":
-        design = design_lqr(make_system(system_name), method=method)
-        return LinearController(design.W, design.b)
+        system = make_system(system_name)
+        return lqr_controller(design_lqr(system, method=method, action_repeat=action_repeat))
     from leoc.experiments.controllers import load_trained_controller
 
-    return load_trained_controller(Path(spec))
+    return load_trained_controller(Path(spec), system=system_name)
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -84,20 +87,42 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from leoc.evaluation.rollout import response_test
     from leoc.systems import make_system
 
+    from leoc.evaluation.rollout import control_period
+
     system = make_system(args.system)
-    controller = load_controller(args.controller, args.system, args.method)
-    result = response_test(system, controller, args.test, steps=args.steps)
+    controller = load_controller(args.controller, args.system, args.method, args.action_repeat)
+    result = response_test(system, controller, args.test, steps=args.steps, band=args.band)
     metrics = result.metrics
     unit = "deg" if system.main_in_degrees else "m"
-    settling = "not settled" if metrics.settling_time is None else f"{metrics.settling_time} steps"
-    print(f"{args.test} response of {args.controller} on {args.system} ({args.steps} steps)")
+    settling = (
+        "not settled"
+        if metrics.settling_time is None
+        else f"{metrics.settling_time} steps ({metrics.settling_seconds:.3g} s)"
+    )
+    band = (
+        f"{metrics.band:.3g} {unit}, absolute"
+        if metrics.band_fraction is None
+        else f"{metrics.band:.3g} {unit} = {metrics.band_fraction:.0%} of the peak error"
+    )
+    period = control_period(controller)
+    print(
+        f"{args.test} response of {args.controller} on {args.system} ({args.steps} steps, "
+        f"control period {period} step{'s' if period > 1 else ''})"
+    )
     print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
     print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")
-    print(f"  settling time:      {settling} (band {metrics.band} {unit})")
+    print(f"  peak deviation:     {metrics.peak_deviation:.6g} {unit}")
+    print(f"  settling time:      {settling} (band {band})")
+    print(f"  terminated:         {'yes' if metrics.terminated else 'no'}")
     print(f"  return:             {result.trajectory.total_reward:.4f}")
     if args.plot:
         label = "linear" if args.controller == "linear" else Path(args.controller).name
-        path = plot_responses({args.system: {args.test: {label: [result.deviation]}}}, args.plot)
+        record = {
+            "deviation": result.deviation,
+            "terminated": metrics.terminated,
+            "settled": metrics.settled,
+        }
+        path = plot_responses({args.system: {args.test: {label: [record]}}}, args.plot)
         print(f"figure written to {path}")
     return 0
 
@@ -185,7 +210,20 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument(
         "--controller",
         default="linear",
-        help="'linear' (the LQR) or a run folder written by 'leoc train' (default: linear)",
+        help="'linear' (the LQR) or a run folder written by 'leoc train' or printed by "
+        "'leoc reproduce' (default: linear); a trained controller runs at its trained period",
+    )
+    simulate.add_argument(
+        "--action-repeat",
+        type=int,
+        default=1,
+        help="control period of the linear controller in simulator steps (its LQR is designed "
+        "for it; PILCO's is 3); default 1",
+    )
+    simulate.add_argument(
+        "--band",
+        type=float,
+        help="absolute settling band (deg or m); default 2%% of the peak error",
     )
     simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
     simulate.add_argument("--steps", type=int, default=200, help="episode length (default 200)")

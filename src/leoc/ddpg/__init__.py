@@ -12,7 +12,7 @@ or train with the paper's settings through :func:`train_ddpg` (``leoc train SYST
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback
-from leoc.ddpg.config import ALGOS, HOLD_BAND_BY_SYSTEM, TOTAL_STEPS_BY_SYSTEM, DDPGConfig
+from leoc.ddpg.config import ALGOS, TOTAL_STEPS_BY_SYSTEM, DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import AffineOutput, PhysicalPolicy, physical_policy
 from leoc.ddpg.policies import (
@@ -22,7 +22,6 @@ from leoc.ddpg.policies import (
     action_box,
     hybrid_policy_kwargs,
 )
-from leoc.ddpg.rollout import EvaluationResult, evaluate_policy, run_episode
 from leoc.ddpg.train import (
     DDPGResult,
     build_model,
@@ -34,12 +33,10 @@ from leoc.ddpg.train import (
 
 __all__ = [
     "ALGOS",
-    "HOLD_BAND_BY_SYSTEM",
     "TOTAL_STEPS_BY_SYSTEM",
     "AffineOutput",
     "DDPGConfig",
     "DDPGResult",
-    "EvaluationResult",
     "HybridActor",
     "HybridDDPGPolicy",
     "HybridTD3Policy",
@@ -50,12 +47,10 @@ __all__ = [
     "SeededOUNoise",
     "action_box",
     "build_model",
-    "evaluate_policy",
     "held_and_reached",
     "hybrid_policy_kwargs",
     "load_ddpg_controller",
     "load_ddpg_model",
     "physical_policy",
-    "run_episode",
     "train_ddpg",
 ]

@@ -2,19 +2,21 @@
 best model and drives a tqdm progress bar.
 
 The curve is return against *interaction time*: environment steps and simulated seconds
-(``steps * dt``). Evaluation episodes are the deterministic swing-up rollouts of
-:mod:`leoc.ddpg.rollout`, always from the same seeded starts, so points are comparable.
+(``steps * dt``). Evaluation episodes are those of the trainer contract (:mod:`leoc.training`):
+deterministic swing-up episodes on the pure step function, from the same seeded starts at every
+evaluation, so points are comparable and PILCO's curves are measured the same way.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
-from leoc.ddpg.rollout import EvaluationResult, evaluate_policy
+from leoc.training import Evaluation, curve_row, evaluate_episodes
 
 __all__ = ["LearningCurveCallback"]
 
@@ -26,16 +28,12 @@ class LearningCurveCallback(BaseCallback):
 
     Parameters
     ----------
-    eval_env : gymnasium.Env
-        A separate environment instance (never the training one).
     system : leoc.systems.System
-        Supplies ``dt``, ``episode_steps`` and ``main_coordinate`` for the hold test.
-    eval_seeds : sequence of int
-        One deterministic episode per seed.
+        The system the evaluation episodes run on (its hold test, ``dt``).
+    eval_starts : (E, S) array
+        One deterministic episode per start (:func:`leoc.training.evaluation_starts`).
     eval_interval : int
         Environment steps between evaluations.
-    hold_band, min_hold_steps
-        Hold test of :func:`leoc.ddpg.rollout.evaluate_policy`.
     save_best : callable, optional
         Called with the SB3 model whenever the mean return improves (saves ``best_model.zip``).
     progress : bool
@@ -46,9 +44,7 @@ class LearningCurveCallback(BaseCallback):
     Attributes
     ----------
     curve : list of dict
-        One row per evaluation: ``steps``, ``interaction_seconds``, ``mean_return``,
-        ``std_return``, ``held_fraction``, ``returns``, ``hold_starts`` (per episode, the step
-        from which it holds the operating point, ``None`` if it does not).
+        One row per evaluation (:func:`leoc.training.curve_row`).
     best_policy : PhysicalPolicy or None
         Physical-units copy of the actor at the best evaluation.
     best_return : float
@@ -56,23 +52,17 @@ class LearningCurveCallback(BaseCallback):
 
     def __init__(
         self,
-        eval_env: Any,
         system: Any,
-        eval_seeds: Sequence[int],
+        eval_starts: np.ndarray,
         eval_interval: int,
-        hold_band: float,
-        min_hold_steps: int,
         save_best: Callable[[Any], None] | None = None,
         progress: bool = True,
         total_steps: int = 0,
     ) -> None:
         super().__init__(verbose=0)
-        self.eval_env = eval_env
         self.system = system
-        self.eval_seeds = list(eval_seeds)
+        self.eval_starts = np.asarray(eval_starts, dtype=float)
         self.eval_interval = eval_interval
-        self.hold_band = hold_band
-        self.min_hold_steps = min_hold_steps
         self.save_best = save_best
         self.progress = progress
         self.total_steps = total_steps
@@ -107,29 +97,12 @@ class LearningCurveCallback(BaseCallback):
             self._bar.close()
             self._bar = None
 
-    def _evaluate(self) -> EvaluationResult:
+    def _evaluate(self) -> Evaluation:
         policy = physical_policy(self.model.actor)
-        result = evaluate_policy(
-            policy,
-            self.eval_env,
-            self.system,
-            self.eval_seeds,
-            self.hold_band,
-            self.min_hold_steps,
-        )
+        result = evaluate_episodes(self.system, policy, self.eval_starts)
         steps = int(self.num_timesteps)
         self._last_eval_step = steps
-        self.curve.append(
-            {
-                "steps": steps,
-                "interaction_seconds": steps * self.system.dt,
-                "mean_return": result.mean_return,
-                "std_return": result.std_return,
-                "held_fraction": result.held_fraction,
-                "returns": result.returns,
-                "hold_starts": result.hold_starts,
-            }
-        )
+        self.curve.append(curve_row(steps, self.system.dt, result))
         if result.mean_return > self.best_return:
             self.best_return = result.mean_return
             self.best_policy = policy

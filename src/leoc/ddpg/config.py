@@ -29,8 +29,6 @@ DEFAULT_TOTAL_STEPS = 10_000
 TOTAL_STEPS_BY_SYSTEM = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
 # Hold band of the "reached and held the operating point" test, in the units of
 # ``System.main_coordinate`` (degrees for the pendulum and cart-pole angles, metres for the car).
-HOLD_BAND_BY_SYSTEM = {"pendulum": 5.0, "cartpole": 5.0, "mountaincar": 0.05}
-DEFAULT_HOLD_BAND = 5.0
 PAPER_HIDDEN_SIZES = (400, 300)
 
 
@@ -81,11 +79,6 @@ class DDPGConfig:
         Environment steps between two evaluations.
     eval_episodes : int
         Deterministic swing-up episodes per evaluation, on a separate environment instance.
-    hold_band : float
-        Band of the hold test, in main-coordinate units (degrees, or metres for the car).
-    min_hold_steps : int
-        An episode holds the operating point if its main coordinate stays inside the band for
-        at least the last ``min_hold_steps`` steps of the full-length episode.
     """
 
     system: str
@@ -114,8 +107,6 @@ class DDPGConfig:
     lqr_method: str = "discrete"
     eval_interval: int = 1_000
     eval_episodes: int = 5
-    hold_band: float = DEFAULT_HOLD_BAND
-    min_hold_steps: int = 50
 
     def __post_init__(self) -> None:
         from leoc.systems import SYSTEM_NAMES
@@ -134,7 +125,6 @@ class DDPGConfig:
             "td3_policy_delay",
             "eval_interval",
             "eval_episodes",
-            "min_hold_steps",
         )
         for name in positive_ints:
             value = getattr(self, name)
@@ -146,7 +136,6 @@ class DDPGConfig:
             "discount",
             "polyak",
             "lambda_init",
-            "hold_band",
         )
         for name in positive_floats:
             value = getattr(self, name)
@@ -163,8 +152,8 @@ class DDPGConfig:
     def for_system(cls, name: str, algo: str = "ddpg", **overrides: Any) -> DDPGConfig:
         """The paper's defaults for system ``name`` and ``algo``, with ``overrides`` applied.
 
-        Per-system defaults: ``total_steps`` (15k for the cart-pole, 10k otherwise) and
-        ``hold_band`` (5 degrees for the angles, 0.05 m for the mountain car).
+        Per-system default: ``total_steps`` (15k for the cart-pole, 10k otherwise). The hold
+        test is the system's own (``System.hold_step``).
 
         Raises
         ------
@@ -180,7 +169,6 @@ class DDPGConfig:
             )
         values: dict[str, Any] = {
             "total_steps": TOTAL_STEPS_BY_SYSTEM.get(name, DEFAULT_TOTAL_STEPS),
-            "hold_band": HOLD_BAND_BY_SYSTEM.get(name, DEFAULT_HOLD_BAND),
         }
         values.update(overrides)
         for key in ("actor_hidden", "critic_hidden"):

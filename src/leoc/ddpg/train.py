@@ -1,18 +1,18 @@
 """Training glue: ``train_ddpg`` runs SB3's DDPG/TD3 (baseline or LEOC hybrid) on one system.
 
-Run folder (every file written atomically: temporary file, then ``os.replace``)::
+Run folder: the trainer contract of :mod:`leoc.training` (every file written atomically)::
 
     config.json         DDPGConfig + seed + library versions
-    model.zip           SB3 save of the final model
-    best_model.zip      SB3 save of the model with the best evaluation mean return
+    model.zip           SB3 save of the final model: the run's controller (model selection:
+                        the final policy, as for PILCO)
+    best_model.zip      SB3 save of the model with the best evaluation mean return (kept for
+                        users who want it; ``load_ddpg_controller(run, which="best")``)
     curve.json          learning curve + summary (held/reached steps, final and best returns)
     curve.csv           learning curve: steps, interaction_seconds, mean_return, std_return,
                         held_fraction
     learning_curve.png  mean return (+/- std) against interaction time in simulated seconds
 
-"Reached" and "held" (:mod:`leoc.ddpg.rollout` defines the per-episode test):
-``reached_steps`` is the first evaluation at which every evaluation episode holds the operating
-point; ``held_steps`` the first evaluation from which every later evaluation holds it too.
+"Reached" and "held": see :mod:`leoc.training`.
 """
 
 from __future__ import annotations
@@ -20,10 +20,11 @@ from __future__ import annotations
 import io
 import json
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import torch
+from stable_baselines3.common.logger import Logger
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback
@@ -31,12 +32,15 @@ from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, hybrid_policy_kwargs
-from leoc.io import (
-    save_figure_atomic,
-    write_bytes_atomic,
-    write_csv_atomic,
-    write_json_atomic,
-    write_text_atomic,
+from leoc.io import write_bytes_atomic, write_text_atomic
+from leoc.training import (
+    CONFIG_FILE,
+    TrainResult,
+    curve_summary,
+    evaluation_starts,
+    held_and_reached,
+    read_config,
+    write_curve,
 )
 
 __all__ = [
@@ -49,63 +53,16 @@ __all__ = [
 ]
 
 DEFAULT_RUN_ROOT = Path("runs") / "ddpg"
-# Seed offsets: the evaluation env and the exploration noise get their own streams.
-EVAL_SEED_OFFSET = 10_000
+# Seed offset of the exploration noise's own stream (evaluation: leoc.training).
 NOISE_SEED_OFFSET = 20_000
-CURVE_COLUMNS = ("steps", "interaction_seconds", "mean_return", "std_return", "held_fraction")
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
-
-
-class DDPGResult(NamedTuple):
-    """Outcome of :func:`train_ddpg`.
-
-    Attributes
-    ----------
-    policy : torch.nn.Module
-        float64 physical-units policy (B, O) -> (B, 1) of the best evaluated model (a
-        :class:`~leoc.ddpg.PhysicalPolicy`; for the hybrid pi(a) = G(a), Jacobian W).
-    run_dir : Path
-    curve : list of dict
-        Per evaluation: steps, interaction_seconds, mean_return, std_return, held_fraction,
-        returns.
-    config : dict
-        The run's configuration (DDPGConfig fields + seed).
-    held_steps : int or None
-        First evaluation step from which every evaluation holds the operating point.
-    reached_steps : int or None
-        First evaluation step at which every evaluation episode holds the operating point.
-    final_return, best_return : float
-        Mean evaluation return of the final and of the best model.
-    model : stable_baselines3 DDPG or TD3
-        The trained SB3 model (final parameters).
-    """
-
-    policy: torch.nn.Module
-    run_dir: Path
-    curve: list[dict[str, Any]]
-    config: dict[str, Any]
-    held_steps: int | None
-    reached_steps: int | None
-    final_return: float
-    best_return: float
-    model: Any
+DDPGResult = TrainResult  # the one trainer result (leoc.training)
 
 
 def _atomic_save_model(model: Any, path: Path) -> None:
     buffer = io.BytesIO()
     model.save(buffer)
     write_bytes_atomic(path, buffer.getvalue())
-
-
-def held_and_reached(curve: list[dict[str, Any]]) -> tuple[int | None, int | None]:
-    """``(held_steps, reached_steps)`` of a learning curve (see the module docstring)."""
-    reached = next((row["steps"] for row in curve if row["held_fraction"] >= 1.0), None)
-    held = None
-    for row in reversed(curve):
-        if row["held_fraction"] < 1.0:
-            break
-        held = row["steps"]
-    return held, reached
 
 
 def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
@@ -156,30 +113,6 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
             **common,
         )
     return LeocDDPG(policy, env, **common)
-
-
-def _plot_curve(curve: list[dict[str, Any]], title: str, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    seconds = np.array([row["interaction_seconds"] for row in curve])
-    mean = np.array([row["mean_return"] for row in curve])
-    std = np.array([row["std_return"] for row in curve])
-    fig, axis = plt.subplots(figsize=(6.0, 4.0))
-    axis.plot(seconds, mean, marker="o")
-    axis.fill_between(seconds, mean - std, mean + std, alpha=0.25)
-    axis.set_xlabel("interaction time [simulated s]")
-    axis.set_ylabel("evaluation return")
-    axis.set_title(title)
-    axis.grid(True, alpha=0.3)
-    save_figure_atomic(fig, path)
-
-
-def _write_curve(run_dir: Path, curve: list[dict[str, Any]], summary: dict[str, Any]) -> None:
-    write_json_atomic(run_dir / "curve.json", {"curve": curve, "summary": summary}, indent=2)
-    write_csv_atomic(run_dir / "curve.csv", curve, CURVE_COLUMNS)
 
 
 def _versions() -> dict[str, str]:
@@ -239,74 +172,57 @@ def train_ddpg(
     run_path.mkdir(parents=True, exist_ok=True)
     config_dict = {**config.as_dict(), "seed": seed}
     write_text_atomic(
-        run_path / "config.json",
+        run_path / CONFIG_FILE,
         json.dumps({**config_dict, "versions": _versions()}, indent=2),
     )
 
     system_obj = make_system(system)
     env = make_env(system)
-    eval_env = make_env(system)
     model = build_model(config, seed, env)
-    eval_seeds = [seed + EVAL_SEED_OFFSET + k for k in range(config.eval_episodes)]
+    # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger
+    model.set_logger(Logger(folder=None, output_formats=[]))
     callback = LearningCurveCallback(
-        eval_env,
         system_obj,
-        eval_seeds,
+        evaluation_starts(system_obj, seed, config.eval_episodes),
         config.eval_interval,
-        config.hold_band,
-        config.min_hold_steps,
         save_best=lambda m: _atomic_save_model(m, run_path / MODEL_FILES["best"]),
         progress=progress,
         total_steps=config.total_steps,
     )
     model.learn(total_timesteps=config.total_steps, callback=callback)
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
-
-    curve = callback.curve
-    held, reached = held_and_reached(curve)
-    summary = {
-        "held_steps": held,
-        "held_seconds": None if held is None else held * system_obj.dt,
-        "reached_steps": reached,
-        "reached_seconds": None if reached is None else reached * system_obj.dt,
-        "final_return": curve[-1]["mean_return"],
-        "best_return": callback.best_return,
-        "dt": system_obj.dt,
-    }
-    _write_curve(run_path, curve, summary)
-    _plot_curve(
-        curve, f"{system} {algo.upper()} {kind} (seed {seed})", run_path / "learning_curve.png"
-    )
-    policy = (
-        callback.best_policy if callback.best_policy is not None else physical_policy(model.actor)
-    )
     env.close()
-    eval_env.close()
-    return DDPGResult(
-        policy,
-        run_path,
-        curve,
-        config_dict,
-        held,
-        reached,
-        float(curve[-1]["mean_return"]),
-        float(callback.best_return),
-        model,
+
+    summary = curve_summary(callback.curve, system_obj.dt)
+    write_curve(run_path, callback.curve, summary, f"{system} {algo.upper()} {kind} (seed {seed})")
+    return TrainResult(
+        physical_policy(model.actor), run_path, callback.curve, config_dict, summary, model
     )
 
 
-def load_ddpg_model(run_dir: str | Path, which: str = "best") -> Any:
-    """Load the SB3 model of a run folder (``which``: ``"best"`` or ``"final"``), on the CPU."""
+def load_ddpg_model(run_dir: str | Path, which: str = "final") -> Any:
+    """Load the SB3 model of a run folder (``which``: ``"final"``, the run's controller, or
+    ``"best"``), on the CPU."""
     if which not in MODEL_FILES:
         raise ValueError(f"which: expected one of {tuple(MODEL_FILES)}, found {which!r}")
     run_path = Path(run_dir)
-    config = json.loads((run_path / "config.json").read_text())
-    algo_class = LeocTD3 if config["algo"] == "td3" else LeocDDPG
-    return algo_class.load(run_path / MODEL_FILES[which], device="cpu")
+    config = read_config(run_path)
+    algo_class = LeocTD3 if config.get("algo") == "td3" else LeocDDPG
+    path = run_path / MODEL_FILES[which]
+    if not path.is_file():
+        raise FileNotFoundError(f"controller: {path} is missing")
+    try:
+        return algo_class.load(path, device="cpu")
+    except Exception as error:  # a truncated or garbled zip: name it
+        raise ValueError(
+            f"controller: {path} could not be read as an SB3 model "
+            f"({type(error).__name__}: {error})"
+        ) from error
 
 
-def load_ddpg_controller(run_dir: str | Path, which: str = "best") -> torch.nn.Module:
-    """float64 physical-units policy of a run folder (best model by default).
+def load_ddpg_controller(run_dir: str | Path, which: str = "final") -> torch.nn.Module:
+    """float64 physical-units policy of a run folder (the final model by default: the run's
+    controller, see :mod:`leoc.training`).
 
     Returns
     -------

@@ -3,21 +3,30 @@
 Every function here takes ``e``, a 1-D record :math:`e[t],\\ t = 0, \\dots, T - 1` (time in
 steps), the deviation of a system's main coordinate from its operating point (an angle in degrees
 for the pendulum and the cart-pole, a position for the mountain car). Results are in the units of
-``e`` (steady-state error, overshoot) or in steps (settling time); multiply a settling time by the
-environment's ``dt`` to get seconds.
+``e`` (steady-state error, overshoot, peak deviation) or in steps (settling time; with ``dt``
+also in seconds).
 
 Letters used throughout:
 
 - :math:`T` -- record length (samples), :math:`T \\ge 2`;
 - :math:`W` -- final window (samples), clipped to :math:`T`;
 - :math:`e_f` -- final value, by default the mean of the last :math:`W` samples;
-- :math:`b` -- settling band, in the units of ``e`` (for example 1 degree).
+- :math:`b` -- settling band, in the units of ``e``.
+
+Settling band. By default the band is *relative to the response*: :math:`b = 0.02\\,
+\\max_t |e[t] - e_f|`, 2 % of the peak error, the convention of MATLAB's ``stepinfo``/
+``lsiminfo`` (for a step from rest without overshoot the peak error is
+:math:`|y_{init} - y_{final}|`, stepinfo's reference; for an impulse, whose final value is the
+initial one, it is the peak excursion). An absolute band (for example 1 degree) is an option:
+pass ``band``. A relative band makes the settling time scale-free: an impulse that never leaves
+a fixed 1-degree band would otherwise "settle" in 0 steps.
 
 The definitions follow the project design ("Metrics"). They differ from
-:func:`control.step_info` in three documented ways: the final value is estimated from the record
-(python-control uses the DC gain of the model), the band is absolute (python-control uses 2 % of
-the final value), and a record whose last window leaves the band is "not settled" (``None``),
-whereas python-control returns a time whenever only the very last sample is inside its band.
+:func:`control.step_info` in documented ways: the final value is estimated from the record
+(python-control uses the DC gain of the model), the relative band is taken from the peak error
+(python-control uses 2 % of the final value, which is 0 for an impulse), and a record whose last
+window leaves the band is "not settled" (``None``), whereas python-control returns a time
+whenever only the very last sample is inside its band.
 """
 
 from __future__ import annotations
@@ -32,17 +41,22 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "DEFAULT_FINAL_WINDOW",
+    "DEFAULT_RELATIVE_BAND",
     "MIN_SAMPLES",
     "OVERSHOOT_ABS_TOLERANCE",
     "OVERSHOOT_REL_TOLERANCE",
     "MetricsSummary",
     "ResponseMetrics",
     "overshoot",
+    "relative_band",
     "response_metrics",
     "settling_time",
     "steady_state_error",
     "summarise_metrics",
 ]
+
+DEFAULT_RELATIVE_BAND = 0.02
+r"""Default settling band as a fraction of the peak error :math:`\max_t |e[t] - e_f|`."""
 
 DEFAULT_FINAL_WINDOW = 20
 """Number of final samples averaged to estimate the final value (clipped to the record)."""
@@ -77,6 +91,14 @@ class ResponseMetrics(NamedTuple):
         Settling band :math:`b` used (units of ``e``).
     final_window : int
         Number of final samples actually used, ``min(final_window, len(e))``.
+    peak_deviation : float
+        :math:`\\max_t |e[t]|`, the largest deviation from the operating point (units of ``e``).
+    settling_seconds : float or None
+        ``settling_time * dt`` when ``dt`` was given and the record settled.
+    band_fraction : float or None
+        The fraction of the peak error that defined a relative band; None for an absolute band.
+    terminated : bool
+        The episode ended early (left the allowed region); its record is then cut short.
     """
 
     steady_state_error: float
@@ -85,6 +107,10 @@ class ResponseMetrics(NamedTuple):
     settled: bool
     band: float
     final_window: int
+    peak_deviation: float = math.nan
+    settling_seconds: float | None = None
+    band_fraction: float | None = None
+    terminated: bool = False
 
 
 class MetricsSummary(NamedTuple):
@@ -102,6 +128,10 @@ class MetricsSummary(NamedTuple):
         Number of runs summarised.
     n_settled : int
         Number of runs that settled.
+    peak_deviation_mean, peak_deviation_std : float
+        Over all runs (units of ``e``).
+    n_terminated : int
+        Number of runs whose episode terminated.
     """
 
     steady_state_error_mean: float
@@ -112,6 +142,9 @@ class MetricsSummary(NamedTuple):
     settling_time_std: float
     n_runs: int
     n_settled: int
+    peak_deviation_mean: float = math.nan
+    peak_deviation_std: float = math.nan
+    n_terminated: int = 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -150,10 +183,7 @@ def _check_real(value: object, name: str) -> float:
 
 
 def _check_band(band: object) -> float:
-    number = _check_real(band, "band")
-    if number <= 0.0:
-        raise ValueError(f"band must be > 0, found {number}")
-    return number
+    return _check_band_like(band, "band")
 
 
 def _check_tolerance(tolerance: object) -> float:
@@ -319,8 +349,36 @@ def settling_time(
     return last_outside + 1
 
 
+def relative_band(
+    e: ArrayLike,
+    fraction: float = DEFAULT_RELATIVE_BAND,
+    final_value: float | None = None,
+    final_window: int = DEFAULT_FINAL_WINDOW,
+) -> float:
+    """Settling band relative to the response: ``fraction`` of the peak error.
+
+    .. math::
+
+        b = \text{fraction} \\cdot \\max_t |e[t] - e_f|
+
+    Returns 0.0 for a record that never leaves its final value (it settles at step 0).
+    """
+    signal = _as_signal(e)
+    number = _check_real(fraction, "band_fraction")
+    if not 0.0 < number < 1.0:
+        raise ValueError(f"band_fraction must be in (0, 1), found {number}")
+    e_final = _final_value(signal, final_value, final_window)
+    return number * float(np.max(np.abs(signal - e_final)))
+
+
 def response_metrics(
-    e: ArrayLike, band: float, final_window: int = DEFAULT_FINAL_WINDOW
+    e: ArrayLike,
+    band: float | None = None,
+    final_window: int = DEFAULT_FINAL_WINDOW,
+    *,
+    band_fraction: float = DEFAULT_RELATIVE_BAND,
+    dt: float | None = None,
+    terminated: bool = False,
 ) -> ResponseMetrics:
     """All transient-response metrics of one record, from one estimate of the final value.
 
@@ -328,22 +386,39 @@ def response_metrics(
     ----------
     e : array_like, shape (T,)
         Deviation from the operating point, finite, :math:`T \\ge 2`.
-    band : float
-        Settling band :math:`b > 0`, in the units of ``e``.
+    band : float, optional
+        Absolute settling band :math:`b > 0`, in the units of ``e``. Default: relative,
+        ``band_fraction`` of the peak error (:func:`relative_band`).
     final_window : int, optional
         Window :math:`W \\ge 1` (samples, clipped to :math:`T`). Default 20.
+    band_fraction : float, optional
+        Fraction of the peak error of the default relative band (default 0.02, 2 %).
+    dt : float, optional
+        Time step in seconds; fills ``settling_seconds``.
+    terminated : bool, optional
+        Whether the episode ended early (recorded in the result).
 
     Returns
     -------
     ResponseMetrics
         :math:`e_f` from :func:`steady_state_error`, then :func:`overshoot` and
-        :func:`settling_time` evaluated with that same :math:`e_f`.
+        :func:`settling_time` evaluated with that same :math:`e_f`, and the peak deviation.
     """
     signal = _as_signal(e)
-    band_value = _check_band(band)
     window = _check_final_window(final_window, signal.size)
     e_final = _final_value(signal, None, window)
-    settle = settling_time(signal, band_value, final_value=e_final, final_window=window)
+    if band is None:
+        band_value = relative_band(signal, band_fraction, e_final, window)
+        fraction: float | None = float(band_fraction)
+    else:
+        band_value, fraction = _check_band(band), None
+    if band_value > 0.0:
+        settle = settling_time(signal, band_value, final_value=e_final, final_window=window)
+    else:  # a flat record: no sample ever leaves its final value
+        settle = 0
+    seconds = None
+    if dt is not None and settle is not None:
+        seconds = settle * _check_band_like(dt, "dt")
     return ResponseMetrics(
         steady_state_error=e_final,
         overshoot=overshoot(signal, final_value=e_final),
@@ -351,7 +426,18 @@ def response_metrics(
         settled=settle is not None,
         band=band_value,
         final_window=window,
+        peak_deviation=float(np.max(np.abs(signal))),
+        settling_seconds=seconds,
+        band_fraction=fraction,
+        terminated=bool(terminated),
     )
+
+
+def _check_band_like(value: object, name: str) -> float:
+    number = _check_real(value, name)
+    if number <= 0.0:
+        raise ValueError(f"{name} must be > 0, found {number}")
+    return number
 
 
 def _mean_std(values: Sequence[float]) -> tuple[float, float]:
@@ -390,6 +476,7 @@ def summarise_metrics(metrics: Sequence[ResponseMetrics]) -> MetricsSummary:
     overshoot_mean, overshoot_std = _mean_std([run.overshoot for run in runs])
     settled_times = [float(run.settling_time) for run in runs if run.settling_time is not None]
     settle_mean, settle_std = _mean_std(settled_times)
+    peak_mean, peak_std = _mean_std([run.peak_deviation for run in runs])
     return MetricsSummary(
         steady_state_error_mean=error_mean,
         steady_state_error_std=error_std,
@@ -399,4 +486,7 @@ def summarise_metrics(metrics: Sequence[ResponseMetrics]) -> MetricsSummary:
         settling_time_std=settle_std,
         n_runs=len(runs),
         n_settled=len(settled_times),
+        peak_deviation_mean=peak_mean,
+        peak_deviation_std=peak_std,
+        n_terminated=sum(bool(run.terminated) for run in runs),
     )

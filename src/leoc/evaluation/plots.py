@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from leoc.systems import make_system
 
 CONTROLLER_COLOURS = {
     "linear": "#222222",
+    "linear_pilco": "#8c564b",
     "ddpg_baseline": "#1f77b4",
     "ddpg_hybrid": "#17becf",
     "td3_baseline": "#9467bd",
@@ -23,9 +25,17 @@ CONTROLLER_COLOURS = {
     "pilco_baseline": "#d62728",
     "pilco_hybrid": "#ff7f0e",
 }
-CONTROLLER_STYLES = {"linear": "-", "ddpg_hybrid": "--", "pilco_hybrid": ":", "td3_hybrid": "--"}
+CONTROLLER_STYLES = {
+    "linear": "-",
+    "linear_pilco": "-.",
+    "ddpg_hybrid": "--",
+    "pilco_hybrid": ":",
+    "td3_hybrid": "--",
+}
 FIGURE_DPI = 120
 PANEL_SIZE = (4.2, 3.0)
+# Headroom around the range of the stabilising responses, as a fraction of that range.
+Y_MARGIN = 0.15
 
 
 def controller_colour(label: str) -> str:
@@ -46,19 +56,79 @@ def save_figure(figure, path: str | Path) -> Path:
     return save_figure_atomic(figure, path, dpi=FIGURE_DPI)
 
 
+class Response(NamedTuple):
+    """One response record to draw: e(t) and whether it stabilised."""
+
+    deviation: np.ndarray
+    terminated: bool = False
+    settled: bool = True
+
+
+def _as_response(entry: Any) -> Response:
+    if isinstance(entry, Response):
+        return entry
+    if isinstance(entry, Mapping):
+        return Response(
+            np.asarray(entry["deviation"], dtype=float),
+            bool(entry.get("terminated", False)),
+            bool(entry.get("settled", True)),
+        )
+    return Response(np.asarray(entry, dtype=float))
+
+
+def stabilising_range(records: Sequence[Response]) -> tuple[float, float] | None:
+    """y-range of the records that settled and did not terminate, with a margin; None if none
+    did (then the axis scales itself)."""
+    good = [r.deviation for r in records if r.settled and not r.terminated]
+    if not good:
+        return None
+    low = min(float(np.min(d)) for d in good)
+    high = max(float(np.max(d)) for d in good)
+    span = max(high - low, 1e-9)
+    return low - Y_MARGIN * span, high + Y_MARGIN * span
+
+
+def _draw_response(axis, time, record: Response, limits, colour, style, label) -> bool:
+    """Draw one record clipped to ``limits``; mark clipping and termination. Returns whether
+    the record left the range."""
+    values = record.deviation
+    clipped = False
+    if limits is not None:
+        clipped = bool(np.any(values < limits[0]) or np.any(values > limits[1]))
+        values = np.clip(values, *limits)
+    axis.plot(time, values, color=colour, linestyle=style, linewidth=1.2, label=label)
+    if clipped:
+        outside = np.flatnonzero((record.deviation < limits[0]) | (record.deviation > limits[1]))
+        axis.plot(time[outside[0]], values[outside[0]], marker="^", color=colour, markersize=7)
+    if record.terminated:
+        axis.plot(time[-1], values[-1], marker="X", color=colour, markersize=9)
+    return clipped
+
+
 def plot_responses(
-    responses: Mapping[str, Mapping[str, Mapping[str, Sequence[np.ndarray]]]],
+    responses: Mapping[str, Mapping[str, Mapping[str, Sequence[Any]]]],
     path: str | Path,
+    labels: Mapping[str, str] | None = None,
 ) -> Path:
     """Grid of responses: rows = tests (impulse, step), columns = systems.
 
     Parameters
     ----------
-    responses : mapping system -> test -> controller label -> list of deviations e(t) (seeds)
-        Every seed is drawn as a line in the controller's colour.
+    responses : mapping system -> test -> controller key -> list of records (one per seed)
+        A record is an array e(t), a :class:`Response`, or a mapping with ``deviation`` and
+        optionally ``terminated``/``settled``.
     path : output PNG path
+    labels : mapping controller key -> legend label, optional
+
+    Notes
+    -----
+    Each panel's y-range is set by the responses that settled without terminating; responses
+    that leave it are clipped (a triangle where they leave, "(clipped)" in the legend) and a
+    terminated episode ends with a cross, so one diverging controller does not flatten the
+    others. The legend sits below the panels, off the data.
     """
     plt = _pyplot()
+    labels = dict(labels or {})
     systems = list(responses)
     tests = sorted({test for by_test in responses.values() for test in by_test})
     figure, axes = plt.subplots(
@@ -67,25 +137,54 @@ def plot_responses(
         figsize=(PANEL_SIZE[0] * len(systems), PANEL_SIZE[1] * len(tests)),
         squeeze=False,
     )
+    handles: dict[str, Any] = {}
     for column, system_name in enumerate(systems):
         system = make_system(system_name)
         for row, test in enumerate(tests):
             axis = axes[row][column]
-            for label, deviations in responses[system_name].get(test, {}).items():
-                for index, deviation in enumerate(deviations):
-                    time = np.arange(len(deviation)) * system.dt
-                    axis.plot(
+            by_label = {
+                key: [_as_response(entry) for entry in entries]
+                for key, entries in responses[system_name].get(test, {}).items()
+            }
+            limits = stabilising_range([r for records in by_label.values() for r in records])
+            for key, records in by_label.items():
+                clipped = False
+                for record in records:
+                    time = np.arange(len(record.deviation)) * system.dt
+                    clipped |= _draw_response(
+                        axis,
                         time,
-                        deviation,
-                        color=controller_colour(label),
-                        linestyle=CONTROLLER_STYLES.get(label, "-"),
-                        linewidth=1.2,
-                        label=label if index == 0 else None,
+                        record,
+                        limits,
+                        controller_colour(key),
+                        CONTROLLER_STYLES.get(key, "-"),
+                        None,
                     )
+                text = labels.get(key, key) + (" (clipped)" if clipped else "")
+                handles.setdefault(
+                    text,
+                    plt.Line2D(
+                        [],
+                        [],
+                        color=controller_colour(key),
+                        linestyle=CONTROLLER_STYLES.get(key, "-"),
+                    ),
+                )
+            if limits is not None:
+                axis.set_ylim(*limits)
             axis.axhline(0.0, color="#bbbbbb", linewidth=0.8)
             axis.set_title(f"{system_name}: {test} response")
             axis.set_xlabel("time [s]")
             axis.set_ylabel(f"deviation of {system.main_label}")
-            axis.legend(fontsize="small")
-    figure.tight_layout()
+    handles["terminated episode"] = plt.Line2D([], [], color="k", marker="X", linestyle="none")
+    handles["left the plotted range"] = plt.Line2D([], [], color="k", marker="^", linestyle="none")
+    figure.tight_layout(rect=(0, 0.08, 1, 1))
+    figure.legend(
+        list(handles.values()),
+        list(handles),
+        loc="lower center",
+        ncol=min(4, len(handles)),
+        fontsize="small",
+        frameon=False,
+    )
     return save_figure(figure, path)

@@ -1,4 +1,9 @@
-"""Load a trained controller from a run folder written by ``leoc train``."""
+"""Load a trained controller, at its control period, from a run folder.
+
+Accepted folders: the run folder written by ``leoc train`` (or ``train_pilco``/``train_ddpg``),
+and the per-run folder ``OUT/runs/SYSTEM/CONTROLLER/seedN`` that ``leoc reproduce`` prints
+(its trainer output is in ``train/``).
+"""
 
 from __future__ import annotations
 
@@ -6,30 +11,59 @@ from pathlib import Path
 
 import torch
 
+from leoc.training import read_config
+
 PILCO_MARKER = "controller.pt"
 DDPG_MARKER = "model.zip"
+REPRODUCE_TRAIN_DIR = "train"
 
 
-def load_trained_controller(run_dir: str | Path) -> torch.nn.Module:
-    """The physical-units policy (float64 observations -> actions) saved in ``run_dir``.
+def trainer_dir(run_dir: str | Path) -> Path:
+    """The folder holding the trainer's files: ``run_dir`` itself or its ``train/``."""
+    path = Path(run_dir)
+    if not path.is_dir():
+        raise FileNotFoundError(f"controller: run folder {str(path)!r} does not exist")
+    for candidate in (path, path / REPRODUCE_TRAIN_DIR):
+        if (candidate / PILCO_MARKER).is_file() or (candidate / DDPG_MARKER).is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"controller: expected 'linear' or a run folder holding {PILCO_MARKER} (PILCO) or "
+        f"{DDPG_MARKER} (DDPG/TD3), directly or in {REPRODUCE_TRAIN_DIR}/, found neither in "
+        f"{str(path)!r}"
+    )
 
-    PILCO runs are recognised by ``controller.pt``, DDPG/TD3 runs by ``model.zip``.
+
+def load_trained_controller(run_dir: str | Path, system: str | None = None) -> torch.nn.Module:
+    """The physical-units policy (float64 observations -> actions) saved in ``run_dir``, at the
+    control period it was trained at (PILCO: a :class:`~leoc.policies.HeldPolicy`).
+
+    Parameters
+    ----------
+    run_dir : path
+        A ``leoc train`` run folder or a ``leoc reproduce`` per-run folder.
+    system : str, optional
+        The system the caller will run it on; a controller trained for another system is
+        refused with both names.
 
     Raises
     ------
     FileNotFoundError
-        If ``run_dir`` holds neither.
+        If ``run_dir`` holds no controller.
+    ValueError
+        If the controller was trained for another system, or a file cannot be read (the
+        message names the file).
     """
-    path = Path(run_dir)
-    if (path / PILCO_MARKER).is_file():
+    folder = trainer_dir(run_dir)
+    trained_for = read_config(folder).get("system")
+    if system is not None and trained_for != system:
+        raise ValueError(
+            f"controller: {str(Path(run_dir))!r} was trained for {trained_for!r}, "
+            f"not for {system!r}"
+        )
+    if (folder / PILCO_MARKER).is_file():
         from leoc.pilco.train import load_pilco_controller
 
-        return load_pilco_controller(path)
-    if (path / DDPG_MARKER).is_file():
-        from leoc.ddpg.train import load_ddpg_controller
+        return load_pilco_controller(folder)
+    from leoc.ddpg.train import load_ddpg_controller
 
-        return load_ddpg_controller(path)
-    raise FileNotFoundError(
-        f"controller: expected 'linear' or a run folder holding {PILCO_MARKER} (PILCO) or "
-        f"{DDPG_MARKER} (DDPG/TD3), found {str(path)!r}"
-    )
+    return load_ddpg_controller(folder)

@@ -7,8 +7,27 @@ from typing import Any, NamedTuple
 
 from leoc.systems import SYSTEM_NAMES
 
-CONTROLLERS = ("linear", "ddpg_baseline", "ddpg_hybrid", "pilco_baseline", "pilco_hybrid")
-TRAINED_CONTROLLERS = CONTROLLERS[1:]
+CONTROLLERS = (
+    "linear",
+    "linear_pilco",
+    "ddpg_baseline",
+    "ddpg_hybrid",
+    "pilco_baseline",
+    "pilco_hybrid",
+)
+LINEAR_CONTROLLERS = ("linear", "linear_pilco")
+TRAINED_CONTROLLERS = CONTROLLERS[2:]
+# The linear reference of each framework: the LQR designed and run at that framework's control
+# period (DDPG acts every simulator step, PILCO holds each action for ``action_repeat`` steps).
+LINEAR_REFERENCE = {"ddpg": "linear", "pilco": "linear_pilco"}
+CONTROLLER_LABELS = {
+    "linear": "linear (LQR at dt)",
+    "linear_pilco": "linear (LQR at PILCO's period)",
+    "ddpg_baseline": "DDPG baseline",
+    "ddpg_hybrid": "DDPG hybrid",
+    "pilco_baseline": "PILCO baseline",
+    "pilco_hybrid": "PILCO hybrid",
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,7 +127,8 @@ class RunSpec(NamedTuple):
 
     @property
     def framework(self) -> str:
-        return self.controller.split("_")[0]
+        """``linear``, ``ddpg`` or ``pilco``."""
+        return "linear" if self.controller in LINEAR_CONTROLLERS else self.controller.split("_")[0]
 
     @property
     def hybrid(self) -> bool:
@@ -131,7 +151,7 @@ def run_specs(
         RunSpec(system, controller, seed)
         for system in systems
         for controller in controllers
-        for seed in (profile.seeds if controller != "linear" else (0,))
+        for seed in (profile.seeds if controller not in LINEAR_CONTROLLERS else (0,))
     ]
     cost = {"pilco": 2, "ddpg": 1, "linear": 0}
     return sorted(specs, key=lambda spec: -cost[spec.framework])

@@ -16,38 +16,79 @@ from typing import Any
 
 import numpy as np
 
-from leoc.evaluation.metrics import ResponseMetrics, summarise_metrics
+from leoc.evaluation.metrics import DEFAULT_RELATIVE_BAND, ResponseMetrics, summarise_metrics
 from leoc.evaluation.plots import (
     _pyplot,
     controller_colour,
     plot_responses,
     save_figure,
 )
-from leoc.evaluation.robustness import SCALED_PARAMETERS
-from leoc.evaluation.rollout import RESPONSE_TESTS
+from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
+from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
-from leoc.experiments.profiles import CONTROLLERS
-from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE
+from leoc.experiments.profiles import (
+    CONTROLLER_LABELS,
+    CONTROLLERS,
+    LINEAR_CONTROLLERS,
+    LINEAR_REFERENCE,
+)
+from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.training import MODEL_SELECTION_TEXT
 
 CURVE_GRID_POINTS = 50
 FMT = "{:.3g}"
+# A hybrid "differs from its linear reference" when a metric differs by more than this fraction
+# of the reference's value, with the reference floored at this fraction of its peak deviation
+# (so 1e-12 vs 1e-13 of round-off in a zero steady-state error is not a difference).
+RELATIVE_TOLERANCE = 0.01
+ZERO_FLOOR_OF_PEAK = 0.01
+COMPARED_METRICS = ("steady_state_error", "overshoot", "peak_deviation", "settling_time")
 
 Evaluations = dict[str, dict[str, list[dict[str, Any]]]]  # system -> controller -> seeds
 
 
-def load_evaluations(out_dir: Path) -> Evaluations:
-    """Every finished run under ``out_dir/runs``, grouped by system and controller."""
+def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evaluations:
+    """Finished runs under ``out_dir/runs``, grouped by system and controller.
+
+    With ``meta``, only the runs of its systems, controllers and seeds are aggregated (a folder
+    resumed with other settings never mixes runs into the report silently).
+
+    Raises
+    ------
+    ValueError
+        Naming the file, when an ``evaluation.json`` does not parse.
+    """
     grouped: Evaluations = defaultdict(lambda: defaultdict(list))
     for path in sorted((out_dir / "runs").glob(f"*/*/seed*/{EVALUATION_FILE}")):
-        data = json.loads(path.read_text())
-        grouped[data["spec"]["system"]][data["spec"]["controller"]].append(data)
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise ValueError(f"{path}: damaged evaluation file ({error})") from error
+        spec = data["spec"]
+        if meta is not None and not _selected(spec, meta):
+            continue
+        grouped[spec["system"]][spec["controller"]].append(data)
     return {system: dict(grouped[system]) for system in SYSTEM_NAMES if system in grouped}
+
+
+def _selected(spec: dict[str, Any], meta: dict[str, Any]) -> bool:
+    seeds = meta.get("seeds", [])
+    seed_ok = spec["controller"] in LINEAR_CONTROLLERS or spec["seed"] in seeds
+    return (
+        spec["system"] in meta.get("systems", [])
+        and spec["controller"] in meta.get("controllers", [])
+        and seed_ok
+    )
 
 
 def _ordered(controllers: dict[str, Any]) -> list[str]:
     return [name for name in CONTROLLERS if name in controllers]
+
+
+def _label(controller: str) -> str:
+    return CONTROLLER_LABELS.get(controller, controller)
 
 
 def _metrics(entry: dict[str, Any]) -> ResponseMetrics:
@@ -55,21 +96,31 @@ def _metrics(entry: dict[str, Any]) -> ResponseMetrics:
 
 
 def response_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
-    """Rows: system, test, controller, mean/std of the metrics over seeds, settled count."""
+    """Rows: system, test, controller, mean/std of the metrics over seeds, settled and
+    terminated counts, settling time in seconds."""
     rows = []
     for system, by_controller in evaluations.items():
+        dt = make_system(system).dt
         for test in RESPONSE_TESTS:
             for controller in _ordered(by_controller):
                 runs = by_controller[controller]
                 summary = summarise_metrics([_metrics(run["responses"][test]) for run in runs])
                 rows.append(
-                    {"system": system, "test": test, "controller": controller, **summary._asdict()}
+                    {
+                        "system": system,
+                        "test": test,
+                        "controller": controller,
+                        "action_repeat": runs[0].get("action_repeat", 1),
+                        **summary._asdict(),
+                        "settling_seconds_mean": summary.settling_time_mean * dt,
+                    }
                 )
     return rows
 
 
 def robustness_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
-    """Rows: system, controller, parameter, scale, return mean/std, fraction held."""
+    """Rows: system, controller, parameter, scale, return mean/std over every episode of every
+    seed, fraction stabilised, fraction of impulse tests settled."""
     rows = []
     for system, by_controller in evaluations.items():
         for controller in _ordered(by_controller):
@@ -78,7 +129,9 @@ def robustness_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
                 for point in run["robustness"]:
                     points[(point["parameter"], point["scale"])].append(point)
             for (parameter, scale), group in sorted(points.items()):
-                returns = np.array([p["total_reward"] for p in group])
+                returns = np.concatenate([p["returns"] for p in group])
+                stabilised = np.concatenate([p["stabilised"] for p in group])
+                impulses = [p["impulse"] for p in group]
                 rows.append(
                     {
                         "system": system,
@@ -87,10 +140,39 @@ def robustness_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
                         "scale": scale,
                         "return_mean": float(returns.mean()),
                         "return_std": float(returns.std()),
-                        "fraction_held": float(np.mean([p["held"] for p in group])),
+                        "fraction_stabilised": float(stabilised.mean()),
+                        "impulse_settled": float(
+                            np.mean([i["settled"] and not i["terminated"] for i in impulses])
+                        ),
+                        "n_episodes": int(returns.size),
                         "n_runs": len(group),
                     }
                 )
+    return rows
+
+
+def swing_up_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
+    """Rows: system, controller, mean return and fraction of swing-up episodes that held, runs
+    whose every episode held, mean hold step."""
+    rows = []
+    for system, by_controller in evaluations.items():
+        for controller in _ordered(by_controller):
+            runs = by_controller[controller]
+            returns = np.concatenate([run["swing_up"]["returns"] for run in runs])
+            holds = [h for run in runs for h in run["swing_up"]["hold_steps"]]
+            held = [h for h in holds if h is not None]
+            rows.append(
+                {
+                    "system": system,
+                    "controller": controller,
+                    "return_mean": float(returns.mean()),
+                    "return_std": float(returns.std()),
+                    "fraction_held": len(held) / len(holds) if holds else 0.0,
+                    "runs_all_held": sum(run["swing_up"]["held_fraction"] >= 1.0 for run in runs),
+                    "n_runs": len(runs),
+                    "mean_hold_step": float(np.mean(held)) if held else math.nan,
+                }
+            )
     return rows
 
 
@@ -112,102 +194,220 @@ def curve_summary(runs: list[dict[str, Any]]) -> dict[str, list[float]] | None:
     }
 
 
+# ------------------------------------------------------------------------------------ checks
+def _differs(value: float, reference: float, peak: float) -> bool:
+    if math.isnan(value) or math.isnan(reference):
+        return math.isnan(value) != math.isnan(reference)
+    scale = max(abs(reference), ZERO_FLOOR_OF_PEAK * abs(peak))
+    return abs(value - reference) > RELATIVE_TOLERANCE * scale
+
+
+def response_flags(rows: list[dict[str, Any]]) -> list[str]:
+    """One sentence per hybrid whose response differs from its linear reference by more than
+    1 % (relative) in a metric, or settles/terminates where the reference does not."""
+    index = {(r["system"], r["test"], r["controller"]): r for r in rows}
+    flags = []
+    for (system, test, controller), row in index.items():
+        framework = controller.split("_")[0]
+        if controller in LINEAR_CONTROLLERS or not controller.endswith("hybrid"):
+            continue
+        reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
+        if reference is None:
+            continue
+        problems = []
+        if row["n_terminated"] > 0:
+            problems.append(f"terminated in {row['n_terminated']}/{row['n_runs']} runs")
+        if row["n_settled"] < row["n_runs"]:
+            problems.append(f"settled in only {row['n_settled']}/{row['n_runs']} runs")
+        for metric in COMPARED_METRICS:
+            value, ref = row[f"{metric}_mean"], reference[f"{metric}_mean"]
+            if _differs(value, ref, reference["peak_deviation_mean"]):
+                problems.append(
+                    f"{metric.replace('_', ' ')} {FMT.format(value)} vs {FMT.format(ref)}"
+                )
+        if problems:
+            flags.append(
+                f"**{system} {_label(controller)}** ({test}) differs from "
+                f"{_label(reference['controller'])}: " + "; ".join(problems) + "."
+            )
+    return flags
+
+
+def robustness_flags(rows: list[dict[str, Any]]) -> list[str]:
+    """Hybrids whose fraction stabilised differs from their linear reference at some scale."""
+    index = {(r["system"], r["controller"], r["parameter"], r["scale"]): r for r in rows}
+    flags = []
+    for (system, controller, parameter, scale), row in sorted(index.items()):
+        if not controller.endswith("hybrid"):
+            continue
+        reference = index.get(
+            (system, LINEAR_REFERENCE[controller.split("_")[0]], parameter, scale)
+        )
+        if reference is None:
+            continue
+        if abs(row["fraction_stabilised"] - reference["fraction_stabilised"]) > RELATIVE_TOLERANCE:
+            flags.append(
+                f"**{system} {_label(controller)}**, {parameter} x{scale:g}: stabilised "
+                f"{row['fraction_stabilised']:.0%} of episodes vs "
+                f"{reference['fraction_stabilised']:.0%} for {_label(reference['controller'])}."
+            )
+    return flags
+
+
+def swing_up_flags(rows: list[dict[str, Any]]) -> list[str]:
+    """Learned controllers that do not swing up and hold in every episode."""
+    return [
+        f"**{row['system']} {_label(row['controller'])}** does not swing up and hold: "
+        f"{row['fraction_held']:.0%} of its swing-up episodes held the operating point."
+        for row in rows
+        if row["controller"] not in LINEAR_CONTROLLERS and row["fraction_held"] < 1.0
+    ]
+
+
 # ------------------------------------------------------------------------------------ figures
+def _legend_below(figure, axes) -> None:
+    """One legend for the whole figure, below the panels (off the data)."""
+    handles: dict[str, Any] = {}
+    for axis in np.ravel(axes):
+        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    figure.tight_layout(rect=(0, 0.08, 1, 1))
+    if handles:
+        figure.legend(
+            list(handles.values()),
+            list(handles),
+            loc="lower center",
+            ncol=min(4, len(handles)),
+            fontsize="small",
+            frameon=False,
+        )
+
+
 def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path) -> Path:
     """Figure 6: return vs interaction time, baseline vs hybrid, rows = framework."""
     plt = _pyplot()
     systems = list(curves)
     frameworks = ("ddpg", "pilco")
     figure, axes = plt.subplots(
-        2, max(1, len(systems)), figsize=(4.2 * max(1, len(systems)), 6), squeeze=False
+        2, max(1, len(systems)), figsize=(4.2 * max(1, len(systems)), 6.4), squeeze=False
     )
     for column, system in enumerate(systems):
         for row, framework in enumerate(frameworks):
             axis = axes[row][column]
             for kind in ("baseline", "hybrid"):
-                label = f"{framework}_{kind}"
-                curve = curves[system].get(label)
+                key = f"{framework}_{kind}"
+                curve = curves[system].get(key)
                 if curve is None:
                     continue
                 seconds, mean, std = (np.array(curve[k]) for k in ("seconds", "mean", "std"))
-                colour = controller_colour(label)
+                colour = controller_colour(key)
                 axis.plot(
                     seconds,
                     mean,
                     color=colour,
                     marker="." if len(seconds) < 20 else None,
-                    label=f"{label} (n={curve['n_seeds']})",
+                    label=_label(key),
                 )
                 axis.fill_between(seconds, mean - std, mean + std, color=colour, alpha=0.2)
             axis.set_title(f"{system}: {framework.upper()}")
             axis.set_xlabel("interaction time [s]")
-            axis.set_ylabel("episode return")
-            axis.legend(fontsize="small")
-    figure.tight_layout()
+            axis.set_ylabel("evaluation return")
+    _legend_below(figure, axes)
     return save_figure(figure, path)
 
 
 def plot_robustness(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Figure 8: return (mean +/- std) against the parameter scale, rows = parameter."""
+    """Figure 8: fraction stabilised (top) and return (bottom) against the scale, per parameter."""
     plt = _pyplot()
     systems = list(dict.fromkeys(row["system"] for row in rows))
+    panels = [(p, q) for p in SCALED_PARAMETERS for q in ("fraction_stabilised", "return_mean")]
     figure, axes = plt.subplots(
-        len(SCALED_PARAMETERS),
+        len(panels),
         max(1, len(systems)),
-        figsize=(4.2 * max(1, len(systems)), 6),
+        figsize=(4.2 * max(1, len(systems)), 2.6 * len(panels)),
         squeeze=False,
     )
     for column, system in enumerate(systems):
-        for row_index, parameter in enumerate(SCALED_PARAMETERS):
+        for row_index, (parameter, quantity) in enumerate(panels):
             axis = axes[row_index][column]
             for controller in CONTROLLERS:
                 selected = [
                     r
                     for r in rows
-                    if r["system"] == system
-                    and r["parameter"] == parameter
-                    and r["controller"] == controller
+                    if (r["system"], r["parameter"], r["controller"])
+                    == (system, parameter, controller)
                 ]
                 if not selected:
                     continue
                 scale = np.array([r["scale"] for r in selected])
-                mean = np.array([r["return_mean"] for r in selected])
-                std = np.array([r["return_std"] for r in selected])
+                values = np.array([r[quantity] for r in selected])
                 colour = controller_colour(controller)
-                axis.plot(scale, mean, color=colour, marker="o", markersize=3, label=controller)
-                axis.fill_between(scale, mean - std, mean + std, color=colour, alpha=0.15)
+                axis.plot(
+                    scale, values, color=colour, marker="o", markersize=3, label=_label(controller)
+                )
+                if quantity == "return_mean":
+                    std = np.array([r["return_std"] for r in selected])
+                    axis.fill_between(scale, values - std, values + std, color=colour, alpha=0.12)
             axis.set_title(f"{system}: {parameter} scaled")
             axis.set_xlabel(f"{parameter} / nominal")
-            axis.set_ylabel("episode return")
-            axis.legend(fontsize="x-small")
-    figure.tight_layout()
+            axis.set_ylabel(
+                "fraction stabilised" if quantity == "fraction_stabilised" else "episode return"
+            )
+            if quantity == "fraction_stabilised":
+                axis.set_ylim(-0.05, 1.05)
+    _legend_below(figure, axes)
     return save_figure(figure, path)
 
 
 def plot_relevance(evaluations: Evaluations, path: Path) -> Path | None:
-    """Figure 4: main coordinate and r(x) along a swing-up with each hybrid (first seed)."""
-    panels = [
-        (system, controller, runs[0]["relevance"])
+    """Figure 4: main coordinate and r(x) along a swing-up, a grid of systems (rows) x hybrid
+    controllers (columns), first seed."""
+    grid = {
+        (system, controller): runs[0]["relevance"]
         for system, by_controller in evaluations.items()
         for controller, runs in by_controller.items()
         if runs and runs[0].get("relevance")
-    ]
-    if not panels:
+    }
+    if not grid:
         return None
     plt = _pyplot()
-    figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.2), squeeze=False)
-    for axis, (system, controller, trace) in zip(axes[0], panels, strict=True):
+    systems = list(dict.fromkeys(system for system, _ in grid))
+    controllers = [c for c in CONTROLLERS if any(c == k for _, k in grid)]
+    figure, axes = plt.subplots(
+        len(systems),
+        len(controllers),
+        figsize=(4.4 * len(controllers), 2.8 * len(systems)),
+        squeeze=False,
+    )
+    for row, system in enumerate(systems):
         label = make_system(system).main_label
-        axis.plot(trace["time"], trace["main"], color="#1f77b4", label=label)
-        axis.set_xlabel("time [s]")
-        axis.set_ylabel(label, color="#1f77b4")
-        twin = axis.twinx()
-        twin.plot(trace["time"], trace["relevance"], color="#ff7f0e", label="r(x)")
-        twin.set_ylim(-0.05, 1.05)
-        twin.set_ylabel("relevance r(x)", color="#ff7f0e")
-        axis.set_title(f"{system}: {controller}")
+        for column, controller in enumerate(controllers):
+            axis = axes[row][column]
+            trace = grid.get((system, controller))
+            if trace is None:
+                axis.set_axis_off()
+                continue
+            axis.plot(trace["time"], trace["main"], color="#1f77b4", label=label)
+            axis.set_xlabel("time [s]")
+            axis.set_ylabel(label, color="#1f77b4")
+            twin = axis.twinx()
+            twin.plot(trace["time"], trace["relevance"], color="#ff7f0e", label="r(x)")
+            twin.set_ylim(-0.05, 1.05)
+            twin.set_ylabel("relevance r(x)", color="#ff7f0e")
+            axis.set_title(f"{system}: {_label(controller)}")
     figure.tight_layout()
     return save_figure(figure, path)
+
+
+def _response_records(runs: list[dict[str, Any]], test: str) -> list[dict[str, Any]]:
+    return [
+        {
+            "deviation": run["responses"][test]["deviation"],
+            "terminated": run["responses"][test]["metrics"].get("terminated", False),
+            "settled": run["responses"][test]["metrics"]["settled"],
+        }
+        for run in runs
+    ]
 
 
 # ------------------------------------------------------------------------------------ markdown
@@ -227,65 +427,76 @@ def _paper_cells(system: str, controller: str) -> str:
 
 def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
     lines = [
-        "| system | controller | steady-state error | overshoot | settling time [steps] "
-        "| settled | paper: steady-state error | paper: overshoot | paper: settling time |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| system | controller | period [steps] | steady-state error | overshoot "
+        "| peak deviation | settling time [steps] | settling time [s] | settled | terminated "
+        "| paper: steady-state error | paper: overshoot | paper: settling time |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         if row["test"] != test:
             continue
-        paper = _paper_cells(row["system"], row["controller"]) if test == "impulse" else "| | |"
+        paper_key = "linear" if row["controller"] in LINEAR_CONTROLLERS else row["controller"]
+        paper = _paper_cells(row["system"], paper_key) if test == "impulse" else "| | |"
         lines.append(
-            f"| {row['system']} | {row['controller']} "
+            f"| {row['system']} | {_label(row['controller'])} | {row['action_repeat']} "
             f"| {_pm(row['steady_state_error_mean'], row['steady_state_error_std'])} "
             f"| {_pm(row['overshoot_mean'], row['overshoot_std'])} "
+            f"| {_pm(row['peak_deviation_mean'], row['peak_deviation_std'])} "
             f"| {_pm(row['settling_time_mean'], row['settling_time_std'])} "
-            f"| {row['n_settled']}/{row['n_runs']} {paper}"
+            f"| {FMT.format(row['settling_seconds_mean'])} "
+            f"| {row['n_settled']}/{row['n_runs']} | {row['n_terminated']}/{row['n_runs']} {paper}"
         )
     return lines
 
 
 def robustness_table(rows: list[dict[str, Any]]) -> list[str]:
-    """Fraction of runs that stay at the operating point, over all scales, per parameter."""
+    """Per controller and parameter: fraction stabilised at each scale."""
+    scales = sorted({r["scale"] for r in rows})
     lines = [
-        "| system | controller | "
-        + " | ".join(f"{p}: held / mean return" for p in SCALED_PARAMETERS)
-        + " |",
-        "|---|---|" + "---|" * len(SCALED_PARAMETERS),
+        "| system | controller | parameter | "
+        + " | ".join(f"x{s:g}" for s in scales)
+        + " | mean return |",
+        "|---|---|---|" + "---|" * (len(scales) + 1),
     ]
-    keys = list(dict.fromkeys((r["system"], r["controller"]) for r in rows))
-    for system, controller in keys:
-        cells = []
-        for parameter in SCALED_PARAMETERS:
-            selected = [
-                r
-                for r in rows
-                if (r["system"], r["controller"], r["parameter"]) == (system, controller, parameter)
-            ]
-            held = np.mean([r["fraction_held"] for r in selected])
-            mean_return = np.mean([r["return_mean"] for r in selected])
-            cells.append(f"{held:.0%} / {mean_return:.3g}")
-        lines.append(f"| {system} | {controller} | " + " | ".join(cells) + " |")
+    keys = list(dict.fromkeys((r["system"], r["controller"], r["parameter"]) for r in rows))
+    for system, controller, parameter in keys:
+        selected = {
+            r["scale"]: r
+            for r in rows
+            if (r["system"], r["controller"], r["parameter"]) == (system, controller, parameter)
+        }
+        cells = [
+            f"{selected[s]['fraction_stabilised']:.0%}" if s in selected else "" for s in scales
+        ]
+        mean_return = np.mean([r["return_mean"] for r in selected.values()])
+        lines.append(
+            f"| {system} | {_label(controller)} | {parameter} | "
+            + " | ".join(cells)
+            + f" | {FMT.format(mean_return)} |"
+        )
     return lines
 
 
-def swing_up_table(evaluations: Evaluations) -> list[str]:
+def swing_up_table(rows: list[dict[str, Any]]) -> list[str]:
     lines = [
-        "| system | controller | swing-up return | runs holding the operating point "
-        "| mean hold step |",
-        "|---|---|---|---|---|",
+        "| system | controller | swing-up return | episodes holding the operating point "
+        "| runs holding in every episode | mean hold step |",
+        "|---|---|---|---|---|---|",
     ]
-    for system, by_controller in evaluations.items():
-        for controller in _ordered(by_controller):
-            runs = by_controller[controller]
-            returns = np.array([run["swing_up"]["total_reward"] for run in runs])
-            holds = [run["swing_up"]["hold_step"] for run in runs]
-            held = [h for h in holds if h is not None]
-            lines.append(
-                f"| {system} | {controller} | {_pm(returns.mean(), returns.std())} "
-                f"| {len(held)}/{len(runs)} | {FMT.format(np.mean(held)) if held else '-'} |"
-            )
+    for row in rows:
+        hold = "-" if math.isnan(row["mean_hold_step"]) else FMT.format(row["mean_hold_step"])
+        lines.append(
+            f"| {row['system']} | {_label(row['controller'])} "
+            f"| {_pm(row['return_mean'], row['return_std'])} | {row['fraction_held']:.0%} "
+            f"| {row['runs_all_held']}/{row['n_runs']} | {hold} |"
+        )
     return lines
+
+
+def _flag_block(flags: list[str], none_text: str) -> list[str]:
+    if not flags:
+        return [f"**Checks: {none_text}**", ""]
+    return ["**What failed:**", ""] + [f"- {flag}" for flag in flags] + [""]
 
 
 def write_report(out_dir: str | Path) -> Path:
@@ -296,32 +507,44 @@ def write_report(out_dir: str | Path) -> Path:
         raise FileNotFoundError(
             f"run_dir: no {META_FILE} in {str(out)!r}; is it a reproduce folder?"
         )
-    meta = json.loads(meta_path.read_text())
-    evaluations = load_evaluations(out)
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"{meta_path}: damaged reproduce metadata ({error})") from error
+    evaluations = load_evaluations(out, meta)
     responses = response_summary(evaluations)
     robustness = robustness_summary(evaluations)
+    swing_up = swing_up_summary(evaluations)
     curves = {
         system: {c: curve_summary(runs) for c, runs in by_c.items() if curve_summary(runs)}
         for system, by_c in evaluations.items()
     }
-    train_seconds = sum(
+    run_seconds = sum(
         run["wall_seconds"]
         for by_c in evaluations.values()
         for runs in by_c.values()
         for run in runs
     )
+    flags = {
+        "responses": response_flags(responses),
+        "robustness": robustness_flags(robustness),
+        "swing_up": swing_up_flags(swing_up),
+    }
     write_json_atomic(
         out / "results.json",
         {
             "meta": meta,
             "responses": responses,
             "robustness": robustness,
+            "swing_up": swing_up,
             "learning_curves": curves,
-            "summed_run_wall_seconds": train_seconds,
+            "flags": flags,
+            "summed_run_wall_seconds": run_seconds,
         },
     )
     write_csv_atomic(out / "responses.csv", responses)
     write_csv_atomic(out / "robustness.csv", robustness)
+    write_csv_atomic(out / "swing_up.csv", swing_up)
     curve_rows = [
         {"system": s, "controller": c, "seconds": t, "mean": m, "std": d}
         for s, by_c in curves.items()
@@ -334,15 +557,13 @@ def write_report(out_dir: str | Path) -> Path:
         plot_responses(
             {
                 system: {
-                    test: {
-                        c: [run["responses"][test]["deviation"] for run in runs]
-                        for c, runs in by_c.items()
-                    }
+                    test: {c: _response_records(runs, test) for c, runs in by_c.items()}
                     for test in RESPONSE_TESTS
                 }
                 for system, by_c in evaluations.items()
             },
             out / "responses.png",
+            CONTROLLER_LABELS,
         )
         figures.append(("Impulse and step responses (paper figure 7)", "responses.png"))
     if any(curves.values()):
@@ -354,9 +575,10 @@ def write_report(out_dir: str | Path) -> Path:
     if plot_relevance(evaluations, out / "relevance.png"):
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
     path = out / "report.md"
-    write_text_atomic(
-        path, render_markdown(meta, evaluations, responses, robustness, figures, train_seconds)
+    document = render_markdown(
+        meta, evaluations, responses, robustness, swing_up, flags, figures, run_seconds
     )
+    write_text_atomic(path, document)
     return path
 
 
@@ -365,8 +587,10 @@ def render_markdown(
     evaluations: Evaluations,
     responses: list[dict[str, Any]],
     robustness: list[dict[str, Any]],
+    swing_up: list[dict[str, Any]],
+    flags: dict[str, list[str]],
     figures: list[tuple[str, str]],
-    train_seconds: float,
+    run_seconds: float,
 ) -> str:
     wall = meta.get("wall_seconds_last_invocation")
     lines = [
@@ -377,11 +601,17 @@ def render_markdown(
         f"Seeds: {meta.get('seeds')}. Settings: `{json.dumps(meta.get('settings'))}`.",
         "",
         f"Wall time of the last invocation: {wall:.0f} s; summed wall time of all runs: "
-        f"{train_seconds:.0f} s (runs execute in parallel on {meta.get('jobs')} workers)."
+        f"{run_seconds:.0f} s (runs execute in parallel on {meta.get('jobs')} workers)."
         if wall is not None
         else "Wall time: not finished.",
         "",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta.get("versions", {}).items()),
+        "",
+        f"Model selection: {MODEL_SELECTION_TEXT}. Every controller is evaluated at the control "
+        "period it was trained at (the 'period' column: simulator steps per decision; PILCO "
+        "holds each action for that many steps), and each hybrid is compared with the LQR "
+        "designed for its own period: DDPG hybrids with *linear (LQR at dt)*, PILCO hybrids "
+        "with *linear (LQR at PILCO's period)*.",
         "",
     ]
     missing = [
@@ -392,58 +622,87 @@ def render_markdown(
     ]
     if missing:
         lines += [f"Runs without results (failed or not run yet): {', '.join(missing)}.", ""]
+    all_flags = flags["responses"] + flags["robustness"] + flags["swing_up"]
+    lines += ["## Summary", ""]
+    lines += _flag_block(
+        all_flags,
+        "every hybrid matches its linear reference within 1 % and every learned controller "
+        "swings up and holds.",
+    )
     lines += [
         "## Metric definitions",
         "",
-        "Every test starts exactly at the operating point; *impulse* adds -1.0 to the first "
-        "action, *step* adds -0.2 to every action, for 200 steps. e(t) is the deviation of the "
-        "main coordinate (degrees for pendulum and cart-pole, metres for mountain car).",
+        f"Every response test starts exactly at the operating point; *impulse* adds "
+        f"{IMPULSE_MAGNITUDE:g} to the action of the first simulator step, *step* adds "
+        f"{STEP_MAGNITUDE:g} to every action, for 200 simulator steps. e(t) is the deviation of "
+        "the main coordinate (degrees for pendulum and cart-pole, metres for mountain car).",
         "- steady-state error: mean of e over the last 20 samples;",
         "- overshoot: largest excursion past that final value on the side opposite to the "
         "initial deviation (the side of the first sample deviating by more than 1% of the "
         "peak deviation);",
-        "- settling time: first step after which |e - e_final| stays within the band (1 degree; "
-        "0.001 m for mountain car) to the end; 0 if it never leaves the band; runs that do not "
-        "settle (a sample of the last 20 outside the band) count in 'settled' and get no number.",
-        "Mean ± std (population) over seeds; settling time over the settled runs only.",
+        "- peak deviation: max |e(t)| (what the paper's 'overshoot' column appears to be: its "
+        "'Linear' values equal the first swing of the impulse in our simulators);",
+        f"- settling time: first step after which |e - e_final| stays within the band to the "
+        f"end, the band being {DEFAULT_RELATIVE_BAND:.0%} of the peak error max |e - e_final| "
+        "(MATLAB stepinfo's convention); *not settled* (no number) if a sample of the last 20 "
+        "is outside it; reported in steps and seconds;",
+        "- terminated: the episode left the allowed region (its record is cut short).",
+        "Mean ± std (population) over seeds; settling time over the settled runs only. A hybrid "
+        f"is flagged when a metric differs from its linear reference by more than "
+        f"{RELATIVE_TOLERANCE:.0%} of the reference (floored at {ZERO_FLOOR_OF_PEAK:.0%} of its "
+        "peak deviation, so round-off around zero is not a difference).",
         "",
-        "The paper's numbers (appendix D, typed in) do not state their band or their "
-        "overshoot reference; its 'Linear' overshoots (0.45 deg pendulum, 0.67 deg cart-pole) "
-        "equal the deviation one step after the impulse in our simulators, so its overshoot "
-        "appears to measure the first swing, not the swing past the final value, and its "
-        "mountain-car settling times (~201 steps) exceed the 200-step episode.",
+        "The paper's numbers (appendix D, typed in) do not state their band; its mountain-car "
+        "settling times (~201 steps) exceed the 200-step episode.",
         "",
         "## Impulse response",
         "",
     ]
+    lines += _flag_block(
+        [f for f in flags["responses"] if "(impulse)" in f], "no hybrid differs from its LQR."
+    )
     lines += response_table(responses, "impulse")
-    lines += ["", "## Step response", ""] + response_table(responses, "step")
-    bands = ", ".join(f"{s} {make_system(s).hold_band}" for s in SYSTEM_NAMES)
+    lines += ["", "## Step response", ""]
+    lines += _flag_block(
+        [f for f in flags["responses"] if "(step)" in f], "no hybrid differs from its LQR."
+    )
+    lines += response_table(responses, "step")
+    regions = "; ".join(
+        f"{s}: ± {list(make_system(s).operating_region)} ({', '.join(make_system(s).state_names)})"
+        for s in SYSTEM_NAMES
+        if s in evaluations
+    )
     lines += [
         "",
         "## Robustness",
         "",
-        "Each controller, trained on the nominal system, starts exactly at the operating point "
-        "on systems whose mass (all masses) or g is scaled by 0.5x ... 5.0x; one 200-step "
-        "episode per scale and seed. "
-        f"'held': the main coordinate ends within the hold band ({bands}; degrees or m) and "
-        "the episode did not terminate. Cells: fraction held over all scales / mean return.",
+        "Each controller, trained on the nominal system, runs on systems whose mass (all "
+        "masses) or g is scaled by 0.5x ... 5.0x: per scale and seed, "
+        f"{ROBUSTNESS_EPISODES} episodes from starts drawn uniformly in the operating region "
+        f"(the same starts at every scale; {regions}; the nominal LQR recovers from every "
+        "corner of these boxes), and the impulse test. Cells: fraction of episodes stabilised "
+        "(held the operating point within the hold band for the system's minimum duration at "
+        "the end, not terminated). Large scales fail for physical reasons: the actuator limit "
+        "cannot hold the heavier or stronger-pulled system away from the top.",
         "",
     ]
+    lines += _flag_block(flags["robustness"], "every hybrid stabilises as its LQR does.")
     lines += robustness_table(robustness)
     lines += [
         "",
         "## Swing-up",
         "",
-        "One 200-step episode from the seeded swing-up start per controller and seed.",
+        f"{SWING_UP_EPISODES} episodes per run from the seeded swing-up starts (the trainers' "
+        "evaluation starts). Linear controllers are not expected to swing up.",
         "",
     ]
-    lines += swing_up_table(evaluations)
+    lines += _flag_block(flags["swing_up"], "every learned controller swings up and holds.")
+    lines += swing_up_table(swing_up)
     for title, filename in figures:
         lines += ["", f"## {title}", "", f"![{title}]({filename})"]
     lines += [
         "",
-        "All numbers: results.json, responses.csv, robustness.csv, "
+        "All numbers: results.json, responses.csv, robustness.csv, swing_up.csv, "
         "learning_curves.csv. Regenerate figures and this report: `leoc plot <folder>`.",
         "",
     ]

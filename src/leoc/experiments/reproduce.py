@@ -30,16 +30,19 @@ import numpy as np
 import torch
 
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
-from leoc.evaluation.rollout import RESPONSE_TESTS, hold_step, response_test, rollout
+from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
 from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
 from leoc.io import write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.training import evaluate_episodes, evaluation_starts
 
 EVALUATION_FILE = "evaluation.json"
 LOG_FILE = "train.log"
 META_FILE = "meta.json"
 PROGRESS_INTERVAL_S = 15.0
 WORKER_THREADS = 1
+# Swing-up episodes of every evaluated controller (the trainers' evaluation starts).
+SWING_UP_EPISODES = 5
 
 
 def run_dir_of(out_dir: Path, spec: RunSpec) -> Path:
@@ -62,21 +65,34 @@ def versions() -> dict[str, str]:
 
 
 # ---------------------------------------------------------------------------------- training
-def _curve(seconds: Sequence[float], returns: Sequence[float]) -> dict[str, list[float]]:
-    return {"seconds": [float(s) for s in seconds], "returns": [float(r) for r in returns]}
+def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
+    """Return against interaction seconds of a learning curve (the trainer contract's rows)."""
+    return {
+        "seconds": [float(row["interaction_seconds"]) for row in rows],
+        "returns": [float(row["mean_return"]) for row in rows],
+        "held_fraction": [float(row["held_fraction"]) for row in rows],
+    }
+
+
+def pilco_action_repeat(profile: Profile) -> int:
+    """PILCO's control period under ``profile`` (its override, else the PILCO default)."""
+    from leoc.pilco.train import PilcoConfig
+
+    return int(profile.pilco_overrides.get("action_repeat", PilcoConfig.action_repeat))
 
 
 def train_controller(
     spec: RunSpec, profile: Profile, train_dir: Path
 ) -> tuple[torch.nn.Module, dict[str, list[float]] | None]:
-    """Design (linear) or train one controller; returns it and its learning curve."""
+    """Design (linear) or train one controller; returns it (at its control period) and its
+    learning curve."""
     system = make_system(spec.system)
-    if spec.controller == "linear":
+    if spec.framework == "linear":
         from leoc.control import design_lqr
-        from leoc.policies import LinearController
+        from leoc.policies import lqr_controller
 
-        design = design_lqr(system)
-        return LinearController(design.W, design.b), None
+        repeat = pilco_action_repeat(profile) if spec.controller == "linear_pilco" else 1
+        return lqr_controller(design_lqr(system, action_repeat=repeat)), None
     if spec.framework == "pilco":
         from leoc.pilco.train import train_pilco
 
@@ -89,30 +105,24 @@ def train_controller(
             progress=True,
             **profile.pilco_overrides,
         )
-        log = result.log
-        return result.policy, _curve(
-            [row["interaction_seconds"] for row in log], [row["return"] for row in log]
-        )
-    from leoc.ddpg.train import train_ddpg
+    else:
+        from leoc.ddpg.train import train_ddpg
 
-    result = train_ddpg(
-        spec.system,
-        algo="ddpg",
-        hybrid=spec.hybrid,
-        seed=spec.seed,
-        run_dir=train_dir,
-        total_steps=profile.ddpg_steps.get(spec.system),
-        progress=False,
-        **profile.ddpg_overrides,
-    )
-    curve = result.curve
-    return result.policy, _curve(
-        [row["interaction_seconds"] for row in curve], [row["mean_return"] for row in curve]
-    )
+        result = train_ddpg(
+            spec.system,
+            algo="ddpg",
+            hybrid=spec.hybrid,
+            seed=spec.seed,
+            run_dir=train_dir,
+            total_steps=profile.ddpg_steps.get(spec.system),
+            progress=False,
+            **profile.ddpg_overrides,
+        )
+    return result.policy, _curve(result.curve)
 
 
 def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str, Any]:
-    """Responses, robustness, swing-up and relevance trace of one controller."""
+    """Responses, robustness, swing-up and relevance trace of one controller, at its period."""
     system = make_system(spec.system)
     responses = {}
     for test in RESPONSE_TESTS:
@@ -122,16 +132,22 @@ def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str,
             "deviation": result.deviation.tolist(),
             "total_reward": result.trajectory.total_reward,
         }
-    start = system.sample_start(np.random.default_rng(spec.seed), "swing_up")
-    swing = rollout(system, controller, start)
-    trace = relevance_trace(spec.system, controller, spec.seed)
+    swing = evaluate_episodes(
+        system, controller, evaluation_starts(system, spec.seed, SWING_UP_EPISODES)
+    )
+    trace = relevance_trace(system, controller, spec.seed)
     return {
+        "action_repeat": control_period(controller),
         "responses": responses,
-        "robustness": [point._asdict() for point in robustness_sweep(spec.system, controller)],
+        "robustness": [
+            {**point._asdict(), "return_mean": point.return_mean}
+            for point in robustness_sweep(system, controller, seed=spec.seed)
+        ],
         "swing_up": {
-            "total_reward": swing.total_reward,
-            "hold_step": hold_step(system, swing.states),
-            "terminated": swing.terminated,
+            "returns": swing.returns,
+            "hold_steps": swing.hold_steps,
+            "mean_return": swing.mean_return,
+            "held_fraction": swing.held_fraction,
         },
         "relevance": None if trace is None else {k: v.tolist() for k, v in trace._asdict().items()},
     }

@@ -6,14 +6,16 @@ horizon) -> run the policy on the real system for one episode -> add its data.
 
 Timing choice (documented in :mod:`leoc.pilco.rollout`): the policy decides every
 ``action_repeat`` simulator steps and holds its action (zero-order hold), the GP models that
-``action_repeat``-step map, and the horizon is ``horizon`` decisions. Every real rollout, for
-data and for evaluation, is a full ``episode_steps``-step episode run with the same hold, so
-training and evaluation see the same closed loop. (The LQR part of the hybrid, designed at
-``dt``, stays stable under the 3-step hold on all three systems.)
+``action_repeat``-step map, and the horizon is ``horizon`` decisions. The controller keeps that
+period wherever it runs: it is returned, saved and loaded as a
+:class:`~leoc.policies.HeldPolicy`, and the LQR part of the hybrid is designed by discrete LQR
+on the ``action_repeat``-step held map, so pi(a) = G(a) and dpi/dx(a) = W hold for the closed
+loop actually run.
 
-The run folder holds ``config.json``, ``log.json``, ``log.csv``, ``learning_curve.png``,
-``controller.pt`` (policy state + GP model + config) and ``checkpoint.pt`` (everything needed to
-resume, written atomically).
+Learning curve and run folder: the trainer contract of :mod:`leoc.training` (evaluation
+episodes from fixed starts after every iteration, ``config.json``, ``curve.json``/``curve.csv``
+with PILCO's own columns added, ``learning_curve.png``), plus ``controller.pt`` (policy state +
+GP model + config) and ``checkpoint.pt`` (everything needed to resume, written atomically).
 """
 
 from __future__ import annotations
@@ -29,41 +31,27 @@ import numpy as np
 import torch
 from torch import nn
 
-from leoc.io import (
-    save_figure_atomic,
-    save_torch_atomic,
-    write_csv_atomic,
-    write_json_atomic,
-    write_text_atomic,
-)
+from leoc.io import save_torch_atomic, write_text_atomic
 from leoc.pilco.gp import GPHyper, GPPosterior, GPSettings, fit_gp
 from leoc.pilco.propagate import Prediction, SaturatedPolicy, predict
-from leoc.pilco.rollout import (
-    Rollout,
-    hold_start,
-    policy_action_fn,
-    random_action_fn,
-    run_rollout,
-)
-from leoc.policies import HybridPolicy, LinearController, RBFNetwork
+from leoc.pilco.rollout import Rollout, hold_start, run_rollout
+from leoc.policies import HeldPolicy, HybridPolicy, LinearController, RBFNetwork
 from leoc.systems import make_system
 from leoc.systems.base import DTYPE, System
+from leoc.systems.rollout import RandomController
+from leoc.training import (
+    CONFIG_FILE,
+    TrainResult,
+    curve_row,
+    curve_summary,
+    evaluate_episodes,
+    evaluation_starts,
+    write_curve,
+)
 
 DEFAULT_RUN_ROOT = Path("runs")
 CHECKPOINT_NAME = "checkpoint.pt"
 CONTROLLER_NAME = "controller.pt"
-LOG_FIELDS = (
-    "iteration",
-    "interaction_seconds",
-    "steps",
-    "return",
-    "predicted_cost",
-    "data_size",
-    "wall_seconds",
-    "held_operating_point",
-    "hold_step",
-    "gp_sparse",
-)
 # Initial RBF weights: standard deviation as a fraction of the actuator limit.
 WEIGHT_STD_FRACTION = 0.1
 # Smallest initial RBF length-scale (a constant observation column would otherwise give 0).
@@ -100,10 +88,8 @@ class PilcoConfig:
         L-BFGS iterations of each policy optimisation.
     cost_width : float
         Width of the saturating cost (distance at which the cost is 1 - exp(-1/2)).
-    hold_band : float
-        Band of the "reached and held the operating point" test (degrees or position units).
-    hold_min_steps : int
-        Fewest final steps inside the band that count as holding.
+    eval_episodes : int
+        Deterministic evaluation episodes after every iteration (:mod:`leoc.training`).
     quadrature_order : int
         Gauss-Hermite nodes per state dimension for the hybrid's moment matching.
     hybrid_method : str
@@ -117,8 +103,8 @@ class PilcoConfig:
     num_threads : int or None
         ``torch.set_num_threads`` for the run (None: leave as is).
     stop_after_held : int
-        Stop early once this many consecutive iterations held the operating point (0: never;
-        for multi-seed measurements).
+        Stop early once this many consecutive evaluations held the operating point in every
+        episode (0: never; for multi-seed measurements).
     """
 
     system: str = "pendulum"
@@ -132,8 +118,7 @@ class PilcoConfig:
     num_basis: int = 30
     policy_iterations: int = 75
     cost_width: float = 0.5
-    hold_band: float = 5.0
-    hold_min_steps: int = 30
+    eval_episodes: int = 5
     quadrature_order: int = 5
     hybrid_method: str = "quadrature"
     lambda_init: float = 1.0
@@ -171,20 +156,13 @@ class PilcoConfig:
 
 
 SYSTEM_DEFAULTS: dict[str, dict[str, Any]] = {
-    "pendulum": {"num_basis": 30, "cost_width": 0.5, "hold_band": 5.0},
-    "cartpole": {"num_basis": 60, "cost_width": 0.5, "hold_band": 5.0, "quadrature_order": 4},
-    "mountaincar": {"num_basis": 60, "cost_width": 1.0, "hold_band": 0.05},
+    "pendulum": {"num_basis": 30, "cost_width": 0.5},
+    "cartpole": {"num_basis": 60, "cost_width": 0.5, "quadrature_order": 4},
+    "mountaincar": {"num_basis": 60, "cost_width": 1.0},
 }
 
 
-class PilcoResult(NamedTuple):
-    """Result of :func:`train_pilco`."""
-
-    policy: nn.Module
-    run_dir: Path
-    log: list[dict[str, Any]]
-    config: dict[str, Any]
-    model: GPPosterior | None
+PilcoResult = TrainResult  # the one trainer result (leoc.training)
 
 
 class CostSpec(NamedTuple):
@@ -256,7 +234,7 @@ def build_policy(
         return SaturatedPolicy(rbf, limit, "sin")
     from leoc.control.lqr import design_lqr
 
-    design = design_lqr(system)
+    design = design_lqr(system, action_repeat=config.action_repeat)
     return HybridPolicy(
         LinearController(design.W, design.b),
         rbf,
@@ -347,92 +325,54 @@ class _RunState(NamedTuple):
     iteration: int
     inputs: np.ndarray
     targets: np.ndarray
-    interaction_seconds: float
+    interaction_steps: int
     log: list[dict[str, Any]]
     rng_state: dict[str, Any]
     hyper: GPHyper | None
 
 
-def _write_logs(run_dir: Path, log: list[dict[str, Any]]) -> None:
-    write_json_atomic(run_dir / "log.json", log, indent=2)
-    write_csv_atomic(run_dir / "log.csv", log, LOG_FIELDS)
-
-
-def plot_learning_curve(log: list[dict[str, Any]], path: Path, title: str) -> None:
-    """Return of each iteration's rollout against cumulative interaction time (PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    seconds = [row["interaction_seconds"] for row in log]
-    returns = [row["return"] for row in log]
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(seconds, returns, "o-", label="return of the iteration's rollout")
-    held = [row for row in log if row["held_operating_point"]]
-    if held:
-        ax.plot(
-            [row["interaction_seconds"] for row in held],
-            [row["return"] for row in held],
-            "g*",
-            markersize=12,
-            label="held the operating point",
-        )
-    ax.set_xlabel("interaction time [simulated s]")
-    ax.set_ylabel("return")
-    ax.set_title(title)
-    ax.grid(True, alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    save_figure_atomic(fig, path)
-
-
 def _log_row(
     iteration: int,
+    steps: int,
+    system: System,
+    evaluation_of: Any,
     rollouts: list[Rollout],
-    seconds: float,
     predicted: float | None,
     data_size: int,
     wall: float,
-    hold: int | None,
     sparse: bool,
 ) -> dict[str, Any]:
-    return {
-        "iteration": iteration,
-        "interaction_seconds": seconds,
-        "steps": int(sum(r.steps for r in rollouts)),
-        "return": float(np.mean([r.total_return for r in rollouts])),
-        "predicted_cost": predicted,
-        "data_size": data_size,
-        "wall_seconds": wall,
-        "held_operating_point": hold is not None,
-        "hold_step": hold,
-        "gp_sparse": sparse,
-    }
+    """The learning-curve row of an iteration (leoc.training) plus PILCO's own columns."""
+    row = curve_row(steps, system.dt, evaluation_of)
+    row.update(
+        iteration=iteration,
+        rollout_return=float(np.mean([r.total_return for r in rollouts])),
+        rollout_hold_step=hold_start(system, rollouts[-1]),
+        predicted_cost=predicted,
+        data_size=data_size,
+        wall_seconds=wall,
+        gp_sparse=sparse,
+    )
+    return row
 
 
-def _initial_state(
+def _random_rollouts(
     system: System, config: PilcoConfig, rng: np.random.Generator
-) -> tuple[_RunState, list[Rollout], float]:
-    """Random rollouts (iteration 0)."""
+) -> tuple[list[Rollout], float]:
+    """The random rollouts of iteration 0 and their wall time."""
     start_time = time.perf_counter()
+    controller = RandomController(system, rng, config.action_repeat)
     rollouts = [
         run_rollout(
             system,
-            random_action_fn(system, rng),
+            controller,
             system.sample_start(rng, "swing_up"),
             config.episode_steps,
             config.action_repeat,
         )
         for _ in range(config.initial_rollouts)
     ]
-    inputs = np.concatenate([r.inputs for r in rollouts])
-    targets = np.concatenate([r.targets for r in rollouts])
-    seconds = sum(r.steps for r in rollouts) * system.dt
-    row = _log_row(0, rollouts, seconds, None, len(inputs), 0.0, None, False)
-    row["wall_seconds"] = time.perf_counter() - start_time
-    state = _RunState(0, inputs, targets, seconds, [row], {}, None)
-    return state, rollouts, seconds
+    return rollouts, time.perf_counter() - start_time
 
 
 def _default_run_dir(config: PilcoConfig) -> Path:
@@ -443,11 +383,11 @@ def _default_run_dir(config: PilcoConfig) -> Path:
 def _progress_line(row: dict[str, Any], total: int) -> str:
     cost = row["predicted_cost"]
     cost_text = "      -" if cost is None else f"{cost:7.3f}"
-    held = f" held from step {row['hold_step']}" if row["held_operating_point"] else ""
     return (
         f"[pilco] iter {row['iteration']:2d}/{total} predicted cost {cost_text} "
-        f"return {row['return']:9.2f} data {row['data_size']:4d} "
-        f"interaction {row['interaction_seconds']:6.2f} s wall {row['wall_seconds']:6.1f} s{held}"
+        f"rollout return {row['rollout_return']:9.2f} eval return {row['mean_return']:9.2f} "
+        f"held {row['held_fraction']:4.0%} data {row['data_size']:4d} "
+        f"interaction {row['interaction_seconds']:6.2f} s wall {row['wall_seconds']:6.1f} s"
     )
 
 
@@ -465,7 +405,7 @@ def _save_checkpoint(
             "iteration": state.iteration,
             "inputs": state.inputs,
             "targets": state.targets,
-            "interaction_seconds": state.interaction_seconds,
+            "interaction_steps": state.interaction_steps,
             "log": state.log,
             "rng_state": state.rng_state,
             "torch_rng_state": generator.get_state(),
@@ -507,12 +447,36 @@ def _resume(
         saved["iteration"],
         saved["inputs"],
         saved["targets"],
-        saved["interaction_seconds"],
+        saved["interaction_steps"],
         saved["log"],
         saved["rng_state"],
         hyper,
     )
     return state, policy, model
+
+
+def _evaluate(system: System, config: PilcoConfig, policy: nn.Module, starts: np.ndarray) -> Any:
+    """The policy's evaluation episodes, at its control period (leoc.training)."""
+    return evaluate_episodes(system, HeldPolicy(policy, config.action_repeat), starts)
+
+
+def _first_state(
+    system: System,
+    config: PilcoConfig,
+    rng: np.random.Generator,
+    generator: torch.Generator,
+    starts: np.ndarray,
+) -> tuple[_RunState, nn.Module]:
+    """Iteration 0: random rollouts, the initial policy built from their data, its evaluation."""
+    rollouts, wall = _random_rollouts(system, config, rng)
+    inputs = np.concatenate([r.inputs for r in rollouts])
+    targets = np.concatenate([r.targets for r in rollouts])
+    policy = build_policy(system, config, generator, inputs[:, : system.obs_dim])
+    steps = sum(r.steps for r in rollouts)
+    evaluation = _evaluate(system, config, policy, starts)
+    row = _log_row(0, steps, system, evaluation, rollouts, None, len(inputs), wall, False)
+    state = _RunState(0, inputs, targets, steps, [row], rng.bit_generator.state, None)
+    return state, policy
 
 
 def _iterate(
@@ -521,39 +485,39 @@ def _iterate(
     state: _RunState,
     policy: nn.Module,
     rng: np.random.Generator,
+    starts: np.ndarray,
 ) -> tuple[_RunState, GPPosterior]:
-    """One PILCO iteration: fit GP, optimise policy, run it, add its data."""
+    """One PILCO iteration: fit GP, optimise policy, run it, add its data, evaluate it."""
     start_time = time.perf_counter()
     model = fit_gp(state.inputs, state.targets, config.gp, rng, init=state.hyper)
     predicted = optimise_policy(policy, model, system, config)
     rollout = run_rollout(
         system,
-        policy_action_fn(policy),
+        HeldPolicy(policy, config.action_repeat),
         system.sample_start(rng, "swing_up"),
         config.episode_steps,
         config.action_repeat,
     )
-    seconds = state.interaction_seconds + rollout.steps * system.dt
+    steps = state.interaction_steps + rollout.steps
     inputs = np.concatenate([state.inputs, rollout.inputs])
     targets = np.concatenate([state.targets, rollout.targets])
-    hold = hold_start(
-        system, rollout, config.hold_band, config.hold_min_steps, config.episode_steps
-    )
+    evaluation = _evaluate(system, config, policy, starts)
     row = _log_row(
         state.iteration + 1,
+        steps,
+        system,
+        evaluation,
         [rollout],
-        seconds,
         predicted,
         len(inputs),
         time.perf_counter() - start_time,
-        hold,
         model.sparse,
     )
     new_state = _RunState(
         state.iteration + 1,
         inputs,
         targets,
-        seconds,
+        steps,
         [*state.log, row],
         rng.bit_generator.state,
         model.hyper,
@@ -564,7 +528,12 @@ def _iterate(
 def _held_long_enough(log: list[dict[str, Any]], config: PilcoConfig) -> bool:
     count = config.stop_after_held
     recent = log[-count:] if count > 0 else []
-    return len(recent) == count > 0 and all(row["held_operating_point"] for row in recent)
+    return len(recent) == count > 0 and all(row["held_fraction"] >= 1.0 for row in recent)
+
+
+def _title(config: PilcoConfig) -> str:
+    kind = "hybrid" if config.hybrid else "RBF"
+    return f"PILCO {kind}, {config.system} (seed {config.seed})"
 
 
 def train_pilco(
@@ -576,7 +545,7 @@ def train_pilco(
     resume: bool = True,
     progress: bool = True,
     **overrides: Any,
-) -> PilcoResult:
+) -> TrainResult:
     """Train a PILCO controller (RBF baseline or LEOC hybrid) on ``system``.
 
     Parameters
@@ -586,7 +555,7 @@ def train_pilco(
     hybrid : bool
         The hybrid RBF + LQR policy instead of the RBF baseline.
     seed : int
-        The one seed of the run (numpy and torch generators).
+        The one seed of the run (numpy and torch generators, evaluation starts).
     run_dir : path, optional
         Run folder; default ``runs/pilco_<system>_<rbf|hybrid>_seed<seed>``.
     iterations : int, optional
@@ -600,7 +569,10 @@ def train_pilco(
 
     Returns
     -------
-    PilcoResult
+    TrainResult
+        The final policy as a :class:`~leoc.policies.HeldPolicy` at ``action_repeat``, the
+        learning curve (one row per iteration, iteration 0 = the random rollouts), the config,
+        its summary and the last GP posterior.
     """
     if iterations is not None:
         overrides["iterations"] = iterations
@@ -613,13 +585,12 @@ def train_pilco(
     plant.episode_steps = config.episode_steps
     rng = np.random.default_rng(seed)
     generator = torch.Generator().manual_seed(seed)
+    starts = evaluation_starts(plant, seed, config.eval_episodes)
     resumed = _resume(run_path, config, plant, generator) if resume else None
     model = None
     if resumed is None:
-        state, _, _ = _initial_state(plant, config, rng)
-        policy = build_policy(plant, config, generator, state.inputs[:, : plant.obs_dim])
-        state = state._replace(rng_state=rng.bit_generator.state)
-        write_text_atomic(run_path / "config.json", json.dumps(config.to_dict(), indent=2))
+        state, policy = _first_state(plant, config, rng, generator, starts)
+        write_text_atomic(run_path / CONFIG_FILE, json.dumps(config.to_dict(), indent=2))
         _save_checkpoint(run_path, config, state, policy, None, generator)
         if progress:
             print(_progress_line(state.log[0], config.iterations), flush=True)
@@ -627,22 +598,32 @@ def train_pilco(
         state, policy, model = resumed
         rng.bit_generator.state = state.rng_state
     while state.iteration < config.iterations and not _held_long_enough(state.log, config):
-        state, model = _iterate(plant, config, state, policy, rng)
+        state, model = _iterate(plant, config, state, policy, rng, starts)
         _save_checkpoint(run_path, config, state, policy, model, generator)
-        _write_logs(run_path, state.log)
+        write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
         if progress:
             print(_progress_line(state.log[-1], config.iterations), flush=True)
-    _write_logs(run_path, state.log)
-    kind = "hybrid" if config.hybrid else "RBF"
-    plot_learning_curve(state.log, run_path / "learning_curve.png", f"PILCO {kind}, {system}")
+    summary = curve_summary(state.log, plant.dt)
+    write_curve(run_path, state.log, summary, _title(config))
     policy.eval()
-    return PilcoResult(policy, run_path, state.log, config.to_dict(), model)
+    held = HeldPolicy(policy, config.action_repeat).eval()
+    return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)
 
 
 def load_pilco_controller(run_dir: str | Path) -> nn.Module:
-    """The trained policy of a run folder (acts on observations, returns physical actions)."""
-    saved = torch.load(Path(run_dir) / CONTROLLER_NAME, weights_only=False)
-    config = PilcoConfig.from_dict(saved["config"])
+    """The trained policy of a run folder at its control period (a
+    :class:`~leoc.policies.HeldPolicy`: observations -> physical actions)."""
+    path = Path(run_dir) / CONTROLLER_NAME
+    try:
+        saved = torch.load(path, weights_only=False)
+        config = PilcoConfig.from_dict(saved["config"])
+    except FileNotFoundError:
+        raise
+    except Exception as error:  # a truncated or garbled file: name it
+        raise ValueError(
+            f"controller: {path} could not be read as a PILCO controller "
+            f"({type(error).__name__}: {error})"
+        ) from error
     policy = build_policy(make_system(config.system), config, torch.Generator().manual_seed(0))
     policy.load_state_dict(saved["policy_state"])
-    return policy.eval()
+    return HeldPolicy(policy.eval(), config.action_repeat).eval()

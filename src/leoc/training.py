@@ -1,0 +1,231 @@
+"""One trainer contract for PILCO and DDPG/TD3: evaluation episodes, learning curve, result,
+run folder.
+
+Both trainers (:func:`leoc.pilco.train_pilco`, :func:`leoc.ddpg.train_ddpg`) evaluate their
+current controller the same way, return the same :class:`TrainResult` and write the same files.
+
+Evaluation. After every iteration (PILCO) or every ``eval_interval`` environment steps
+(DDPG/TD3), the deterministic controller runs ``eval_episodes`` full episodes from the swing-up
+start distribution, at its own control period, from the fixed starts
+``System.sample_start(default_rng(seed + 10000 + k))`` (the same starts at every evaluation, so
+points are comparable; the same starts the gymnasium env gives for ``reset(seed=seed + 10000 +
+k)``). Evaluation episodes are not interaction: they do not count in the interaction time.
+
+Hold test: :meth:`leoc.systems.System.hold_step` (the system's band and minimum duration, the
+episode must not terminate). ``reached_steps``: the first evaluation at which every episode
+holds; ``held_steps``: the first evaluation from which every later evaluation holds too.
+
+Model selection, the same for both frameworks: the controller returned, saved as the run's
+controller and evaluated by ``leoc reproduce`` is the *final* one (the policy at the end of
+the training budget), never the best-evaluated one, so no selection on evaluation episodes
+enters the reported numbers.
+
+Run folder (every file written atomically)::
+
+    config.json          the trainer's configuration (+ seed, library versions)
+    curve.json           {"curve": [rows], "summary": {...}}, rows with CURVE_COLUMNS plus the
+                         per-episode "returns" and "hold_steps"
+    curve.csv            the rows, CURVE_COLUMNS only
+    learning_curve.png   mean return (+/- std) against interaction time
+    controller file      PILCO ``controller.pt``, DDPG/TD3 ``model.zip`` (loaded with its
+                         control period by ``experiments.controllers.load_trained_controller``)
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+
+from leoc.io import save_figure_atomic, write_csv_atomic, write_json_atomic
+from leoc.systems.base import System
+from leoc.systems.rollout import Controller, simulate
+
+EVAL_SEED_OFFSET = 10_000
+CONFIG_FILE = "config.json"
+CURVE_JSON = "curve.json"
+CURVE_CSV = "curve.csv"
+CURVE_PNG = "learning_curve.png"
+CURVE_COLUMNS = ("steps", "interaction_seconds", "mean_return", "std_return", "held_fraction")
+MODEL_SELECTION = "final"
+MODEL_SELECTION_TEXT = (
+    "the final controller of each run (the policy at the end of its training budget), for "
+    "PILCO and DDPG alike; no selection on evaluation episodes"
+)
+
+
+class Evaluation(NamedTuple):
+    """Deterministic episodes of one controller (see the module docstring)."""
+
+    mean_return: float
+    std_return: float
+    returns: list[float]
+    hold_steps: list[int | None]  # per episode; None if it did not hold
+
+    @property
+    def held(self) -> list[bool]:
+        return [step is not None for step in self.hold_steps]
+
+    @property
+    def held_fraction(self) -> float:
+        return float(np.mean(self.held)) if self.hold_steps else 0.0
+
+
+def evaluation_starts(system: System, seed: int, episodes: int) -> np.ndarray:
+    """``(episodes, S)`` swing-up starts of the evaluation episodes of a run seeded ``seed``."""
+    return np.stack(
+        [
+            system.sample_start(np.random.default_rng(seed + EVAL_SEED_OFFSET + k), "swing_up")
+            for k in range(episodes)
+        ]
+    )
+
+
+def evaluate_episodes(system: System, controller: Controller, starts: np.ndarray) -> Evaluation:
+    """Run ``controller`` (at its own period) from every start at once; returns and holds."""
+    batch = simulate(system, controller, starts)
+    hold_steps = [
+        system.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i]))
+        for i in range(len(starts))
+    ]
+    returns = batch.total_rewards
+    return Evaluation(float(returns.mean()), float(returns.std()), returns.tolist(), hold_steps)
+
+
+def curve_row(steps: int, dt: float, evaluation: Evaluation) -> dict[str, Any]:
+    """One learning-curve row after ``steps`` simulator steps of interaction."""
+    return {
+        "steps": int(steps),
+        "interaction_seconds": steps * dt,
+        "mean_return": evaluation.mean_return,
+        "std_return": evaluation.std_return,
+        "held_fraction": evaluation.held_fraction,
+        "returns": evaluation.returns,
+        "hold_steps": evaluation.hold_steps,
+    }
+
+
+def held_and_reached(curve: Sequence[dict[str, Any]]) -> tuple[int | None, int | None]:
+    """``(held_steps, reached_steps)`` of a learning curve (see the module docstring)."""
+    reached = next((row["steps"] for row in curve if row["held_fraction"] >= 1.0), None)
+    held = None
+    for row in reversed(curve):
+        if row["held_fraction"] < 1.0:
+            break
+        held = row["steps"]
+    return held, reached
+
+
+def curve_summary(curve: Sequence[dict[str, Any]], dt: float) -> dict[str, Any]:
+    """Held/reached steps and seconds, final and best evaluation returns, selection rule."""
+    held, reached = held_and_reached(curve)
+    return {
+        "held_steps": held,
+        "held_seconds": None if held is None else held * dt,
+        "reached_steps": reached,
+        "reached_seconds": None if reached is None else reached * dt,
+        "final_return": float(curve[-1]["mean_return"]),
+        "best_return": float(max(row["mean_return"] for row in curve)),
+        "dt": dt,
+        "model_selection": MODEL_SELECTION,
+    }
+
+
+class TrainResult(NamedTuple):
+    """What both trainers return.
+
+    Attributes
+    ----------
+    policy : torch.nn.Module
+        The final controller in physical units (float64 observations -> actions), carrying its
+        control period (``action_repeat``).
+    run_dir : Path
+    curve : list of dict
+        Learning-curve rows (:data:`CURVE_COLUMNS`, ``returns``, ``hold_steps``).
+    config : dict
+        The run's configuration.
+    summary : dict
+        :func:`curve_summary` of the curve.
+    model : object
+        The framework's own model (SB3 algorithm; PILCO's GP posterior).
+    """
+
+    policy: torch.nn.Module
+    run_dir: Path
+    curve: list[dict[str, Any]]
+    config: dict[str, Any]
+    summary: dict[str, Any]
+    model: Any
+
+    @property
+    def held_steps(self) -> int | None:
+        return self.summary["held_steps"]
+
+    @property
+    def reached_steps(self) -> int | None:
+        return self.summary["reached_steps"]
+
+    @property
+    def final_return(self) -> float:
+        return self.summary["final_return"]
+
+    @property
+    def best_return(self) -> float:
+        return self.summary["best_return"]
+
+
+def plot_curve(curve: Sequence[dict[str, Any]], title: str, path: Path) -> None:
+    """Mean evaluation return (+/- std) against interaction time, holds starred (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seconds = np.array([row["interaction_seconds"] for row in curve])
+    mean = np.array([row["mean_return"] for row in curve])
+    std = np.array([row["std_return"] for row in curve])
+    figure, axis = plt.subplots(figsize=(6.0, 4.0))
+    axis.plot(seconds, mean, marker="o", label="mean evaluation return")
+    axis.fill_between(seconds, mean - std, mean + std, alpha=0.25, label="+/- std")
+    held = [row for row in curve if row["held_fraction"] >= 1.0]
+    if held:
+        axis.plot(
+            [row["interaction_seconds"] for row in held],
+            [row["mean_return"] for row in held],
+            "g*",
+            markersize=12,
+            label="every episode held the operating point",
+        )
+    axis.set_xlabel("interaction time [simulated s]")
+    axis.set_ylabel("evaluation return")
+    axis.set_title(title)
+    axis.grid(True, alpha=0.3)
+    axis.legend(fontsize="small", loc="best")
+    save_figure_atomic(figure, path)
+
+
+def write_curve(
+    run_dir: Path, curve: Sequence[dict[str, Any]], summary: dict[str, Any], title: str
+) -> None:
+    """``curve.json``, ``curve.csv`` and ``learning_curve.png`` of a run folder."""
+    write_json_atomic(run_dir / CURVE_JSON, {"curve": list(curve), "summary": summary}, indent=2)
+    write_csv_atomic(run_dir / CURVE_CSV, curve, CURVE_COLUMNS)
+    plot_curve(curve, title, run_dir / CURVE_PNG)
+
+
+def read_config(run_dir: Path) -> dict[str, Any]:
+    """``config.json`` of a run folder, with errors that name the file."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise FileNotFoundError(f"run folder: {path} is missing (expected the run's config)")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"run folder: {path} is not valid JSON ({error})") from error
+    if not isinstance(data, dict):
+        raise ValueError(f"run folder: {path}: expected a JSON object, found {type(data).__name__}")
+    return data
