@@ -159,7 +159,7 @@ def test_never_leaves_band_settles_at_zero(band):
 def test_constant_signal():
     e = np.full(50, -4.25)
     metrics = response_metrics(e, band=0.1)
-    assert metrics == ResponseMetrics(-4.25, 0.0, 0, True, 0.1, DEFAULT_FINAL_WINDOW)
+    assert metrics == ResponseMetrics(-4.25, 0.0, 0, True, 0.1, DEFAULT_FINAL_WINDOW, 4.25)
 
 
 @pytest.mark.parametrize("offset", [0.75, -3.0, 12.0])
@@ -475,3 +475,59 @@ def test_rejects_bad_final_value_and_tolerance():
         overshoot(GOOD, tolerance=-0.1)
     with pytest.raises(ValueError, match="tolerance must be finite, found nan"):
         overshoot(GOOD, tolerance=math.nan)
+
+
+# ---------------------------------------------------------------------------------------------
+# The relative band (default): 2 % of the peak error, against closed forms
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("pole", [0.5, 0.8, 0.95])
+def test_relative_band_first_order_decay_closed_form(pole):
+    # e[t] = pole^t: e_f ~ 0, peak error 1, band 0.02, so the record settles at the first t
+    # with pole^t <= 0.02: t_s = ceil(ln 0.02 / ln pole) (the window is far inside the band)
+    e = pole ** np.arange(400.0)
+    metrics = response_metrics(e, dt=0.05)
+    expected = math.ceil(math.log(0.02) / math.log(pole))
+    assert metrics.band_fraction == 0.02
+    assert metrics.band == pytest.approx(0.02 * (1.0 - metrics.steady_state_error))
+    assert metrics.settling_time == expected
+    assert metrics.settling_seconds == pytest.approx(expected * 0.05)
+    assert metrics.peak_deviation == 1.0
+
+
+@pytest.mark.parametrize(("radius", "frequency"), [(0.9, 0.5), (0.97, 0.2)])
+def test_relative_band_second_order_decay_between_envelope_bounds(radius, frequency):
+    # e[t] = r^t cos(w t): the envelope r^t reaches 2 % of the peak (1 at t = 0) at
+    # t_env = ln 0.02 / ln r; the oscillation can only settle earlier, and not before the last
+    # envelope crossing of the band less one half period
+    t = np.arange(600.0)
+    e = radius**t * np.cos(frequency * t)
+    metrics = response_metrics(e)
+    envelope = math.log(0.02) / math.log(radius)
+    assert metrics.settled
+    assert envelope - math.pi / frequency - 1 <= metrics.settling_time <= math.ceil(envelope)
+    assert metrics.overshoot > 0.0  # the second-order record swings past zero
+
+
+def test_relative_band_is_scale_free_and_absolute_band_is_not():
+    e = 0.9 ** np.arange(300.0)
+    assert response_metrics(1e-3 * e).settling_time == response_metrics(e).settling_time
+    # an absolute band wider than the whole response: "settled" at 0, what the relative band
+    # is there to avoid
+    assert response_metrics(1e-3 * e, band=1.0).settling_time == 0
+
+
+def test_flat_record_settles_at_zero_with_a_relative_band():
+    metrics = response_metrics(np.zeros(30))
+    assert (metrics.settling_time, metrics.band, metrics.peak_deviation) == (0, 0.0, 0.0)
+
+
+def test_summary_counts_terminated_runs_and_peaks():
+    runs = [
+        response_metrics(0.9 ** np.arange(100.0)),
+        response_metrics(2.0 * 0.9 ** np.arange(100.0), terminated=True),
+    ]
+    summary = summarise_metrics(runs)
+    assert summary.n_terminated == 1
+    assert summary.peak_deviation_mean == pytest.approx(1.5)

@@ -378,12 +378,14 @@ TINY = dict(
     episode_steps=24,
     initial_rollouts=2,
     gp_train_iterations=3,
-    hold_min_steps=3,
+    eval_episodes=2,
 )
 
 
 def test_train_save_load_and_resume(tmp_path) -> None:
     from leoc.pilco.train import load_pilco_controller, train_pilco
+    from leoc.policies import HeldPolicy
+    from leoc.training import CURVE_COLUMNS
 
     run = tmp_path / "run"
     first = train_pilco(
@@ -391,32 +393,37 @@ def test_train_save_load_and_resume(tmp_path) -> None:
     )
     for name in (
         "config.json",
-        "log.json",
-        "log.csv",
+        "curve.json",
+        "curve.csv",
         "learning_curve.png",
         "controller.pt",
         "checkpoint.pt",
     ):
         assert (run / name).exists(), name
-    assert [row["iteration"] for row in first.log] == [0, 1]
-    keys = {
+    assert [row["iteration"] for row in first.curve] == [0, 1]
+    keys = set(CURVE_COLUMNS) | {
         "iteration",
-        "interaction_seconds",
-        "steps",
-        "return",
+        "returns",
+        "hold_steps",
+        "rollout_return",
         "predicted_cost",
         "data_size",
         "wall_seconds",
-        "held_operating_point",
     }
-    assert keys <= set(first.log[-1])
-    assert first.log[1]["interaction_seconds"] == pytest.approx(3 * 24 * 0.05)
+    assert keys <= set(first.curve[-1])
+    assert len(first.curve[-1]["returns"]) == TINY["eval_episodes"]
+    assert first.curve[1]["interaction_seconds"] == pytest.approx(3 * 24 * 0.05)
+    assert first.summary["model_selection"] == "final"
+    # the controller carries PILCO's control period
+    assert isinstance(first.policy, HeldPolicy) and first.policy.action_repeat == 3
     resumed = train_pilco(
         "pendulum", hybrid=True, seed=3, run_dir=run, iterations=2, progress=False, **TINY
     )
-    assert [row["iteration"] for row in resumed.log] == [0, 1, 2]
-    assert json.loads((run / "log.json").read_text())[:2] == json.loads(json.dumps(first.log))
+    assert [row["iteration"] for row in resumed.curve] == [0, 1, 2]
+    saved = json.loads((run / "curve.json").read_text())["curve"]
+    assert saved[:2] == json.loads(json.dumps(first.curve))
     loaded = load_pilco_controller(run)
+    assert isinstance(loaded, HeldPolicy) and loaded.action_repeat == 3
     obs = torch.tensor([[0.5, 0.8, -1.0]], dtype=DTYPE)
     torch.testing.assert_close(loaded(obs), resumed.policy(obs))
     # The same seed without resuming gives the same run (determinism).
@@ -430,7 +437,42 @@ def test_train_save_load_and_resume(tmp_path) -> None:
         resume=False,
         **TINY,
     )
-    assert [r["return"] for r in again.log] == [r["return"] for r in resumed.log[:2]]
+    assert [r["rollout_return"] for r in again.curve] == [
+        r["rollout_return"] for r in resumed.curve[:2]
+    ]
+    assert [r["mean_return"] for r in again.curve] == [r["mean_return"] for r in resumed.curve[:2]]
+
+
+@pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
+def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
+    from leoc.control import design_lqr
+    from leoc.pilco.train import PilcoConfig, build_policy
+    from leoc.systems import make_system
+
+    system = make_system(name)
+    config = PilcoConfig.for_system(name, hybrid=True, num_basis=4)
+    gen = torch.Generator().manual_seed(1)
+    observations = system.observe(torch.randn(20, system.state_dim, generator=gen, dtype=DTYPE))
+    policy = build_policy(system, config, gen, observations.numpy())
+    held = design_lqr(system, action_repeat=config.action_repeat)
+    single = design_lqr(system)
+    a = torch.as_tensor(system.operating_obs, dtype=DTYPE)
+    torch.testing.assert_close(policy(a[None])[0], torch.as_tensor(held.b + held.W @ a.numpy()))
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None])[0], a)
+    np.testing.assert_allclose(jacobian.numpy(), held.W, rtol=0, atol=1e-12)
+    assert not np.allclose(held.W, single.W, rtol=1e-3)  # the period changes the design
+
+    # the closed loop actually run, x -> step_held(x, pi(o(x)), 3), has the design's poles
+    def closed_loop(x: torch.Tensor) -> torch.Tensor:
+        state = x[None]
+        return system.step_held(state, policy(system.observe(state)), config.action_repeat)[0]
+
+    state = torch.as_tensor(system.operating_state, dtype=DTYPE)
+    poles = np.linalg.eigvals(torch.autograd.functional.jacobian(closed_loop, state).numpy())
+    np.testing.assert_allclose(
+        np.sort_complex(poles), np.sort_complex(held.closed_loop_eigenvalues), atol=1e-9
+    )
+    assert np.max(np.abs(poles)) < 1.0
 
 
 @pytest.mark.slow
@@ -442,12 +484,12 @@ def test_pendulum_hybrid_swings_up_and_holds(tmp_path) -> None:
         hybrid=True,
         seed=0,
         run_dir=tmp_path,
-        iterations=10,  # the paper's budget; seed 0 first held at iteration 5 in our runs
+        iterations=10,  # the paper's budget
         progress=False,
         stop_after_held=2,
     )
-    # training stops once two consecutive iterations held the operating point
-    assert result.log[-1]["held_operating_point"] and result.log[-2]["held_operating_point"]
+    # training stops once two consecutive evaluations held the operating point in every episode
+    assert result.curve[-1]["held_fraction"] == 1.0 and result.curve[-2]["held_fraction"] == 1.0
 
 
 def test_recomputing_bilinear_exp_has_the_plain_gradients() -> None:

@@ -13,11 +13,13 @@ from leoc.evaluation.rollout import (
     IMPULSE_MAGNITUDE,
     STEP_MAGNITUDE,
     hold_step,
+    holds,
     response_offsets,
     response_test,
     rollout,
 )
-from leoc.policies import HybridPolicy, LinearController, MLPActor
+from leoc.policies import HybridPolicy, LinearController, MLPActor, lqr_controller
+from leoc.systems.rollout import control_period, simulate
 from leoc.systems import SYSTEM_NAMES, make_system
 
 
@@ -104,18 +106,64 @@ def test_hybrid_response_equals_linear_response_to_first_order() -> None:
     assert abs(ours.metrics.steady_state_error) < 1e-6
 
 
-def test_hold_step() -> None:
-    system = make_system("mountaincar")
-    states = np.zeros((10, 2))
-    states[:4, 0] = 1.0
-    assert hold_step(system, states) == 4
-    assert hold_step(system, np.zeros((5, 2))) == 0
-    states[-1, 0] = 1.0
-    assert hold_step(system, states) is None
+def test_hold_test_on_real_episodes() -> None:
+    system = make_system("pendulum")
+    corner = np.asarray(system.operating_region)  # theta and theta_dot both outward
+    design = design_lqr(system)
+    linear = LinearController(design.W, design.b)
+    held = rollout(system, linear, corner)
+    assert hold_step(system, held) is not None and holds(system, held)
+    # without torque the pendulum falls from the same start: not held
+    falls = rollout(system, lambda obs: torch.zeros(obs.shape[0], 1, dtype=obs.dtype), corner)
+    assert hold_step(system, falls) is None
+    # an episode cut short by termination never holds, even if it ends inside the band
+    cartpole = make_system("cartpole")
+    start = np.array([2.39, 5.0, 0.0, 0.0])  # leaves the track within a few steps
+    gone = rollout(cartpole, lambda obs: torch.zeros(obs.shape[0], 1, dtype=obs.dtype), start)
+    assert gone.terminated and hold_step(cartpole, gone) is None
 
 
-def test_metrics_of_response_use_the_system_band() -> None:
+def test_metrics_of_response_use_the_relative_band_or_the_given_band() -> None:
     system = make_system("cartpole")
     design = design_lqr(system)
-    result = response_test(system, LinearController(design.W, design.b), "impulse")
-    assert result.metrics == response_metrics(result.deviation, system.settling_band)
+    controller = LinearController(design.W, design.b)
+    result = response_test(system, controller, "impulse")
+    e = result.deviation
+    assert result.metrics.band == pytest.approx(0.02 * np.max(np.abs(e - e[-20:].mean())))
+    assert result.metrics == response_metrics(e, dt=system.dt)
+    assert result.metrics.settling_time > 0
+    assert result.metrics.settling_seconds == pytest.approx(result.metrics.settling_time * 0.02)
+    absolute = response_test(system, controller, "impulse", band=system.settling_band)
+    assert absolute.metrics == response_metrics(e, system.settling_band, dt=system.dt)
+
+
+def test_a_controller_keeps_its_control_period_in_the_rollout() -> None:
+    system = make_system("cartpole")
+    held = lqr_controller(design_lqr(system, action_repeat=3))
+    assert control_period(held) == 3
+    trajectory = rollout(system, held, np.asarray(system.operating_region))
+    actions = trajectory.actions[:, 0]
+    # the action changes only at decisions (every third step) and is constant in between
+    changes = np.flatnonzero(np.diff(actions) != 0.0) + 1
+    assert changes.size > 0 and np.all(changes % 3 == 0)
+    # the same controller asked every step would act differently
+    every_step = rollout(system, held, np.asarray(system.operating_region), action_repeat=1)
+    assert not np.allclose(every_step.actions, trajectory.actions)
+
+
+def test_batched_simulation_equals_one_rollout_per_start() -> None:
+    system = make_system("cartpole")
+    controller = lqr_controller(design_lqr(system))
+    starts = np.array([[0.1, 0.0, 0.1, 0.0], [2.3, 3.0, 0.0, 0.0], [-0.2, 0.1, -0.1, 0.2]])
+    batch = simulate(system, controller, starts, steps=60)
+    assert batch.terminated.tolist() == [False, True, False]
+    for index, start in enumerate(starts):
+        single = rollout(system, controller, start, steps=60)
+        episode = batch.episode(index)
+        np.testing.assert_allclose(episode.states, single.states, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(episode.rewards, single.rewards, rtol=0, atol=1e-12)
+        assert episode.terminated == single.terminated
+    # a terminated start is frozen: no reward after its end, the out-of-bounds reward at it
+    length = int(batch.lengths[1])
+    assert batch.rewards[1, length - 1] == system.out_of_bounds_reward
+    assert np.all(batch.rewards[1, length:] == 0.0)

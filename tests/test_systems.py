@@ -247,11 +247,18 @@ def test_hold_step_known_answers() -> None:
     system = MountainCar()  # main coordinate: x in metres, hold band 0.05
     states = np.zeros((6, 2))
     states[:, 0] = [1.0, 0.01, 0.9, 0.01, -0.02, 0.005]
-    assert system.hold_step(states) == 3
-    assert system.hold_step(states, band=0.001) is None  # outside at the end
+    assert system.hold_step(states, min_steps=0) == 3
+    assert system.hold_step(states, band=0.001, min_steps=0) is None  # outside at the end
     assert system.hold_step(states, min_steps=3) == 3
     assert system.hold_step(states, min_steps=4) is None  # inside for only 3 steps
-    assert system.hold_step(np.zeros((4, 2))) == 0
+    assert system.hold_step(states) is None  # the default minimum duration is the system's
+    assert system.hold_step(np.zeros((4, 2)), min_steps=0) == 0
+    assert system.hold_step(np.zeros((4, 2)), min_steps=0, terminated=True) is None
+    long = np.zeros((system.hold_min_steps + 3, 2))
+    long[:3, 0] = 1.0
+    assert system.hold_step(long) == 3  # exactly hold_min_steps samples inside
+    long[3, 0] = 1.0
+    assert system.hold_step(long) is None  # one sample short
     pendulum = Pendulum()  # angles are wrapped and in degrees: 2 pi + 1 degree is 1 degree
     angles = np.array([[math.pi, 0.0], [2 * math.pi + math.radians(1.0), 0.0]])
-    assert pendulum.hold_step(angles) == 1
+    assert pendulum.hold_step(angles, min_steps=0) == 1
