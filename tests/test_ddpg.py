@@ -10,6 +10,7 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
 
 import numpy as np
 import pytest
@@ -33,6 +34,7 @@ from leoc.ddpg import (
     train_ddpg,
 )
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
+from leoc.training import CURVE_COLUMNS
 
 SMALL_NET = [32, 32]
 F64_ATOL = 1e-12
@@ -300,7 +302,10 @@ def test_config_defaults_and_overrides():
 
 
 @pytest.mark.parametrize("algo", ["ddpg", "td3"])
-def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo):
+def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo, monkeypatch):
+    temp = tmp_path / "system-temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))  # SB3's logger folder would go here
     runs = [
         train_ddpg("pendulum", algo, hybrid=True, seed=3, run_dir=tmp_path / f"r{k}", **TINY_RUN)
         for k in range(2)
@@ -326,7 +331,10 @@ def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo):
     assert not any(name.endswith(".tmp") for name in files)
     config = json.loads((tmp_path / "r0" / "config.json").read_text())
     assert config["seed"] == 3 and config["hybrid"] is True and config["algo"] == algo
+    assert list(temp.iterdir()) == []  # no SB3-<date> folder in the system temp folder
     rows = runs[0].curve
+    assert set(CURVE_COLUMNS) | {"returns", "hold_steps"} <= set(rows[0])  # trainer contract
+    assert runs[0].summary["model_selection"] == "final"
     assert [row["steps"] for row in rows] == [0, 120, 240]
     assert rows[1]["interaction_seconds"] == pytest.approx(120 * make_system("pendulum").dt)
 
@@ -362,7 +370,7 @@ def test_save_load_round_trip_in_fresh_process(tmp_path):
     np.testing.assert_allclose(np.array(loaded["actions"]), expected, rtol=0, atol=F64_ATOL)
     np.testing.assert_allclose(np.array(loaded["lambda"]), expected_lambda, rtol=0, atol=0)
     assert loaded["target_hybrid"] == "HybridActor" and loaded["hybrid"] is True
-    best = load_ddpg_controller(result.run_dir)  # the best model, in this process
+    best = load_ddpg_controller(result.run_dir)  # the run's (final) controller, in this process
     np.testing.assert_allclose(best(obs).numpy(), result.policy(obs).numpy(), rtol=0, atol=F64_ATOL)
 
 

@@ -19,8 +19,8 @@ from leoc.evaluation.rollout import (
     rollout,
 )
 from leoc.policies import HybridPolicy, LinearController, MLPActor, lqr_controller
-from leoc.systems.rollout import control_period, simulate
 from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.systems.rollout import control_period, simulate
 
 
 @pytest.mark.parametrize("name", SYSTEM_NAMES)

@@ -65,9 +65,7 @@ def cmd_lqr(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_controller(
-    spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1
-):
+def load_controller(spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1):
     """``linear`` (the LQR of the system, designed for and run at ``action_repeat``) or a run
     folder written by ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
     from leoc.control import design_lqr
@@ -84,10 +82,8 @@ def load_controller(
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from leoc.evaluation.plots import plot_responses
-    from leoc.evaluation.rollout import response_test
+    from leoc.evaluation.rollout import control_period, response_test
     from leoc.systems import make_system
-
-    from leoc.evaluation.rollout import control_period
 
     system = make_system(args.system)
     controller = load_controller(args.controller, args.system, args.method, args.action_repeat)
@@ -105,6 +101,21 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         else f"{metrics.band:.3g} {unit} = {metrics.band_fraction:.0%} of the peak error"
     )
     period = control_period(controller)
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "system": args.system,
+                    "controller": args.controller,
+                    "test": args.test,
+                    "action_repeat": period,
+                    "metrics": metrics._asdict(),
+                    "deviation": result.deviation.tolist(),
+                    "total_reward": result.trajectory.total_reward,
+                }
+            )
+        )
+        return 0
     print(
         f"{args.test} response of {args.controller} on {args.system} ({args.steps} steps, "
         f"control period {period} step{'s' if period > 1 else ''})"
@@ -229,6 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--steps", type=int, default=200, help="episode length (default 200)")
     simulate.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
     simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    simulate.add_argument(
+        "--json", action="store_true", help="print the metrics and e(t) as JSON instead"
+    )
     simulate.set_defaults(func=cmd_simulate)
 
     train = commands.add_parser("train", help="train a baseline or hybrid controller")

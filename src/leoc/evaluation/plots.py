@@ -12,6 +12,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from leoc.evaluation.metrics import DEFAULT_FINAL_WINDOW
 from leoc.io import save_figure_atomic
 from leoc.systems import make_system
 
@@ -76,10 +77,19 @@ def _as_response(entry: Any) -> Response:
     return Response(np.asarray(entry, dtype=float))
 
 
-def stabilising_range(records: Sequence[Response]) -> tuple[float, float] | None:
-    """y-range of the records that settled and did not terminate, with a margin; None if none
-    did (then the axis scales itself)."""
-    good = [r.deviation for r in records if r.settled and not r.terminated]
+def stabilising_range(
+    records: Sequence[Response], band: float, final_window: int = DEFAULT_FINAL_WINDOW
+) -> tuple[float, float] | None:
+    """y-range, with a margin, of the records that stabilise: settled, not terminated, and
+    ending within ``band`` of the operating point (a pendulum that settles hanging down does not
+    count). None if no record does (then the axis scales itself)."""
+    good = [
+        r.deviation
+        for r in records
+        if r.settled
+        and not r.terminated
+        and abs(float(np.mean(r.deviation[-final_window:]))) <= band
+    ]
     if not good:
         return None
     low = min(float(np.min(d)) for d in good)
@@ -122,7 +132,7 @@ def plot_responses(
 
     Notes
     -----
-    Each panel's y-range is set by the responses that settled without terminating; responses
+    Each panel's y-range is set by the responses that stabilise at the operating point; responses
     that leave it are clipped (a triangle where they leave, "(clipped)" in the legend) and a
     terminated episode ends with a cross, so one diverging controller does not flatten the
     others. The legend sits below the panels, off the data.
@@ -146,7 +156,9 @@ def plot_responses(
                 key: [_as_response(entry) for entry in entries]
                 for key, entries in responses[system_name].get(test, {}).items()
             }
-            limits = stabilising_range([r for records in by_label.values() for r in records])
+            limits = stabilising_range(
+                [r for records in by_label.values() for r in records], system.hold_band
+            )
             for key, records in by_label.items():
                 clipped = False
                 for record in records:

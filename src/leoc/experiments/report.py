@@ -417,6 +417,10 @@ def _pm(mean: float, std: float) -> str:
     return f"{FMT.format(mean)} ± {FMT.format(std)}"
 
 
+def _number(value: float) -> str:
+    return "-" if math.isnan(value) else FMT.format(value)
+
+
 def _paper_cells(system: str, controller: str) -> str:
     paper = PAPER_IMPULSE_METRICS.get(system, {}).get(controller)
     if paper is None:
@@ -443,7 +447,7 @@ def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
             f"| {_pm(row['overshoot_mean'], row['overshoot_std'])} "
             f"| {_pm(row['peak_deviation_mean'], row['peak_deviation_std'])} "
             f"| {_pm(row['settling_time_mean'], row['settling_time_std'])} "
-            f"| {FMT.format(row['settling_seconds_mean'])} "
+            f"| {_number(row['settling_seconds_mean'])} "
             f"| {row['n_settled']}/{row['n_runs']} | {row['n_terminated']}/{row['n_runs']} {paper}"
         )
     return lines
