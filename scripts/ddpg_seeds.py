@@ -6,12 +6,12 @@ that run folder already holds a ``curve.json``, so an interrupted sweep resumes)
 and writes (``OUT/summary.json``, ``OUT/summary.csv``) per (system, algo, policy):
 
 * reached: training steps (and simulated seconds) until the first evaluation in which every
-  episode reaches and holds the operating point (:mod:`leoc.ddpg.rollout`);
+  episode reaches and holds the operating point (:mod:`leoc.training`);
 * held: steps (seconds) from which every later evaluation holds it;
 * final / best: mean evaluation return of the final and of the best model;
 * hold start: in the final evaluation, the mean episode step from which the episodes hold;
 * final offset: the final model's mean absolute main coordinate (degrees, or metres for the
-  car) over the last ``min_hold_steps`` steps of the evaluation episodes (steady-state error).
+  car) over the last ``System.hold_min_steps`` steps of the evaluation episodes.
 
 Means and standard deviations are over the seeds that got there; ``n`` says how many did.
 
@@ -44,19 +44,21 @@ def _run_name(system: str, algo: str, policy: str, seed: int) -> str:
 
 
 def _final_offset(run_dir: Path, config: dict[str, Any]) -> float:
-    """Mean |main coordinate| over the last ``min_hold_steps`` steps, final model, eval starts."""
-    from leoc.ddpg import load_ddpg_controller, run_episode
-    from leoc.ddpg.train import EVAL_SEED_OFFSET
-    from leoc.systems import make_env, make_system
+    """Mean |main coordinate| over the last ``hold_min_steps`` steps, final model, eval starts."""
+    from leoc.ddpg import load_ddpg_controller
+    from leoc.systems import make_system
+    from leoc.systems.rollout import simulate
+    from leoc.training import evaluation_starts
 
     system = make_system(config["system"])
-    env = make_env(config["system"])
     policy = load_ddpg_controller(run_dir, "final")
-    offsets = []
-    for k in range(config["eval_episodes"]):
-        episode = run_episode(policy, env, config["seed"] + EVAL_SEED_OFFSET + k)
-        tail = system.main_coordinate(episode.states)[-config["min_hold_steps"] :]
-        offsets.append(float(abs(tail).mean()))
+    batch = simulate(
+        system, policy, evaluation_starts(system, config["seed"], config["eval_episodes"])
+    )
+    offsets = [
+        float(abs(system.main_coordinate(states)[-system.hold_min_steps :]).mean())
+        for states in batch.states
+    ]
     return statistics.mean(offsets)
 
 
@@ -64,7 +66,7 @@ def _summarise_run(run_dir: Path) -> dict[str, Any]:
     data = json.loads((run_dir / "curve.json").read_text())
     config = json.loads((run_dir / "config.json").read_text())
     summary = data["summary"]
-    final_starts = [s for s in data["curve"][-1].get("hold_starts", []) if s is not None]
+    final_starts = [s for s in data["curve"][-1].get("hold_steps", []) if s is not None]
     return {
         "system": config["system"],
         "algo": config["algo"],

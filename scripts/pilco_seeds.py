@@ -1,10 +1,10 @@
 """Multi-seed PILCO measurement: when does each policy reach and hold the operating point?
 
 For every (system, policy, seed) it trains with :func:`leoc.pilco.train.train_pilco` (one
-torch thread) and reports the first iteration whose real 200-step rollout held the operating
-point (main coordinate inside the hold band from some step to the end, for at least
-``hold_min_steps`` steps), the interaction time used up to and including that rollout, and
-whether every later iteration held too.
+torch thread) and reports the first iteration whose evaluation episodes all held the operating
+point (``System.hold_step``: inside the hold band to the end, for at least the system's
+``hold_min_steps`` steps; :mod:`leoc.training`), the interaction time used up to and including
+that iteration, and whether every later iteration held too.
 
 Example::
 
@@ -23,23 +23,23 @@ import torch
 from leoc.pilco.train import train_pilco
 
 
-def summarise(log: list[dict]) -> dict:
-    held = [row for row in log if row["held_operating_point"]]
+def summarise(curve: list[dict]) -> dict:
+    held = [row for row in curve if row["held_fraction"] >= 1.0]
     if not held:
         return {
             "first_held_iteration": None,
             "interaction_seconds": None,
             "stayed": False,
-            "iterations_run": log[-1]["iteration"],
+            "iterations_run": curve[-1]["iteration"],
         }
     first = held[0]
-    later = [row for row in log if row["iteration"] >= first["iteration"]]
+    later = [row for row in curve if row["iteration"] >= first["iteration"]]
     return {
         "first_held_iteration": first["iteration"],
         "interaction_seconds": first["interaction_seconds"],
-        "hold_step": first["hold_step"],
-        "stayed": all(row["held_operating_point"] for row in later),
-        "iterations_run": log[-1]["iteration"],
+        "hold_steps": first["hold_steps"],
+        "stayed": all(row["held_fraction"] >= 1.0 for row in later),
+        "iterations_run": curve[-1]["iteration"],
     }
 
 
@@ -70,7 +70,7 @@ def main() -> None:
                     iterations=args.iterations,
                     **overrides,
                 )
-                row = {"system": system, "policy": policy, "seed": seed, **summarise(result.log)}
+                row = {"system": system, "policy": policy, "seed": seed, **summarise(result.curve)}
                 results.append(row)
                 print(json.dumps(row), flush=True)
     summary = out / f"summary_{'_'.join(args.systems)}_{'_'.join(args.policies)}.json"
