@@ -190,13 +190,28 @@ def plot_responses(
             axis.set_ylabel(f"deviation of {system.main_label}")
     handles["terminated episode"] = plt.Line2D([], [], color="k", marker="X", linestyle="none")
     handles["left the plotted range"] = plt.Line2D([], [], color="k", marker="^", linestyle="none")
-    figure.tight_layout(rect=(0, 0.08, 1, 1))
-    figure.legend(
-        list(handles.values()),
-        list(handles),
-        loc="lower center",
-        ncol=min(4, len(handles)),
-        fontsize="small",
-        frameon=False,
-    )
+    legend_below(figure, handles)
     return save_figure(figure, path)
+
+
+def axes_handles(axes: Any) -> dict[str, Any]:
+    """The legend handles of every axis, one per label (first seen wins)."""
+    handles: dict[str, Any] = {}
+    for axis in np.ravel(axes):
+        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    return handles
+
+
+def legend_below(figure: Any, handles: Mapping[str, Any]) -> None:
+    """One legend for the whole figure, below the panels (off the data)."""
+    figure.tight_layout(rect=(0, 0.08, 1, 1))
+    if handles:
+        figure.legend(
+            list(handles.values()),
+            list(handles),
+            loc="lower center",
+            ncol=min(4, len(handles)),
+            fontsize="small",
+            frameon=False,
+        )

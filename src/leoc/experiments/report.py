@@ -19,7 +19,9 @@ import numpy as np
 from leoc.evaluation.metrics import DEFAULT_RELATIVE_BAND, ResponseMetrics, summarise_metrics
 from leoc.evaluation.plots import (
     _pyplot,
+    axes_handles,
     controller_colour,
+    legend_below,
     plot_responses,
     save_figure,
 )
@@ -265,24 +267,6 @@ def swing_up_flags(rows: list[dict[str, Any]]) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------ figures
-def _legend_below(figure, axes) -> None:
-    """One legend for the whole figure, below the panels (off the data)."""
-    handles: dict[str, Any] = {}
-    for axis in np.ravel(axes):
-        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
-            handles.setdefault(label, handle)
-    figure.tight_layout(rect=(0, 0.08, 1, 1))
-    if handles:
-        figure.legend(
-            list(handles.values()),
-            list(handles),
-            loc="lower center",
-            ncol=min(4, len(handles)),
-            fontsize="small",
-            frameon=False,
-        )
-
-
 def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path) -> Path:
     """Figure 6: return vs interaction time, baseline vs hybrid, rows = framework."""
     plt = _pyplot()
@@ -312,7 +296,7 @@ def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path) -> Path:
             axis.set_title(f"{system}: {framework.upper()}")
             axis.set_xlabel("interaction time [s]")
             axis.set_ylabel("evaluation return")
-    _legend_below(figure, axes)
+    legend_below(figure, axes_handles(axes))
     return save_figure(figure, path)
 
 
@@ -355,7 +339,7 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> Path:
             )
             if quantity == "fraction_stabilised":
                 axis.set_ylim(-0.05, 1.05)
-    _legend_below(figure, axes)
+    legend_below(figure, axes_handles(axes))
     return save_figure(figure, path)
 
 
