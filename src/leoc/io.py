@@ -18,13 +18,28 @@ from typing import Any
 
 import numpy as np
 
+FILE_MODE = 0o666  # an ordinary new file, before the umask
+
+
+def _umask() -> int:
+    """The process umask (read by setting it and restoring it at once)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a unique temporary file and a rename."""
+    """Write ``data`` to ``path`` through a unique temporary file and a rename.
+
+    The file gets the permissions of an ordinary new file (``0o666`` less the umask), not the
+    private ``0o600`` of the temporary file, which would otherwise survive the rename.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        if hasattr(os, "fchmod"):  # POSIX
+            os.fchmod(handle, FILE_MODE & ~_umask())
         with os.fdopen(handle, "wb") as file:
             file.write(data)
         os.replace(temporary, path)
