@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from leoc.cli import main
 from leoc.experiments import sweep as sweep_module
 from leoc.experiments.sweep import (
     BackendUnavailableError,
@@ -240,12 +241,24 @@ def test_option_errors_name_the_argument(tmp_path, monkeypatch) -> None:
         sweep(["../escape"], counting_runner, tmp_path)
     with pytest.raises(ValueError, match="specs: expected strings or objects with"):
         sweep([3], counting_runner, tmp_path)
+    with pytest.raises(ValueError, match="address: only used by the 'ray' backend"):
+        sweep(["a"], counting_runner, tmp_path, address="auto")
     monkeypatch.setitem(sys.modules, "ray", None)  # what an environment without Ray sees
     with pytest.raises(BackendUnavailableError) as caught:
         sweep(["a"], counting_runner, tmp_path / "ray", backend="ray")
     message = str(caught.value)
     assert "\n" not in message and "pip install 'leoc[ray]'" in message
     assert not (tmp_path / "ray").exists()  # nothing written before the error
+
+
+def test_cli_without_ray_says_so_in_one_line(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)
+    out = tmp_path / "out"
+    status = main(["reproduce", "--backend", "ray", "--controllers", "linear", "--out", str(out)])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count("\n") == 1
+    assert error.startswith("leoc reproduce: error: backend: 'ray' needs the ray package")
+    assert not out.exists()
 
 
 # ------------------------------------------------------------------------ the smoke profile

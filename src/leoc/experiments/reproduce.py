@@ -204,7 +204,7 @@ def reproduce(
     profile = get_profile(profile_name, seeds)
     if jobs is not None and (int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
-    check_backend(backend)  # before anything is written
+    check_backend(backend, address)  # before anything is written
     meta_path = out / META_FILE
     if meta_path.is_file():
         previous = json.loads(meta_path.read_text())

@@ -162,8 +162,10 @@ def estimate_remaining(
     return work / max(1, slots)
 
 
-def _check_options(backend: str, jobs: int | None, cpus_per_run: float, max_retries: int) -> None:
-    check_backend(backend)
+def _check_options(
+    backend: str, address: str | None, jobs: int | None, cpus_per_run: float, max_retries: int
+) -> None:
+    check_backend(backend, address)
     if jobs is not None and (isinstance(jobs, bool) or int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs!r}")
     if not (math.isfinite(cpus_per_run) and cpus_per_run > 0):
@@ -183,10 +185,13 @@ def _import_ray() -> Any:
     return ray
 
 
-def check_backend(backend: str) -> None:
-    """Raise a one-line error if ``backend`` is unknown, or is ``"ray"`` without Ray installed."""
+def check_backend(backend: str, address: str | None = None) -> None:
+    """Raise a one-line error if ``backend`` is unknown, is ``"ray"`` without Ray installed, or
+    an ``address`` comes with a backend that has no use for it."""
     if backend not in BACKENDS:
         raise ValueError(f"backend: expected one of {', '.join(BACKENDS)}, found {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"address: only used by the 'ray' backend, found backend {backend!r}")
     if backend == "ray":
         _import_ray()
 
@@ -569,7 +574,7 @@ def sweep(
     ValueError
         An option out of range, or a run key that is not unique.
     """
-    _check_options(backend, jobs, cpus_per_run, max_retries)
+    _check_options(backend, address, jobs, cpus_per_run, max_retries)
     out = Path(out_dir)
     keys = [run_key(spec) for spec in specs]
     duplicates = sorted({key for key in keys if keys.count(key) > 1})
