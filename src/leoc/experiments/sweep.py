@@ -339,7 +339,12 @@ class _RayBackend:
         self._token: str | None = None
         if shared_out_dir is not False:
             self._token = uuid.uuid4().hex
-            write_text_atomic(out_dir / SHARE_TOKEN_FILE, self._token)
+            try:
+                write_text_atomic(out_dir / SHARE_TOKEN_FILE, self._token)
+            except BaseException:
+                if self._started:
+                    ray.shutdown()
+                raise
         self._task = ray.remote(_ray_task).options(num_cpus=cpus_per_run, max_retries=0)
         self._runner, self._out_dir, self._run_dir = runner, out_dir, run_dir
         self._jobs, self._cpus_per_run = jobs, cpus_per_run
