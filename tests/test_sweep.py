@@ -68,6 +68,10 @@ def not_a_mapping_runner(spec: str, out_dir: Path) -> list[int]:
     return [1, 2]
 
 
+def not_json_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    return {"value": {1, 2}}  # a set pickles, but is no JSON
+
+
 def calls_of(out_dir: Path, key: str) -> int:
     path = default_run_dir(out_dir, key) / CALLS_FILE
     return len(path.read_text().splitlines()) if path.is_file() else 0
@@ -165,6 +169,9 @@ def test_a_runner_error_is_reported_not_retried_and_the_rest_finish(tmp_path, ba
     # a result that is not a mapping is an error too, named as such
     other = sweep(["x"], not_a_mapping_runner, tmp_path / "other", backend=backend, echo=quiet)
     assert other.failed == {"x": "runner: expected a mapping, found list"}
+    odd = sweep(["y"], not_json_runner, tmp_path / "odd", backend=backend, echo=quiet)
+    assert odd.failed["y"].startswith("runner: expected a JSON-serialisable mapping, TypeError")
+    assert not (default_run_dir(tmp_path / "odd", "y") / "evaluation.json").exists()
 
 
 def test_ray_without_a_shared_folder_ships_the_run_folder_back(tmp_path, ray_instance) -> None:

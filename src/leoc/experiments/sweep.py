@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import tempfile
 import time
 import traceback
@@ -202,18 +203,29 @@ def _describe(error: BaseException) -> str:
 
 # ------------------------------------------------------------------------------ local backend
 def _local_worker(runner: Runner, spec: Any, out_dir: Path, connection: Any) -> None:
-    """Body of a local worker process: run, then send the outcome through the pipe."""
+    """Body of a local worker process: run, send the outcome through the pipe, and leave.
+
+    The process leaves with ``os._exit`` once the outcome is sent: the runner's files are
+    closed by then, and the interpreter's own shutdown (unloading torch and the rest) takes
+    seconds for which the run's slot would stay taken.
+    """
     try:
-        result = runner(spec, out_dir)
-        connection.send(_Outcome("ok", result=result))
+        outcome = _Outcome("ok", result=runner(spec, out_dir))
     except KeyboardInterrupt:
         # Ctrl-C reaches the whole process group: the driver stops the sweep, the worker just
         # leaves, without a traceback of its own
         os._exit(INTERRUPTED_EXIT_CODE)
     except BaseException as error:
-        connection.send(_Outcome("error", message=_describe(error), detail=traceback.format_exc()))
-    finally:
-        connection.close()
+        outcome = _Outcome("error", message=_describe(error), detail=traceback.format_exc())
+    try:
+        connection.send(outcome)
+    except Exception as error:  # pickling fails before anything is sent
+        message = f"runner: expected a picklable result, {_describe(error)}"
+        connection.send(_Outcome("error", message=message, detail=traceback.format_exc()))
+    connection.close()
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(0)
 
 
 class _LocalBackend:
@@ -437,18 +449,28 @@ class _Driver:
     def _done_path(self, spec: Any) -> Path:
         return self.run_dir(self.out_dir, spec) / self.done_file
 
+    def _write(self, run_dir: Path, outcome: _Outcome) -> _Outcome:
+        """Write a run's shipped files, then its result (last: it marks the run done)."""
+        if not isinstance(outcome.result, Mapping):
+            found = type(outcome.result).__name__
+            return _Outcome("error", message=f"runner: expected a mapping, found {found}")
+        for name, data in (outcome.files or {}).items():
+            if name != self.done_file:
+                write_bytes_atomic(run_dir / name, data)
+        try:
+            write_json_atomic(run_dir / self.done_file, dict(outcome.result))
+        except (TypeError, ValueError) as error:
+            message = f"runner: expected a JSON-serialisable mapping, {_describe(error)}"
+            return _Outcome("error", message=message)
+        return outcome
+
     def _record(self, attempt: _Attempt, outcome: _Outcome, total: int) -> _Attempt | None:
         """Write a finished run; returns the next attempt when the run is to be retried."""
         run_dir = self.run_dir(self.out_dir, attempt.spec)
         wall = time.monotonic() - attempt.started
-        if outcome.kind == "ok" and not isinstance(outcome.result, Mapping):
-            found = type(outcome.result).__name__
-            outcome = _Outcome("error", message=f"runner: expected a mapping, found {found}")
         if outcome.kind == "ok":
-            for name, data in (outcome.files or {}).items():
-                if name != self.done_file:  # the done file is written last, below
-                    write_bytes_atomic(run_dir / name, data)
-            write_json_atomic(run_dir / self.done_file, dict(outcome.result))
+            outcome = self._write(run_dir, outcome)
+        if outcome.kind == "ok":
             self.results[attempt.key] = outcome.result
             self.durations.append(wall)
             self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
