@@ -9,9 +9,10 @@ Two workloads, each run on both backends with the same number of parallel runs (
   (``--systems``/``--controllers`` narrow it), as ``leoc reproduce`` executes them, without the
   report.
 
-The Ray wall time includes starting and stopping the private Ray instance (as ``leoc reproduce
---backend ray`` pays it); that start is also printed on its own. The backends run one after the
-other (local first, then Ray, then the order reversed with ``--repeats 2``), each in a fresh
+Ray is timed twice: with its own private instance, started and stopped inside the sweep (what
+``leoc reproduce --backend ray`` pays on one machine), and on an instance already running (as on
+a standing cluster joined with ``--address auto``), whose start is timed apart. The backends run
+one after the other (the order of the first two reversed in every other round), each in a fresh
 output folder, so nothing is skipped as already done.
 
 Usage::
@@ -82,14 +83,20 @@ def time_backend(backend: str, specs: Sequence[Any], runner: Any, run_dir: Any, 
     return wall
 
 
-def time_ray_start(jobs: int) -> float:
-    """Seconds to start and stop a private Ray instance of ``jobs`` CPUs."""
+def time_warm_ray(
+    specs: Sequence[Any], runner: Any, run_dir: Any, jobs: int
+) -> tuple[float, float]:
+    """Seconds to start a Ray instance of ``jobs`` CPUs, and of the sweep on it once started
+    (as on a standing cluster joined with ``address="auto"``)."""
     import ray
 
     started = time.perf_counter()
     ray.init(address="local", num_cpus=jobs, include_dashboard=False, log_to_driver=False)
-    ray.shutdown()
-    return time.perf_counter() - started
+    start = time.perf_counter() - started
+    try:
+        return start, time_backend("ray", specs, runner, run_dir, jobs)
+    finally:
+        ray.shutdown()
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -106,26 +113,34 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     specs, runner, run_dir = _workload(args)
     print(f"workload {args.workload}: {len(specs)} runs, {args.jobs} at a time")
-    walls: dict[str, list[float]] = {name: [] for name in BACKEND_NAMES}
+    walls: dict[str, list[float]] = {name: [] for name in (*BACKEND_NAMES, "ray-warm", "start")}
     for round_index in range(args.repeats):
         order = BACKEND_NAMES if round_index % 2 == 0 else BACKEND_NAMES[::-1]
         for backend in order:
             wall = time_backend(backend, specs, runner, run_dir, args.jobs)
             walls[backend].append(wall)
-            print(f"  round {round_index + 1}: {backend:5s} {wall:8.1f} s")
-    local, ray = statistics.median(walls["local"]), statistics.median(walls["ray"])
-    start = time_ray_start(args.jobs)
-    print(f"local backend: {local:.1f} s (median of {args.repeats})")
-    print(f"ray backend:   {ray:.1f} s, of which starting and stopping Ray ~{start:.1f} s")
-    print(f"wall ratio ray / local: {ray / local:.3f}")
+            print(f"  round {round_index + 1}: {backend:8s} {wall:8.1f} s")
+        start, warm = time_warm_ray(specs, runner, run_dir, args.jobs)
+        walls["start"].append(start)
+        walls["ray-warm"].append(warm)
+        print(f"  round {round_index + 1}: ray-warm {warm:8.1f} s (after {start:.1f} s to start)")
+    median = {name: statistics.median(values) for name, values in walls.items()}
+    local = median["local"]
+    print(f"local backend:            {local:7.1f} s (medians of {args.repeats} rounds)")
+    print(f"ray, own instance:        {median['ray']:7.1f} s (ratio {median['ray'] / local:.2f})")
+    print(
+        f"ray, instance running:    {median['ray-warm']:7.1f} s "
+        f"(ratio {median['ray-warm'] / local:.2f}); starting Ray took {median['start']:.1f} s"
+    )
     if args.workload == "synthetic":
         ideal = -(-args.runs // args.jobs) * args.work
-        print(f"ideal (runs x work / jobs): {ideal:.1f} s; overhead per run: ", end="")
         per_run = {
-            name: (value - ideal) * args.jobs / args.runs
-            for name, value in (("local", local), ("ray", ray - start))
+            name: (median[name] - ideal) * args.jobs / args.runs for name in ("local", "ray-warm")
         }
-        print(", ".join(f"{name} {value:.2f} s" for name, value in per_run.items()))
+        print(
+            f"ideal (runs x work / jobs): {ideal:.1f} s; overhead per run: "
+            + ", ".join(f"{name} {value:.2f} s" for name, value in per_run.items())
+        )
 
 
 if __name__ == "__main__":

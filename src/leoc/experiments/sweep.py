@@ -9,8 +9,9 @@ never redone and an interrupted sweep resumes by being called again.
 Backends
 --------
 ``local``
-    One spawned process per run, ``jobs`` at a time. A process that dies (killed, out of
-    memory) costs only its own run, which is started again.
+    ``jobs`` spawned worker processes, each doing one run after another. A worker that dies
+    (killed, out of memory) costs only the run it was doing, which is started again on a fresh
+    worker.
 ``ray``
     One Ray task per run, requesting ``cpus_per_run`` CPUs, on a new local Ray instance or on
     an existing cluster (``address``). A worker or node that dies costs only its run, which is
@@ -25,6 +26,7 @@ to the run's log and the sweep goes on with the other runs.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -202,41 +204,60 @@ def _describe(error: BaseException) -> str:
 
 
 # ------------------------------------------------------------------------------ local backend
-def _local_worker(runner: Runner, spec: Any, out_dir: Path, connection: Any) -> None:
-    """Body of a local worker process: run, send the outcome through the pipe, and leave.
+def _run_once(runner: Runner, spec: Any, out_dir: Path) -> _Outcome:
+    try:
+        return _Outcome("ok", result=runner(spec, out_dir))
+    except KeyboardInterrupt:
+        raise
+    except Exception as error:
+        return _Outcome("error", message=_describe(error), detail=traceback.format_exc())
 
-    The process leaves with ``os._exit`` once the outcome is sent: the runner's files are
-    closed by then, and the interpreter's own shutdown (unloading torch and the rest) takes
-    seconds for which the run's slot would stay taken.
+
+def _leave(code: int) -> None:
+    """Leave a worker process at once: the interpreter's own shutdown (unloading torch and the
+    rest) takes seconds, and every file of a run is closed by the time it reports."""
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(code)
+
+
+def _local_worker(runner: Runner, out_dir: Path, connection: Any) -> None:
+    """Body of a local worker process: receive specs, run each, send back its outcome.
+
+    ``None`` (or the driver gone) ends it. Runs share the process one after the other, so the
+    imports (torch, leoc: seconds per process) are paid once per worker, as in a process pool.
     """
     try:
-        outcome = _Outcome("ok", result=runner(spec, out_dir))
+        while True:
+            try:
+                spec = connection.recv()
+            except (EOFError, OSError):
+                spec = None
+            if spec is None:
+                _leave(0)
+            outcome = _run_once(runner, spec, out_dir)
+            try:
+                connection.send(outcome)
+            except Exception as error:  # pickling fails before anything is sent
+                message = f"runner: expected a picklable result, {_describe(error)}"
+                connection.send(_Outcome("error", message=message, detail=traceback.format_exc()))
     except KeyboardInterrupt:
         # Ctrl-C reaches the whole process group: the driver stops the sweep, the worker just
         # leaves, without a traceback of its own
-        os._exit(INTERRUPTED_EXIT_CODE)
-    except BaseException as error:
-        outcome = _Outcome("error", message=_describe(error), detail=traceback.format_exc())
-    try:
-        connection.send(outcome)
-    except Exception as error:  # pickling fails before anything is sent
-        message = f"runner: expected a picklable result, {_describe(error)}"
-        connection.send(_Outcome("error", message=message, detail=traceback.format_exc()))
-    connection.close()
-    for stream in (sys.stdout, sys.stderr):
-        stream.flush()
-    os._exit(0)
+        _leave(INTERRUPTED_EXIT_CODE)
 
 
 class _LocalBackend:
-    """One spawned process per run (a dead process costs its own run only)."""
+    """Up to ``jobs`` worker processes (spawned), reused from run to run; a worker that dies
+    costs only the run it was doing, and a fresh one takes its place."""
 
     def __init__(self, runner: Runner, out_dir: Path, jobs: int) -> None:
         import multiprocessing
 
         self._context = multiprocessing.get_context("spawn")
         self._runner, self._out_dir, self._jobs = runner, out_dir, jobs
-        self._workers: dict[Any, Any] = {}  # receiving connection -> process
+        self._busy: dict[Any, Any] = {}  # driver's end of the pipe -> process
+        self._idle: list[tuple[Any, Any]] = []
 
     def describe(self) -> str:
         return f"{self._jobs} local worker processes"
@@ -244,49 +265,61 @@ class _LocalBackend:
     def slots(self) -> int:
         return self._jobs
 
-    def submit(self, spec: Any) -> Any:
-        receive, send = self._context.Pipe(duplex=False)
+    def _spawn(self) -> tuple[Any, Any]:
+        connection, child_end = self._context.Pipe()
         process = self._context.Process(
-            target=_local_worker, args=(self._runner, spec, self._out_dir, send)
+            target=_local_worker, args=(self._runner, self._out_dir, child_end)
         )
         process.start()
-        send.close()  # the child holds the only writing end: its death reads as end of file
-        self._workers[receive] = process
-        return receive
+        child_end.close()  # the child holds the only other end: its death reads as end of file
+        return connection, process
+
+    def submit(self, spec: Any) -> Any:
+        connection, process = self._idle.pop() if self._idle else self._spawn()
+        connection.send(spec)
+        self._busy[connection] = process
+        return connection  # one run at a time per worker: the pipe names the run
 
     def wait(self, timeout: float) -> list[tuple[Any, _Outcome]]:
         from multiprocessing.connection import wait
 
         finished = []
-        for receive in wait(list(self._workers), timeout):
-            process = self._workers.pop(receive)
+        for connection in wait(list(self._busy), timeout):
+            process = self._busy.pop(connection)
             try:
-                outcome = receive.recv()
+                outcome = connection.recv()
             except (EOFError, OSError):
                 process.join(TERMINATE_GRACE_S)
-                outcome = _Outcome(
-                    "died", message=f"worker process died (exit code {process.exitcode})"
-                )
-            receive.close()
-            process.join()
-            finished.append((receive, outcome))
+                connection.close()
+                code = process.exitcode
+                outcome = _Outcome("died", message=f"worker process died (exit code {code})")
+            else:
+                self._idle.append((connection, process))
+            finished.append((connection, outcome))
         return finished
 
     def stop(self) -> None:
-        for process in self._workers.values():
+        workers = list(self._busy.items()) + self._idle
+        self._busy, self._idle = {}, []
+        for _, process in workers:
             if process.is_alive():
                 process.terminate()
         deadline = time.monotonic() + TERMINATE_GRACE_S
-        for receive, process in self._workers.items():
+        for connection, process in workers:
             process.join(max(0.0, deadline - time.monotonic()))
             if process.is_alive():
                 process.kill()
                 process.join()
-            receive.close()
-        self._workers.clear()
+            connection.close()
 
     def close(self) -> None:
-        self.stop()
+        for connection, _ in self._idle:
+            with contextlib.suppress(OSError):
+                connection.send(None)
+        deadline = time.monotonic() + TERMINATE_GRACE_S
+        for _, process in self._idle:
+            process.join(max(0.0, deadline - time.monotonic()))
+        self.stop()  # whatever did not leave, and any still busy
 
 
 # -------------------------------------------------------------------------------- Ray backend
