@@ -178,6 +178,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         systems=args.systems,
         controllers=args.controllers,
+        backend=args.backend,
+        address=args.address,
     )
     print(path.read_text())
     print(f"report written to {path}")
@@ -274,7 +276,23 @@ def build_parser() -> argparse.ArgumentParser:
         "smoke (a tiny pipeline check)",
     )
     reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
-    reproduce.add_argument("--jobs", type=int, help="worker processes (default: CPU count)")
+    reproduce.add_argument(
+        "--jobs",
+        type=int,
+        help="runs at a time (default: the CPU count; on Ray, as many as the cluster's CPUs)",
+    )
+    reproduce.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="local: worker processes on this machine (default); ray: one Ray task per run "
+        "(needs pip install 'leoc[ray]')",
+    )
+    reproduce.add_argument(
+        "--address",
+        help="Ray only: the cluster to join ('auto' inside a cluster started with 'ray start', "
+        "or HEAD_IP:6379); default: a private Ray instance on this machine",
+    )
     reproduce.add_argument("--seeds", type=int, help="number of seeds (default per profile)")
     reproduce.add_argument(
         "--systems", nargs="+", choices=SYSTEM_CHOICES, default=list(SYSTEM_CHOICES)

@@ -16,13 +16,13 @@ temporary file and ``os.replace``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import platform
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ import torch
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
 from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
+from leoc.experiments.sweep import check_backend, sweep
 from leoc.io import write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.training import evaluate_episodes, evaluation_starts
@@ -39,7 +40,6 @@ from leoc.training import evaluate_episodes, evaluation_starts
 EVALUATION_FILE = "evaluation.json"
 LOG_FILE = "train.log"
 META_FILE = "meta.json"
-PROGRESS_INTERVAL_S = 15.0
 WORKER_THREADS = 1
 # Swing-up episodes of every evaluated controller (the trainers' evaluation starts).
 SWING_UP_EPISODES = 5
@@ -185,67 +185,15 @@ def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any
     return evaluation
 
 
-def _last_line(path: Path) -> str:
-    try:
-        with open(path, "rb") as handle:
-            handle.seek(0, os.SEEK_END)
-            handle.seek(max(0, handle.tell() - 2048))
-            lines = handle.read().decode(errors="replace").replace("\r", "\n").splitlines()
-    except OSError:
-        return "starting"
-    lines = [line.strip() for line in lines if line.strip()]
-    return lines[-1][:120] if lines else "starting"
+@dataclasses.dataclass(frozen=True)
+class ProfileRunner:
+    """The sweep's unit of work for a profile: ``runner(spec, out_dir)`` calls
+    :func:`execute_run` (a picklable callable for worker processes and Ray tasks)."""
 
+    profile: Profile
 
-def run_all(
-    specs: Sequence[RunSpec],
-    profile: Profile,
-    out_dir: Path,
-    jobs: int,
-    echo: Callable[[str], None] = print,
-) -> None:
-    """Execute the pending runs on ``jobs`` worker processes, printing progress."""
-    pending = [
-        spec for spec in specs if not (run_dir_of(out_dir, spec) / EVALUATION_FILE).is_file()
-    ]
-    skipped = len(specs) - len(pending)
-    echo(f"{len(specs)} runs: {skipped} already done, {len(pending)} to run on {jobs} workers")
-    if not pending:
-        return
-    import multiprocessing
-
-    context = multiprocessing.get_context("spawn")
-    finished = 0
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures: dict[Future, RunSpec] = {
-            pool.submit(execute_run, spec, profile, out_dir): spec for spec in pending
-        }
-        try:
-            remaining = set(futures)
-            while remaining:
-                done, remaining = wait(remaining, PROGRESS_INTERVAL_S, FIRST_COMPLETED)
-                for future in done:
-                    spec = futures[future]
-                    finished += 1
-                    error = future.exception()
-                    if error is None:
-                        status = f"done ({future.result()['wall_seconds']:.0f} s)"
-                    else:
-                        status = f"FAILED: {error!r}"
-                    echo(f"[{finished}/{len(pending)}] {spec.key} {status}")
-                    if error is not None:
-                        echo(f"  see {run_dir_of(out_dir, spec) / LOG_FILE}")
-                for future in remaining:
-                    spec = futures[future]
-                    log = run_dir_of(out_dir, spec) / LOG_FILE
-                    # the pool marks queued calls as running: a run has started once its log
-                    # exists (stale logs of an interrupted earlier attempt say so themselves)
-                    if future.running() and log.is_file():
-                        echo(f"  running {spec.key}: {_last_line(log)}")
-        except KeyboardInterrupt:
-            echo("interrupted: finished runs are kept; rerun the same command to resume")
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    def __call__(self, spec: RunSpec, out_dir: Path) -> dict[str, Any]:
+        return execute_run(spec, self.profile, out_dir)
 
 
 def reproduce(
@@ -256,15 +204,23 @@ def reproduce(
     systems: Sequence[str] = SYSTEM_NAMES,
     controllers: Sequence[str] = CONTROLLERS,
     echo: Callable[[str], None] = print,
+    backend: str = "local",
+    address: str | None = None,
 ) -> Path:
-    """Run (or resume) a profile and write the report; returns the path of ``report.md``."""
+    """Run (or resume) a profile and write the report; returns the path of ``report.md``.
+
+    ``jobs`` runs at a time (default: the CPU count locally, the cluster's CPUs on Ray);
+    ``backend`` ``"local"`` (worker processes) or ``"ray"``, ``address`` the Ray cluster to join
+    (``None``: a private Ray instance on this machine; ``"auto"``: the cluster this machine
+    belongs to). See :func:`leoc.experiments.sweep.sweep`.
+    """
     from leoc.experiments.report import write_report
 
     out = Path(out_dir)
     profile = get_profile(profile_name, seeds)
-    jobs = jobs or os.cpu_count() or 1
-    if jobs < 1:
+    if jobs is not None and (int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
+    check_backend(backend, address)  # before anything is written
     meta_path = out / META_FILE
     if meta_path.is_file():
         previous = json.loads(meta_path.read_text())
@@ -288,12 +244,28 @@ def reproduce(
         },
         systems=list(systems),
         controllers=list(controllers),
-        jobs=jobs,
+        # the report says "on JOBS workers"
+        jobs=jobs or ((os.cpu_count() or 1) if backend == "local" else "Ray cluster"),
+        backend=backend,
+        address=address,
         versions=versions(),
         command=" ".join(sys.argv),
     )
     write_json_atomic(meta_path, meta)
-    run_all(specs, profile, out, jobs, echo)
+    result = sweep(
+        specs,
+        ProfileRunner(profile),
+        out,
+        backend=backend,
+        jobs=jobs,
+        address=address,
+        run_dir=run_dir_of,
+        done_file=EVALUATION_FILE,
+        log_file=LOG_FILE,
+        echo=echo,
+    )
+    if result.failed:
+        echo(f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")
     meta["wall_seconds_last_invocation"] = time.perf_counter() - started
     write_json_atomic(meta_path, meta)
     return write_report(out)

@@ -1,0 +1,675 @@
+"""Sweeps of independent runs, on this machine or on a Ray cluster, resumable and retried.
+
+A sweep is a list of run specifications and a runner: ``runner(spec, out_dir)`` does one run,
+may write anything into its run folder ``run_dir(out_dir, spec)``, and returns a JSON-ready
+mapping. The driver (the process that calls :func:`sweep`) writes that mapping atomically to
+``RUN_DIR/done_file``: its presence marks the run finished, on any backend, so a finished run is
+never redone and an interrupted sweep resumes by being called again.
+
+Backends
+--------
+``local``
+    ``jobs`` spawned worker processes, each doing one run after another. A worker that dies
+    (killed, out of memory) costs only the run it was doing, which is started again on a fresh
+    worker.
+``ray``
+    One Ray task per run, requesting ``cpus_per_run`` CPUs, on a new local Ray instance or on
+    an existing cluster (``address``). A worker or node that dies costs only its run, which is
+    resubmitted. If the workers see the driver's ``out_dir`` (one machine, or a shared file
+    system) the runner writes there directly, so a retried run resumes from its own
+    checkpoints; otherwise it runs in a scratch folder on its node and the task returns the
+    run folder's files, which the driver writes under ``out_dir``.
+
+On both, a runner that raises is not retried (the error would recur); its traceback is appended
+to the run's log and the sweep goes on with the other runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+import tempfile
+import time
+import traceback
+import uuid
+from collections import deque
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from leoc.io import write_bytes_atomic, write_json_atomic, write_text_atomic
+
+BACKENDS = ("local", "ray")
+DONE_FILE = "evaluation.json"
+LOG_FILE = "train.log"
+PROGRESS_INTERVAL_S = 15.0
+DEFAULT_MAX_RETRIES = 2
+"""Times a run is started again after its worker died (a runner's own error is not retried)."""
+LOG_TAIL_BYTES = 2048
+LOG_LINE_CHARS = 120
+TERMINATE_GRACE_S = 5.0
+"""Seconds a local worker gets to exit after SIGTERM before it is killed."""
+SHARE_TOKEN_FILE = ".sweep-token"
+"""Written by the driver into ``out_dir``; a Ray worker that reads the same token sees the
+driver's folder (same machine or shared file system) and writes its run there."""
+INTERRUPTED_EXIT_CODE = 130
+
+Runner = Callable[[Any, Path], Mapping[str, Any]]
+RunDir = Callable[[Path, Any], Path]
+
+
+class BackendUnavailableError(ValueError):
+    """The backend asked for cannot run here (e.g. Ray is not installed)."""
+
+
+class SweepResult(NamedTuple):
+    """What one call of :func:`sweep` did.
+
+    Attributes
+    ----------
+    results : dict key -> mapping
+        The results of the runs finished in this call.
+    skipped : tuple of str
+        Keys of the runs already finished before this call (not run again).
+    failed : dict key -> str
+        Runs whose runner raised, or whose worker died more than ``max_retries`` times.
+    retried : dict key -> int
+        Runs started again after their worker died, and how many times.
+    wall_seconds : float
+    """
+
+    results: dict[str, Mapping[str, Any]]
+    skipped: tuple[str, ...]
+    failed: dict[str, str]
+    retried: dict[str, int]
+    wall_seconds: float
+
+
+class _Outcome(NamedTuple):
+    """How an attempt ended: ``kind`` is "ok", "error" (runner raised) or "died" (worker)."""
+
+    kind: str
+    result: Mapping[str, Any] | None = None
+    files: dict[str, bytes] | None = None
+    message: str = ""
+    detail: str = ""
+
+
+class _Attempt(NamedTuple):
+    spec: Any
+    key: str
+    number: int
+    started: float
+
+
+# ----------------------------------------------------------------------------------- helpers
+def run_key(spec: Any) -> str:
+    """The key of a run: ``spec.key`` if it has one, else ``spec`` itself if a string."""
+    key = getattr(spec, "key", spec)
+    if not isinstance(key, str) or not key:
+        raise ValueError(
+            f"specs: expected strings or objects with a non-empty string 'key', found {spec!r}"
+        )
+    parts = Path(key).parts
+    if Path(key).is_absolute() or ".." in parts:
+        raise ValueError(f"specs: a run key must be a relative path inside out_dir, found {key!r}")
+    return key
+
+
+def default_run_dir(out_dir: Path, spec: Any) -> Path:
+    """``out_dir/runs/KEY`` (a key ``a/b/seed0`` nests folders)."""
+    return Path(out_dir) / "runs" / run_key(spec)
+
+
+def last_log_line(path: Path, default: str = "starting") -> str:
+    """The last non-empty line of a log (carriage-return progress bars count as lines)."""
+    try:
+        with open(path, "rb") as handle:
+            handle.seek(0, os.SEEK_END)
+            handle.seek(max(0, handle.tell() - LOG_TAIL_BYTES))
+            text = handle.read().decode(errors="replace")
+    except OSError:
+        return default
+    lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
+    return lines[-1][:LOG_LINE_CHARS] if lines else default
+
+
+def format_seconds(seconds: float) -> str:
+    """``75`` -> ``1m15s``; ``3700`` -> ``1h01m``."""
+    seconds = max(0, int(round(seconds)))
+    if seconds < 60:
+        return f"{seconds}s"
+    if seconds < 3600:
+        return f"{seconds // 60}m{seconds % 60:02d}s"
+    return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
+
+
+def estimate_remaining(
+    durations: Sequence[float], running_elapsed: Iterable[float], queued: int, slots: int
+) -> float | None:
+    r"""Seconds until the sweep ends, from the wall times of the runs finished so far.
+
+    With :math:`\bar d` the mean wall time of the finished runs, :math:`e_i` the elapsed time of
+    each running run, :math:`q` the queued runs and :math:`s` the parallel slots,
+
+    .. math:: \mathrm{ETA} = \frac{q \bar d + \sum_i \max(\bar d - e_i, 0)}{s} .
+
+    ``None`` before any run has finished.
+    """
+    if not durations:
+        return None
+    mean = sum(durations) / len(durations)
+    work = queued * mean + sum(max(mean - elapsed, 0.0) for elapsed in running_elapsed)
+    return work / max(1, slots)
+
+
+def _check_options(
+    backend: str, address: str | None, jobs: int | None, cpus_per_run: float, max_retries: int
+) -> None:
+    check_backend(backend, address)
+    if jobs is not None and (isinstance(jobs, bool) or int(jobs) != jobs or jobs < 1):
+        raise ValueError(f"jobs: expected a positive integer, found {jobs!r}")
+    if not (math.isfinite(cpus_per_run) and cpus_per_run > 0):
+        raise ValueError(f"cpus_per_run: expected a positive number, found {cpus_per_run!r}")
+    if int(max_retries) != max_retries or max_retries < 0:
+        raise ValueError(f"max_retries: expected a non-negative integer, found {max_retries!r}")
+
+
+def _import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise BackendUnavailableError(
+            "backend: 'ray' needs the ray package, which is not installed here; "
+            "install it with: pip install 'leoc[ray]'"
+        ) from None
+    return ray
+
+
+def check_backend(backend: str, address: str | None = None) -> None:
+    """Raise a one-line error if ``backend`` is unknown, is ``"ray"`` without Ray installed, or
+    an ``address`` comes with a backend that has no use for it."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend: expected one of {', '.join(BACKENDS)}, found {backend!r}")
+    if address is not None and backend != "ray":
+        raise ValueError(f"address: only used by the 'ray' backend, found backend {backend!r}")
+    if backend == "ray":
+        _import_ray()
+
+
+def _describe(error: BaseException) -> str:
+    return f"{type(error).__name__}: {error}".splitlines()[0]
+
+
+# ------------------------------------------------------------------------------ local backend
+def _run_once(runner: Runner, spec: Any, out_dir: Path) -> _Outcome:
+    try:
+        return _Outcome("ok", result=runner(spec, out_dir))
+    except KeyboardInterrupt:
+        raise
+    except Exception as error:
+        return _Outcome("error", message=_describe(error), detail=traceback.format_exc())
+
+
+def _leave(code: int) -> None:
+    """Leave a worker process at once: the interpreter's own shutdown (unloading torch and the
+    rest) takes seconds, and every file of a run is closed by the time it reports."""
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(code)
+
+
+def _local_worker(runner: Runner, out_dir: Path, connection: Any) -> None:
+    """Body of a local worker process: receive specs, run each, send back its outcome.
+
+    ``None`` (or the driver gone) ends it. Runs share the process one after the other, so the
+    imports (torch, leoc: seconds per process) are paid once per worker, as in a process pool.
+    """
+    try:
+        while True:
+            try:
+                spec = connection.recv()
+            except (EOFError, OSError):
+                spec = None
+            if spec is None:
+                _leave(0)
+            outcome = _run_once(runner, spec, out_dir)
+            try:
+                connection.send(outcome)
+            except Exception as error:  # pickling fails before anything is sent
+                message = f"runner: expected a picklable result, {_describe(error)}"
+                connection.send(_Outcome("error", message=message, detail=traceback.format_exc()))
+    except KeyboardInterrupt:
+        # Ctrl-C reaches the whole process group: the driver stops the sweep, the worker just
+        # leaves, without a traceback of its own
+        _leave(INTERRUPTED_EXIT_CODE)
+
+
+class _LocalBackend:
+    """Up to ``jobs`` worker processes (spawned), reused from run to run; a worker that dies
+    costs only the run it was doing, and a fresh one takes its place."""
+
+    def __init__(self, runner: Runner, out_dir: Path, jobs: int) -> None:
+        import multiprocessing
+
+        self._context = multiprocessing.get_context("spawn")
+        self._runner, self._out_dir, self._jobs = runner, out_dir, jobs
+        self._busy: dict[Any, Any] = {}  # driver's end of the pipe -> process
+        self._idle: list[tuple[Any, Any]] = []
+
+    def describe(self) -> str:
+        return f"{self._jobs} local worker processes"
+
+    def slots(self) -> int:
+        return self._jobs
+
+    def _spawn(self) -> tuple[Any, Any]:
+        connection, child_end = self._context.Pipe()
+        process = self._context.Process(
+            target=_local_worker, args=(self._runner, self._out_dir, child_end)
+        )
+        process.start()
+        child_end.close()  # the child holds the only other end: its death reads as end of file
+        return connection, process
+
+    def submit(self, spec: Any) -> Any:
+        connection, process = self._idle.pop() if self._idle else self._spawn()
+        connection.send(spec)
+        self._busy[connection] = process
+        return connection  # one run at a time per worker: the pipe names the run
+
+    def wait(self, timeout: float) -> list[tuple[Any, _Outcome]]:
+        from multiprocessing.connection import wait
+
+        finished = []
+        for connection in wait(list(self._busy), timeout):
+            process = self._busy.pop(connection)
+            try:
+                outcome = connection.recv()
+            except (EOFError, OSError):
+                process.join(TERMINATE_GRACE_S)
+                connection.close()
+                code = process.exitcode
+                outcome = _Outcome("died", message=f"worker process died (exit code {code})")
+            else:
+                self._idle.append((connection, process))
+            finished.append((connection, outcome))
+        return finished
+
+    def stop(self) -> None:
+        workers = list(self._busy.items()) + self._idle
+        self._busy, self._idle = {}, []
+        for _, process in workers:
+            if process.is_alive():
+                process.terminate()
+        deadline = time.monotonic() + TERMINATE_GRACE_S
+        for connection, process in workers:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+                process.join()
+            connection.close()
+
+    def close(self) -> None:
+        for connection, _ in self._idle:
+            with contextlib.suppress(OSError):
+                connection.send(None)
+        deadline = time.monotonic() + TERMINATE_GRACE_S
+        for _, process in self._idle:
+            process.join(max(0.0, deadline - time.monotonic()))
+        self.stop()  # whatever did not leave, and any still busy
+
+
+# -------------------------------------------------------------------------------- Ray backend
+def _sees_driver_folder(out_dir: Path, token: str) -> bool:
+    try:
+        return (out_dir / SHARE_TOKEN_FILE).read_text() == token
+    except OSError:
+        return False
+
+
+def _folder_files(folder: Path) -> dict[str, bytes]:
+    return {
+        path.relative_to(folder).as_posix(): path.read_bytes()
+        for path in sorted(folder.rglob("*"))
+        if path.is_file()
+    }
+
+
+def _ray_task(
+    runner: Runner, spec: Any, out_dir: str, run_dir: RunDir, token: str | None
+) -> dict[str, Any]:
+    """Body of a Ray task: the run in the driver's folder if visible (``token`` found there),
+    else in a scratch folder whose run folder is shipped back. A runner's error comes back as
+    a value, with its traceback, exactly as from a local worker."""
+    out = Path(out_dir)
+    try:
+        if token is not None and _sees_driver_folder(out, token):
+            return {"result": runner(spec, out), "files": None}
+        with tempfile.TemporaryDirectory(prefix="leoc-sweep-") as scratch:
+            result = runner(spec, Path(scratch))
+            files = _folder_files(run_dir(Path(scratch), spec))
+        return {"result": result, "files": files}
+    except Exception as error:
+        return {"error": _describe(error), "detail": traceback.format_exc()}
+
+
+class _RayBackend:
+    """One Ray task per run, ``cpus_per_run`` CPUs each; worker deaths are reported, not
+    retried by Ray, so the driver counts and reports them."""
+
+    def __init__(
+        self,
+        runner: Runner,
+        out_dir: Path,
+        run_dir: RunDir,
+        jobs: int | None,
+        cpus_per_run: float,
+        address: str | None,
+        shared_out_dir: bool | None,
+    ) -> None:
+        ray = _import_ray()
+        self._ray = ray
+        self._started = not ray.is_initialized()
+        if self._started:
+            if address is None:  # a private instance on this machine, sized by jobs
+                cpus = None if jobs is None else max(1, math.ceil(jobs * cpus_per_run))
+                ray.init(
+                    address="local", num_cpus=cpus, include_dashboard=False, log_to_driver=False
+                )
+            else:
+                ray.init(address=address, log_to_driver=False)
+        self._token: str | None = None
+        if shared_out_dir is not False:
+            self._token = uuid.uuid4().hex
+            try:
+                write_text_atomic(out_dir / SHARE_TOKEN_FILE, self._token)
+            except BaseException:
+                if self._started:
+                    ray.shutdown()
+                raise
+        self._task = ray.remote(_ray_task).options(num_cpus=cpus_per_run, max_retries=0)
+        self._runner, self._out_dir, self._run_dir = runner, out_dir, run_dir
+        self._jobs, self._cpus_per_run = jobs, cpus_per_run
+        self._refs: set[Any] = set()
+
+    def describe(self) -> str:
+        cpus = self._ray.cluster_resources().get("CPU", 0)
+        return f"a Ray cluster of {cpus:g} CPUs ({self._cpus_per_run:g} per run)"
+
+    def slots(self) -> int:
+        if self._jobs is not None:
+            return self._jobs
+        # asked again at each step: nodes that join the cluster while it runs are used
+        cpus = self._ray.cluster_resources().get("CPU", 0)
+        return max(1, int(cpus // self._cpus_per_run))
+
+    def submit(self, spec: Any) -> Any:
+        ref = self._task.remote(self._runner, spec, str(self._out_dir), self._run_dir, self._token)
+        self._refs.add(ref)
+        return ref
+
+    def _outcome(self, ref: Any) -> _Outcome:
+        exceptions = self._ray.exceptions
+        try:
+            value = self._ray.get(ref)
+        except exceptions.RayTaskError as error:  # failed outside the runner (e.g. imports)
+            cause = getattr(error, "cause", None) or error
+            return _Outcome("error", message=_describe(cause), detail=str(error))
+        except exceptions.RayError as error:  # the worker or its node died
+            return _Outcome("died", message=_describe(error))
+        if "error" in value:
+            return _Outcome("error", message=value["error"], detail=value["detail"])
+        return _Outcome("ok", result=value["result"], files=value["files"])
+
+    def wait(self, timeout: float) -> list[tuple[Any, _Outcome]]:
+        if not self._refs:
+            time.sleep(timeout)
+            return []
+        ready, _ = self._ray.wait(list(self._refs), num_returns=1, timeout=timeout)
+        if ready:  # collect every other one already finished too
+            rest = [ref for ref in self._refs if ref not in ready]
+            more, _ = self._ray.wait(rest, num_returns=len(rest), timeout=0) if rest else ([], [])
+            ready = list(ready) + list(more)
+        finished = []
+        for ref in ready:
+            self._refs.discard(ref)
+            finished.append((ref, self._outcome(ref)))
+        return finished
+
+    def stop(self) -> None:
+        for ref in self._refs:
+            self._ray.cancel(ref, force=True)
+        self._refs.clear()
+
+    def close(self) -> None:
+        self.stop()
+        if self._token is not None:
+            (self._out_dir / SHARE_TOKEN_FILE).unlink(missing_ok=True)
+        if self._started:
+            self._ray.shutdown()
+
+
+# ------------------------------------------------------------------------------------ driver
+class _Driver:
+    """Keeps the slots busy, records outcomes, retries dead workers, prints progress."""
+
+    def __init__(
+        self,
+        backend: Any,
+        out_dir: Path,
+        run_dir: RunDir,
+        done_file: str,
+        log_file: str | None,
+        max_retries: int,
+        echo: Callable[[str], None],
+    ) -> None:
+        self.backend, self.out_dir, self.run_dir = backend, out_dir, run_dir
+        self.done_file, self.log_file, self.max_retries, self.echo = (
+            done_file,
+            log_file,
+            max_retries,
+            echo,
+        )
+        self.results: dict[str, Mapping[str, Any]] = {}
+        self.failed: dict[str, str] = {}
+        self.retried: dict[str, int] = {}
+        self.durations: list[float] = []
+        self.running: dict[Any, _Attempt] = {}
+
+    def _done_path(self, spec: Any) -> Path:
+        return self.run_dir(self.out_dir, spec) / self.done_file
+
+    def _write(self, run_dir: Path, outcome: _Outcome) -> _Outcome:
+        """Write a run's shipped files, then its result (last: it marks the run done)."""
+        if not isinstance(outcome.result, Mapping):
+            found = type(outcome.result).__name__
+            return _Outcome("error", message=f"runner: expected a mapping, found {found}")
+        for name, data in (outcome.files or {}).items():
+            if name != self.done_file:
+                write_bytes_atomic(run_dir / name, data)
+        try:
+            write_json_atomic(run_dir / self.done_file, dict(outcome.result))
+        except (TypeError, ValueError) as error:
+            message = f"runner: expected a JSON-serialisable mapping, {_describe(error)}"
+            return _Outcome("error", message=message)
+        return outcome
+
+    def _record(self, attempt: _Attempt, outcome: _Outcome, total: int) -> _Attempt | None:
+        """Write a finished run; returns the next attempt when the run is to be retried."""
+        run_dir = self.run_dir(self.out_dir, attempt.spec)
+        wall = time.monotonic() - attempt.started
+        if outcome.kind == "ok":
+            outcome = self._write(run_dir, outcome)
+        if outcome.kind == "ok":
+            self.results[attempt.key] = outcome.result
+            self.durations.append(wall)
+            self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
+            return None
+        if outcome.kind == "died" and attempt.number <= self.max_retries:
+            self.retried[attempt.key] = attempt.number
+            self.echo(
+                f"  {attempt.key}: {outcome.message}; retrying "
+                f"(attempt {attempt.number + 1} of {self.max_retries + 1})"
+            )
+            return attempt._replace(number=attempt.number + 1)
+        self.failed[attempt.key] = outcome.message
+        self.echo(f"  {attempt.key} FAILED: {outcome.message}")
+        if self.log_file is not None:
+            log = run_dir / self.log_file
+            run_dir.mkdir(parents=True, exist_ok=True)
+            with open(log, "a") as handle:
+                handle.write(f"\n== sweep: the run failed\n{outcome.detail or outcome.message}\n")
+            self.echo(f"  see {log}")
+        return None
+
+    def _progress(self, started: float, queued: int) -> None:
+        now = time.monotonic()
+        elapsed = [now - attempt.started for attempt in self.running.values()]
+        eta = estimate_remaining(self.durations, elapsed, queued, self.backend.slots())
+        eta_text = "ETA after the first run" if eta is None else f"ETA {format_seconds(eta)}"
+        self.echo(
+            f"[{format_seconds(now - started)}] {len(self.results)} done, "
+            f"{len(self.running)} running, {queued} queued; {eta_text}"
+        )
+        for attempt in sorted(self.running.values(), key=lambda a: a.key):
+            line = "running"
+            if self.log_file is not None:
+                log = self.run_dir(self.out_dir, attempt.spec) / self.log_file
+                line = last_log_line(log, default="running")
+            age = format_seconds(now - attempt.started)
+            self.echo(f"  {attempt.key} ({age}): {line}")
+
+    def run(self, pending: deque[_Attempt], progress_interval_s: float) -> None:
+        started = time.monotonic()
+        total = len(pending)
+        next_progress = started + progress_interval_s
+        while pending or self.running:
+            while pending and len(self.running) < self.backend.slots():
+                attempt = pending.popleft()
+                if self._done_path(attempt.spec).is_file():  # finished meanwhile elsewhere
+                    continue
+                attempt = attempt._replace(started=time.monotonic())
+                self.running[self.backend.submit(attempt.spec)] = attempt
+            timeout = max(0.0, next_progress - time.monotonic())
+            for handle, outcome in self.backend.wait(timeout):
+                retry = self._record(self.running.pop(handle), outcome, total)
+                if retry is not None:
+                    pending.appendleft(retry)
+            if time.monotonic() >= next_progress and (pending or self.running):
+                self._progress(started, len(pending))
+                next_progress = time.monotonic() + progress_interval_s
+
+
+def sweep(
+    specs: Sequence[Any],
+    runner: Runner,
+    out_dir: str | Path,
+    *,
+    backend: str = "local",
+    jobs: int | None = None,
+    address: str | None = None,
+    cpus_per_run: float = 1.0,
+    shared_out_dir: bool | None = None,
+    run_dir: RunDir = default_run_dir,
+    done_file: str = DONE_FILE,
+    log_file: str | None = LOG_FILE,
+    max_retries: int = DEFAULT_MAX_RETRIES,
+    progress_interval_s: float = PROGRESS_INTERVAL_S,
+    echo: Callable[[str], None] = print,
+) -> SweepResult:
+    """Run every spec not finished yet, on this machine or on a Ray cluster.
+
+    Parameters
+    ----------
+    specs : sequence
+        Run specifications: strings, or objects with a string ``key`` (e.g.
+        :class:`leoc.experiments.profiles.RunSpec`); keys are unique relative paths. A spec is
+        passed to the runner as is (it must pickle).
+    runner : callable ``(spec, out_dir) -> mapping``
+        Does one run. It may write into ``run_dir(out_dir, spec)`` (and should log progress to
+        ``log_file`` there) and returns a JSON-ready mapping, which the driver writes to
+        ``done_file``. It must pickle (a module-level function or class instance). On the Ray
+        backend without a shared file system, ``out_dir`` is a scratch folder on the worker.
+    out_dir : path
+    backend : {"local", "ray"}
+    jobs : int, optional
+        Runs at a time. Default: local, the CPU count divided by ``cpus_per_run``; Ray, as many
+        as the cluster's CPUs allow, re-read while the sweep runs (nodes may join).
+    address : str, optional
+        Ray only: ``None`` starts a private Ray instance on this machine (stopped at the end);
+        ``"auto"`` joins the cluster this machine belongs to (``ray start``), ``"HOST:PORT"`` the
+        cluster of that head node. Ignored if Ray is already initialised in this process.
+    cpus_per_run : float
+        CPUs requested by each run's Ray task (default 1).
+    shared_out_dir : bool, optional
+        Ray only: whether workers write into ``out_dir`` itself. ``None`` (default) finds out
+        (the driver leaves a token in ``out_dir`` that a worker on the same machine or on a
+        shared file system reads back); ``False`` always runs in a scratch folder on the
+        worker's node and ships the run folder back (e.g. to keep training I/O off a slow
+        network file system). A retried run resumes from its checkpoints only when shared.
+    run_dir : callable ``(out_dir, spec) -> Path``
+        A run's folder (default ``out_dir/runs/KEY``). Must pickle.
+    done_file, log_file : str
+        Names inside the run folder: the result (its presence marks a finished run) and the
+        runner's log, whose last line the progress shows (``None``: no log).
+    max_retries : int
+        Times a run is started again after its worker process, Ray worker or node died.
+    progress_interval_s : float
+        Seconds between progress reports (done / running / queued, elapsed, ETA from the
+        finished runs' wall times, and each running run's last log line).
+    echo : callable
+        Receives every progress line (default ``print``).
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    BackendUnavailableError
+        ``backend="ray"`` without Ray installed (one line saying how to install it).
+    ValueError
+        An option out of range, or a run key that is not unique.
+    """
+    _check_options(backend, address, jobs, cpus_per_run, max_retries)
+    out = Path(out_dir)
+    keys = [run_key(spec) for spec in specs]
+    duplicates = sorted({key for key in keys if keys.count(key) > 1})
+    if duplicates:
+        raise ValueError(f"specs: expected unique run keys, found {duplicates} more than once")
+    begun = time.monotonic()
+    pending: deque[_Attempt] = deque()
+    skipped: list[str] = []
+    for spec, key in zip(specs, keys, strict=True):
+        if (run_dir(out, spec) / done_file).is_file():
+            skipped.append(key)
+        else:
+            pending.append(_Attempt(spec, key, 1, 0.0))
+    out.mkdir(parents=True, exist_ok=True)
+    if not pending:
+        echo(f"{len(keys)} runs: {len(skipped)} already done, 0 to run")
+        return SweepResult({}, tuple(skipped), {}, {}, time.monotonic() - begun)
+    if backend == "local":
+        slots = jobs or max(1, int((os.cpu_count() or 1) // cpus_per_run))
+        engine: Any = _LocalBackend(runner, out, slots)
+    else:
+        engine = _RayBackend(runner, out, run_dir, jobs, cpus_per_run, address, shared_out_dir)
+    driver = _Driver(engine, out, run_dir, done_file, log_file, max_retries, echo)
+    try:
+        echo(
+            f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run on "
+            f"{engine.describe()}"
+        )
+        driver.run(pending, progress_interval_s)
+    except KeyboardInterrupt:
+        engine.stop()
+        echo("interrupted: finished runs are kept; run the same command again to resume")
+        raise
+    finally:
+        engine.close()
+    return SweepResult(
+        driver.results, tuple(skipped), driver.failed, driver.retried, time.monotonic() - begun
+    )

@@ -1,0 +1,298 @@
+"""Sweeps on the local and Ray backends: results, resume, retries after a worker dies, progress,
+and the reproduce smoke profile giving the same numbers on both backends."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from leoc.cli import main
+from leoc.experiments import sweep as sweep_module
+from leoc.experiments.sweep import (
+    BackendUnavailableError,
+    default_run_dir,
+    estimate_remaining,
+    format_seconds,
+    last_log_line,
+    sweep,
+)
+
+CALLS_FILE = "calls.txt"
+PID_FILE = "pid"
+VICTIM = "victim"
+KILL_TIMEOUT_S = 60.0
+QUICK_RUN_S = 0.3
+TIMING_KEYS = ("wall_seconds", "train_wall_seconds")
+
+
+def quiet(_: str) -> None:
+    """An echo that drops the progress lines."""
+
+
+# ------------------------------------------------------------------------- runners (pickled)
+def counting_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    """Records each call in the run folder, logs, sleeps a little, returns a known result."""
+    run_dir = default_run_dir(out_dir, spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with open(run_dir / CALLS_FILE, "a") as calls:
+        calls.write(f"{os.getpid()}\n")
+    attempt = len((run_dir / CALLS_FILE).read_text().splitlines())
+    with open(run_dir / "train.log", "a") as log:
+        log.write(f"{spec}: attempt {attempt} working\n")
+    if spec == VICTIM and attempt == 1:
+        # the first attempt waits to be killed from outside, mid-run
+        (run_dir / PID_FILE).write_text(str(os.getpid()))
+        deadline = time.monotonic() + KILL_TIMEOUT_S
+        while time.monotonic() < deadline:
+            time.sleep(0.05)
+        raise TimeoutError("the victim's worker was not killed")
+    time.sleep(QUICK_RUN_S)
+    return {"spec": spec, "square": len(spec) ** 2, "attempt": attempt}
+
+
+def failing_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    if spec == "bad":
+        raise ArithmeticError("bad run: no numbers")
+    return counting_runner(spec, out_dir)
+
+
+def not_a_mapping_runner(spec: str, out_dir: Path) -> list[int]:
+    return [1, 2]
+
+
+def not_json_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    return {"value": {1, 2}}  # a set pickles, but is no JSON
+
+
+def calls_of(out_dir: Path, key: str) -> int:
+    path = default_run_dir(out_dir, key) / CALLS_FILE
+    return len(path.read_text().splitlines()) if path.is_file() else 0
+
+
+def done_result(out_dir: Path, key: str) -> dict[str, object]:
+    return json.loads((default_run_dir(out_dir, key) / "evaluation.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def ray_instance() -> Iterator[object]:
+    """One small local Ray instance (2 CPUs) for the module; always shut down."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    # the test runners live in this module, which Ray's workers cannot import: send by value
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    try:
+        yield ray
+    finally:
+        ray.cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+        ray.shutdown()
+
+
+@pytest.fixture(params=["local", "ray"])
+def backend(request: pytest.FixtureRequest) -> str:
+    if request.param == "ray":
+        request.getfixturevalue("ray_instance")
+    return request.param
+
+
+# ------------------------------------------------------------------------------------- sweeps
+def test_a_sweep_writes_every_result_and_a_rerun_redoes_nothing(tmp_path, backend) -> None:
+    specs = ["a", "bb", "nested/ccc"]
+    result = sweep(specs, counting_runner, tmp_path, backend=backend, jobs=2, echo=quiet)
+    assert set(result.results) == set(specs) and not result.failed and not result.retried
+    for key in specs:
+        assert done_result(tmp_path, key) == {"spec": key, "square": len(key) ** 2, "attempt": 1}
+        assert calls_of(tmp_path, key) == 1
+    assert not (tmp_path / sweep_module.SHARE_TOKEN_FILE).exists()
+    stamps = {key: (default_run_dir(tmp_path, key) / "evaluation.json").stat() for key in specs}
+    messages: list[str] = []
+    again = sweep(specs + ["d"], counting_runner, tmp_path, backend=backend, echo=messages.append)
+    assert again.skipped == tuple(specs) and set(again.results) == {"d"}
+    assert messages[0].startswith("4 runs: 3 already done, 1 to run on ")
+    for key in specs:
+        assert calls_of(tmp_path, key) == 1
+        path = default_run_dir(tmp_path, key) / "evaluation.json"
+        assert path.stat().st_mtime_ns == stamps[key].st_mtime_ns
+
+
+def _kill_the_victim(out_dir: Path, killed: list[int]) -> None:
+    pid_file = default_run_dir(out_dir, VICTIM) / PID_FILE
+    deadline = time.monotonic() + KILL_TIMEOUT_S
+    while not pid_file.is_file() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.2)  # mid-run: the runner is well inside its work
+    pid = int(pid_file.read_text())
+    os.kill(pid, signal.SIGKILL)
+    killed.append(pid)
+
+
+def test_a_killed_worker_costs_only_its_run_which_is_retried(tmp_path, backend) -> None:
+    finished_before = default_run_dir(tmp_path, "old") / "evaluation.json"
+    finished_before.parent.mkdir(parents=True)
+    finished_before.write_text('{"kept": true}')
+    specs = [VICTIM, "a", "b", "c", "old"]
+    killed: list[int] = []
+    killer = threading.Thread(target=_kill_the_victim, args=(tmp_path, killed), daemon=True)
+    killer.start()
+    messages: list[str] = []
+    result = sweep(specs, counting_runner, tmp_path, backend=backend, jobs=2, echo=messages.append)
+    killer.join()
+    assert killed, "the victim never started"
+    assert result.retried == {VICTIM: 1} and not result.failed
+    assert result.skipped == ("old",)
+    assert calls_of(tmp_path, VICTIM) == 2
+    assert done_result(tmp_path, VICTIM)["attempt"] == 2
+    for key in ("a", "b", "c"):
+        assert calls_of(tmp_path, key) == 1, key  # nothing else is redone
+    assert json.loads(finished_before.read_text()) == {"kept": True}
+    assert calls_of(tmp_path, "old") == 0
+    assert any(f"{VICTIM}: " in m and "retrying (attempt 2 of 3)" in m for m in messages)
+
+
+def test_a_runner_error_is_reported_not_retried_and_the_rest_finish(tmp_path, backend) -> None:
+    messages: list[str] = []
+    specs = ["bad", "good"]
+    result = sweep(specs, failing_runner, tmp_path, backend=backend, jobs=2, echo=messages.append)
+    assert set(result.results) == {"good"} and not result.retried
+    assert result.failed == {"bad": "ArithmeticError: bad run: no numbers"}
+    assert not (default_run_dir(tmp_path, "bad") / "evaluation.json").exists()
+    log = (default_run_dir(tmp_path, "bad") / "train.log").read_text()
+    assert "ArithmeticError: bad run: no numbers" in log and "Traceback" in log
+    assert any("bad FAILED: ArithmeticError" in m for m in messages)
+    # a result that is not a mapping is an error too, named as such
+    other = sweep(["x"], not_a_mapping_runner, tmp_path / "other", backend=backend, echo=quiet)
+    assert other.failed == {"x": "runner: expected a mapping, found list"}
+    odd = sweep(["y"], not_json_runner, tmp_path / "odd", backend=backend, echo=quiet)
+    assert odd.failed["y"].startswith("runner: expected a JSON-serialisable mapping, TypeError")
+    assert not (default_run_dir(tmp_path / "odd", "y") / "evaluation.json").exists()
+
+
+def test_ray_without_a_shared_folder_ships_the_run_folder_back(tmp_path, ray_instance) -> None:
+    result = sweep(
+        ["a", "b/c"],
+        counting_runner,
+        tmp_path,
+        backend="ray",
+        shared_out_dir=False,
+        echo=quiet,
+    )
+    assert set(result.results) == {"a", "b/c"}
+    for key in ("a", "b/c"):
+        run_dir = default_run_dir(tmp_path, key)
+        # the runner wrote in a scratch folder on its node; the driver wrote the files here
+        assert calls_of(tmp_path, key) == 1
+        assert "attempt 1 working" in (run_dir / "train.log").read_text()
+        assert done_result(tmp_path, key)["spec"] == key
+    assert not (tmp_path / sweep_module.SHARE_TOKEN_FILE).exists()
+
+
+def test_progress_lines_show_counts_eta_and_last_log_lines(tmp_path) -> None:
+    messages: list[str] = []
+    sweep(
+        ["first", "a", "b", "c"],
+        slow_runner,
+        tmp_path,
+        jobs=1,
+        progress_interval_s=0.4,
+        echo=messages.append,
+    )
+    progress = [m for m in messages if " running, " in m]
+    assert progress, messages
+    assert "0 done, 1 running, 3 queued; ETA after the first run" in progress[0]
+    assert any("1 done, 1 running, 2 queued; ETA " in m and "first" not in m for m in progress)
+    assert any(m.startswith("  a (") and m.endswith("step 1 of 2") for m in messages)
+
+
+def slow_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    run_dir = default_run_dir(out_dir, spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with open(run_dir / "train.log", "a", buffering=1) as log:
+        for step in (1, 2):
+            log.write(f"step {step} of 2\n")
+            time.sleep(0.6)
+    return {"spec": spec}
+
+
+# --------------------------------------------------------------------------- helpers, errors
+def test_eta_closed_form_and_time_format() -> None:
+    assert estimate_remaining([], [5.0], 3, 2) is None
+    # mean 10 s; 4 queued (40 s) + running runs with 3 s and 12 s elapsed (7 s + 0 s): 47 s / 2
+    assert estimate_remaining([8.0, 12.0], [3.0, 12.0], 4, 2) == pytest.approx(23.5)
+    assert [format_seconds(s) for s in (0, 59.6, 75, 3700)] == ["0s", "1m00s", "1m15s", "1h01m"]
+
+
+def test_last_log_line_reads_progress_bars_and_missing_files(tmp_path) -> None:
+    log = tmp_path / "train.log"
+    assert last_log_line(log) == "starting"
+    log.write_bytes(b"first\n 10%|#   |\r 20%|##  |\r\n\n")
+    assert last_log_line(log) == "20%|##  |"
+
+
+def test_option_errors_name_the_argument(tmp_path, monkeypatch) -> None:
+    with pytest.raises(ValueError, match="backend: expected one of local, ray, found 'dask'"):
+        sweep(["a"], counting_runner, tmp_path, backend="dask")
+    with pytest.raises(ValueError, match="jobs: expected a positive integer, found 0"):
+        sweep(["a"], counting_runner, tmp_path, jobs=0)
+    with pytest.raises(ValueError, match="cpus_per_run: expected a positive number"):
+        sweep(["a"], counting_runner, tmp_path, cpus_per_run=0)
+    with pytest.raises(ValueError, match=r"specs: expected unique run keys, found \['a'\]"):
+        sweep(["a", "b", "a"], counting_runner, tmp_path)
+    with pytest.raises(ValueError, match="specs: a run key must be a relative path"):
+        sweep(["../escape"], counting_runner, tmp_path)
+    with pytest.raises(ValueError, match="specs: expected strings or objects with"):
+        sweep([3], counting_runner, tmp_path)
+    with pytest.raises(ValueError, match="address: only used by the 'ray' backend"):
+        sweep(["a"], counting_runner, tmp_path, address="auto")
+    monkeypatch.setitem(sys.modules, "ray", None)  # what an environment without Ray sees
+    with pytest.raises(BackendUnavailableError) as caught:
+        sweep(["a"], counting_runner, tmp_path / "ray", backend="ray")
+    message = str(caught.value)
+    assert "\n" not in message and "pip install 'leoc[ray]'" in message
+    assert not (tmp_path / "ray").exists()  # nothing written before the error
+
+
+def test_cli_without_ray_says_so_in_one_line(tmp_path, monkeypatch, capsys) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)
+    out = tmp_path / "out"
+    status = main(["reproduce", "--backend", "ray", "--controllers", "linear", "--out", str(out)])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count("\n") == 1
+    assert error.startswith("leoc reproduce: error: backend: 'ray' needs the ray package")
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------ the smoke profile
+def test_smoke_profile_on_ray_equals_the_local_backend(tmp_path, ray_instance) -> None:
+    from leoc.experiments.reproduce import EVALUATION_FILE, reproduce
+
+    controllers = ["linear", "ddpg_hybrid", "pilco_hybrid"]
+    outputs = {}
+    for name in ("local", "ray"):
+        out = tmp_path / name
+        reproduce(
+            out,
+            profile_name="smoke",
+            systems=["pendulum"],
+            controllers=controllers,
+            jobs=2,
+            backend=name,
+            echo=quiet,
+        )
+        outputs[name] = out
+        assert json.loads((out / "meta.json").read_text())["backend"] == name
+    for controller in controllers:
+        runs = {}
+        for name, out in outputs.items():
+            path = out / "runs" / "pendulum" / controller / "seed0" / EVALUATION_FILE
+            evaluation = json.loads(path.read_text())
+            for key in TIMING_KEYS:
+                evaluation.pop(key)
+            runs[name] = evaluation
+        assert runs["ray"] == runs["local"], controller  # bit-for-bit the same numbers
