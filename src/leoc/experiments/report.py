@@ -35,6 +35,12 @@ from leoc.experiments.profiles import (
     LINEAR_REFERENCE,
 )
 from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
+from leoc.experiments.stats import (
+    MIN_RUNS_FOR_INTERVAL,
+    curve_bands,
+    probability_of_improvement,
+    seed_summary,
+)
 from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.training import MODEL_SELECTION_TEXT
@@ -178,9 +184,11 @@ def swing_up_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
     return rows
 
 
-def curve_summary(runs: list[dict[str, Any]]) -> dict[str, list[float]] | None:
-    """Mean and std over seeds of the return against interaction seconds, on a common grid
-    (each seed's curve linearly interpolated; the grid spans the seconds all seeds reached)."""
+def curve_summary(runs: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Learning curves over seeds on a common grid (each seed's curve linearly interpolated;
+    the grid spans the seconds all seeds reached): mean and std, and with at least three seeds
+    the point-wise IQM with its 95 % bootstrap band (:func:`leoc.experiments.stats.curve_bands`).
+    """
     curves = [run["curve"] for run in runs if run.get("curve") and run["curve"]["seconds"]]
     if not curves:
         return None
@@ -188,12 +196,82 @@ def curve_summary(runs: list[dict[str, Any]]) -> dict[str, list[float]] | None:
     start = max(curve["seconds"][0] for curve in curves)
     grid = np.linspace(start, end, CURVE_GRID_POINTS) if end > start else np.array([end])
     values = np.array([np.interp(grid, c["seconds"], c["returns"]) for c in curves])
-    return {
+    summary: dict[str, Any] = {
         "seconds": grid.tolist(),
         "mean": values.mean(0).tolist(),
         "std": values.std(0).tolist(),
         "n_seeds": len(curves),
     }
+    if len(curves) >= MIN_RUNS_FOR_INTERVAL:
+        bands = curve_bands(values)
+        summary.update(
+            iqm=np.asarray(bands.iqm).tolist(),
+            ci_low=np.asarray(bands.ci_low).tolist(),
+            ci_high=np.asarray(bands.ci_high).tolist(),
+        )
+    return summary
+
+
+def first_hold_seconds(run: dict[str, Any]) -> float | None:
+    """Interaction time of the first evaluation at which every episode held (None: never)."""
+    curve = run.get("curve") or {}
+    for seconds, held in zip(curve.get("seconds", []), curve.get("held_fraction", []), strict=True):
+        if held >= 1.0:
+            return float(seconds)
+    return None
+
+
+SEED_QUANTITIES = {
+    "final return": lambda run: run["curve"]["returns"][-1] if run.get("curve") else None,
+    "interaction time to first hold [s]": first_hold_seconds,
+    "impulse steady-state error": lambda run: run["responses"]["impulse"]["metrics"][
+        "steady_state_error"
+    ],
+    "impulse peak deviation": lambda run: run["responses"]["impulse"]["metrics"]["peak_deviation"],
+    "impulse settling time [steps]": lambda run: run["responses"]["impulse"]["metrics"][
+        "settling_time"
+    ],
+}
+
+
+def seed_statistics(evaluations: Evaluations) -> list[dict[str, Any]]:
+    """Rows: system, controller, quantity, IQM over seeds and its 95 % stratified-bootstrap
+    interval (none with fewer than three seeds; the note says so), seeds used and missing (a
+    run that never held or never settled has no value)."""
+    rows = []
+    for system, by_controller in evaluations.items():
+        for controller in _ordered(by_controller):
+            if controller in LINEAR_CONTROLLERS:
+                continue
+            runs = by_controller[controller]
+            for quantity, value_of in SEED_QUANTITIES.items():
+                summary = seed_summary([value_of(run) for run in runs])
+                rows.append(
+                    {
+                        "system": system,
+                        "controller": controller,
+                        "quantity": quantity,
+                        **summary._asdict(),
+                    }
+                )
+    return rows
+
+
+def improvement_rows(evaluations: Evaluations) -> list[dict[str, Any]]:
+    """Probability that the hybrid's final return beats its baseline's, per framework."""
+    rows = []
+    for system, by_controller in evaluations.items():
+        for framework in ("ddpg", "pilco"):
+            hybrid = by_controller.get(f"{framework}_hybrid")
+            baseline = by_controller.get(f"{framework}_baseline")
+            if not hybrid or not baseline:
+                continue
+            final = SEED_QUANTITIES["final return"]
+            estimate = probability_of_improvement(
+                [final(run) for run in hybrid], [final(run) for run in baseline]
+            )
+            rows.append({"system": system, "framework": framework, **estimate._asdict()})
+    return rows
 
 
 # ------------------------------------------------------------------------------------ checks
@@ -283,16 +361,24 @@ def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path) -> Path:
                 curve = curves[system].get(key)
                 if curve is None:
                     continue
-                seconds, mean, std = (np.array(curve[k]) for k in ("seconds", "mean", "std"))
+                seconds = np.array(curve["seconds"])
                 colour = controller_colour(key)
+                if "iqm" in curve:  # >= 3 seeds: IQM and its 95 % bootstrap band
+                    centre = np.array(curve["iqm"])
+                    low, high = np.array(curve["ci_low"]), np.array(curve["ci_high"])
+                    label = f"{_label(key)} (IQM, 95% CI, n={curve['n_seeds']})"
+                else:  # fewer seeds: no interval, the mean (and std when there are two)
+                    centre, std = np.array(curve["mean"]), np.array(curve["std"])
+                    low, high = centre - std, centre + std
+                    label = f"{_label(key)} (n={curve['n_seeds']}: no interval)"
                 axis.plot(
                     seconds,
-                    mean,
+                    centre,
                     color=colour,
                     marker="." if len(seconds) < 20 else None,
-                    label=_label(key),
+                    label=label,
                 )
-                axis.fill_between(seconds, mean - std, mean + std, color=colour, alpha=0.2)
+                axis.fill_between(seconds, low, high, color=colour, alpha=0.2)
             axis.set_title(f"{system}: {framework.upper()}")
             axis.set_xlabel("interaction time [s]")
             axis.set_ylabel("evaluation return")
@@ -481,6 +567,39 @@ def swing_up_table(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _interval(low: float | None, high: float | None, note: str | None) -> str:
+    if low is None or high is None:
+        return f"({note})" if note else ""
+    return f"[{FMT.format(low)}, {FMT.format(high)}]"
+
+
+def seed_table(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| system | controller | quantity | IQM | 95% CI | seeds used | seeds without a value |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        centre = "-" if row["iqm"] is None else FMT.format(row["iqm"])
+        interval = _interval(row["ci_low"], row["ci_high"], row["note"])
+        lines.append(
+            f"| {row['system']} | {_label(row['controller'])} | {row['quantity']} | {centre} "
+            f"| {interval} | {row['n']} | {row['n_missing']} |"
+        )
+    return lines
+
+
+def improvement_table(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| system | framework | P(hybrid's final return > baseline's) | 95% CI |",
+        "|---|---|---|---|",
+    ]
+    for row in rows:
+        value = "-" if row["probability"] is None else f"{row['probability']:.2f}"
+        interval = _interval(row["ci_low"], row["ci_high"], row["note"])
+        lines.append(f"| {row['system']} | {row['framework'].upper()} | {value} | {interval} |")
+    return lines
+
+
 def _flag_block(flags: list[str], none_text: str) -> list[str]:
     if not flags:
         return [f"**Checks: {none_text}**", ""]
@@ -513,6 +632,8 @@ def write_report(out_dir: str | Path) -> Path:
         for runs in by_c.values()
         for run in runs
     )
+    seeds = seed_statistics(evaluations)
+    improvements = improvement_rows(evaluations)
     flags = {
         "responses": response_flags(responses),
         "robustness": robustness_flags(robustness),
@@ -525,6 +646,8 @@ def write_report(out_dir: str | Path) -> Path:
             "responses": responses,
             "robustness": robustness,
             "swing_up": swing_up,
+            "seed_statistics": seeds,
+            "probability_of_improvement": improvements,
             "learning_curves": curves,
             "flags": flags,
             "summed_run_wall_seconds": run_seconds,
@@ -533,6 +656,7 @@ def write_report(out_dir: str | Path) -> Path:
     write_csv_atomic(out / "responses.csv", responses)
     write_csv_atomic(out / "robustness.csv", robustness)
     write_csv_atomic(out / "swing_up.csv", swing_up)
+    write_csv_atomic(out / "seed_statistics.csv", seeds)
     curve_rows = [
         {"system": s, "controller": c, "seconds": t, "mean": m, "std": d}
         for s, by_c in curves.items()
@@ -564,7 +688,18 @@ def write_report(out_dir: str | Path) -> Path:
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
     path = out / "report.md"
     document = render_markdown(
-        meta, evaluations, responses, robustness, swing_up, flags, figures, run_seconds
+        meta,
+        evaluations,
+        {
+            "responses": responses,
+            "robustness": robustness,
+            "swing_up": swing_up,
+            "seeds": seeds,
+            "improvements": improvements,
+        },
+        flags,
+        figures,
+        run_seconds,
     )
     write_text_atomic(path, document)
     return path
@@ -573,13 +708,12 @@ def write_report(out_dir: str | Path) -> Path:
 def render_markdown(
     meta: dict[str, Any],
     evaluations: Evaluations,
-    responses: list[dict[str, Any]],
-    robustness: list[dict[str, Any]],
-    swing_up: list[dict[str, Any]],
+    tables: dict[str, list[dict[str, Any]]],
     flags: dict[str, list[str]],
     figures: list[tuple[str, str]],
     run_seconds: float,
 ) -> str:
+    responses, robustness = tables["responses"], tables["robustness"]
     wall = meta.get("wall_seconds_last_invocation")
     lines = [
         "# LEOC: reproduction of Zhang & Capel (L4DC 2021)",
@@ -685,7 +819,34 @@ def render_markdown(
         "",
     ]
     lines += _flag_block(flags["swing_up"], "every learned controller swings up and holds.")
-    lines += swing_up_table(swing_up)
+    lines += swing_up_table(tables["swing_up"])
+    n_seeds = len(meta.get("seeds", []))
+    lines += [
+        "",
+        "## Seed statistics",
+        "",
+        "Interquartile mean (IQM) over seeds and its 95% stratified-bootstrap confidence "
+        "interval (Agarwal et al. 2021, 'Deep RL at the edge of the statistical precipice'; "
+        "`leoc.experiments.stats`). 'final return': the last evaluation of the learning curve; "
+        "'interaction time to first hold': the first evaluation at which every episode held "
+        "(a seed that never held has no value and is counted as without one).",
+        "",
+    ]
+    if n_seeds < MIN_RUNS_FOR_INTERVAL:
+        lines += [
+            f"With {n_seeds} seed(s) there are no intervals (at least "
+            f"{MIN_RUNS_FOR_INTERVAL} are needed); the IQM of one value is that value.",
+            "",
+        ]
+    elif n_seeds < 4:
+        lines += [
+            f"With {n_seeds} seeds the IQM trims nothing (it is the mean) and the bootstrap has "
+            "few distinct resamples: read the intervals as rough.",
+            "",
+        ]
+    lines += seed_table(tables["seeds"])
+    lines += ["", "Probability that the hybrid beats its baseline (final return):", ""]
+    lines += improvement_table(tables["improvements"])
     for title, filename in figures:
         lines += ["", f"## {title}", "", f"![{title}]({filename})"]
     lines += [

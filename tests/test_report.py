@@ -1,0 +1,109 @@
+"""Tests of the report's aggregation on synthetic run results: flags and seed statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from leoc.evaluation.metrics import response_metrics
+from leoc.experiments.report import (
+    improvement_rows,
+    response_flags,
+    response_summary,
+    robustness_flags,
+    seed_statistics,
+    swing_up_flags,
+    swing_up_summary,
+)
+from leoc.experiments.stats import iqm
+
+
+def _run(controller: str, seed: int, scale: float, final_return: float, held: bool) -> dict:
+    e = scale * 0.9 ** np.arange(201.0)
+    metrics = response_metrics(e, dt=0.05)._asdict()
+    return {
+        "spec": {"system": "pendulum", "controller": controller, "seed": seed},
+        "action_repeat": 1,
+        "responses": {
+            test: {"metrics": metrics, "deviation": e.tolist()} for test in ("impulse", "step")
+        },
+        "swing_up": {
+            "returns": [final_return] * 2,
+            "hold_steps": [10, 12] if held else [None, None],
+            "mean_return": final_return,
+            "held_fraction": 1.0 if held else 0.0,
+        },
+        "curve": {
+            "seconds": [0.0, 10.0, 20.0],
+            "returns": [-1500.0, -800.0, final_return],
+            "held_fraction": [0.0, 1.0 if held else 0.0, 1.0 if held else 0.0],
+        },
+    }
+
+
+def _evaluations(hybrid_scale: float, seeds: int = 3) -> dict:
+    return {
+        "pendulum": {
+            "linear": [_run("linear", 0, 1.0, -1500.0, False)],
+            "ddpg_baseline": [
+                _run("ddpg_baseline", s, 3.0, -300.0 - s, s > 0) for s in range(seeds)
+            ],
+            "ddpg_hybrid": [
+                _run("ddpg_hybrid", s, hybrid_scale, -200.0 - s, True) for s in range(seeds)
+            ],
+        }
+    }
+
+
+def test_a_hybrid_is_flagged_only_beyond_one_percent_of_its_linear_reference():
+    close = response_flags(response_summary(_evaluations(1.005)))
+    assert close == []
+    far = response_flags(response_summary(_evaluations(1.02)))
+    assert len(far) == 2  # impulse and step
+    assert "DDPG hybrid" in far[0] and "peak deviation" in far[0] and "linear (LQR at dt)" in far[0]
+
+
+def test_controllers_that_do_not_swing_up_are_flagged_by_name():
+    rows = swing_up_summary(_evaluations(1.0))
+    flags = swing_up_flags(rows)
+    assert len(flags) == 1 and "DDPG baseline" in flags[0] and "67%" in flags[0]  # 4 of 6 held
+
+
+def test_robustness_flags_compare_stabilised_fractions():
+    rows = [
+        {
+            "system": "pendulum",
+            "controller": c,
+            "parameter": "mass",
+            "scale": 2.0,
+            "fraction_stabilised": f,
+        }
+        for c, f in (("linear", 1.0), ("ddpg_hybrid", 0.6), ("ddpg_baseline", 0.0))
+    ]
+    flags = robustness_flags(rows)
+    assert len(flags) == 1 and "60%" in flags[0] and "100%" in flags[0]
+
+
+def test_seed_statistics_with_three_seeds_have_intervals_and_with_one_do_not():
+    rows = seed_statistics(_evaluations(1.0, seeds=3))
+    final = next(
+        r for r in rows if (r["controller"], r["quantity"]) == ("ddpg_hybrid", "final return")
+    )
+    assert final["iqm"] == pytest.approx(iqm(np.array([-200.0, -201.0, -202.0])))
+    assert final["ci_low"] <= final["iqm"] <= final["ci_high"] and final["n"] == 3
+    first_hold = next(
+        r
+        for r in rows
+        if (r["controller"], r["quantity"])
+        == ("ddpg_baseline", "interaction time to first hold [s]")
+    )
+    assert (first_hold["n"], first_hold["n_missing"]) == (2, 1)  # seed 0 never held
+    single = seed_statistics(_evaluations(1.0, seeds=1))
+    assert all(r["ci_low"] is None and r["ci_high"] is None for r in single)
+    assert {r["note"] for r in single} == {"n = 1 < 3: no interval", "no values"}
+    assert not any(r["controller"] == "linear" for r in rows)
+
+
+def test_probability_that_the_hybrid_beats_its_baseline():
+    (row,) = improvement_rows(_evaluations(1.0, seeds=3))
+    assert row["framework"] == "ddpg" and row["probability"] == 1.0  # every hybrid run is better
