@@ -81,7 +81,7 @@ def test_robustness_flags_compare_stabilised_fractions():
         for c, f in (("linear", 1.0), ("ddpg_hybrid", 0.6), ("ddpg_baseline", 0.0))
     ]
     flags = robustness_flags(rows)
-    assert len(flags) == 1 and "60%" in flags[0] and "100%" in flags[0]
+    assert len(flags) == 1 and "x2 (60% vs 100%)" in flags[0] and "DDPG hybrid" in flags[0]
 
 
 def test_seed_statistics_with_three_seeds_have_intervals_and_with_one_do_not():

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,6 +15,9 @@ from pathlib import Path
 import numpy as np
 
 SYSTEM_CHOICES = ("pendulum", "cartpole", "mountaincar")
+# Exit statuses of an interrupted command: 128 + the signal number, as a shell reports it.
+EXIT_SIGINT = 128 + signal.SIGINT
+EXIT_SIGTERM = 128 + signal.SIGTERM
 ALGO_CHOICES = ("pilco", "ddpg", "td3")
 DEFAULT_RUNS_DIR = Path("runs")
 
@@ -194,8 +198,39 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, found {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = float(text)
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, found {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="leoc",
         description="LEOC hybrid controllers: LQR near the operating point, a learned policy "
         "elsewhere (Zhang & Capel, L4DC 2021).",
@@ -228,18 +263,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     simulate.add_argument(
         "--action-repeat",
-        type=int,
+        type=positive_int,
         default=1,
         help="control period of the linear controller in simulator steps (its LQR is designed "
         "for it; PILCO's is 3); default 1",
     )
     simulate.add_argument(
         "--band",
-        type=float,
+        type=positive_float,
         help="absolute settling band (deg or m); default 2%% of the peak error",
     )
     simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
-    simulate.add_argument("--steps", type=int, default=200, help="episode length (default 200)")
+    simulate.add_argument(
+        "--steps", type=positive_int, default=200, help="episode length (default 200)"
+    )
     simulate.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
     simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
     simulate.add_argument(
@@ -251,10 +288,14 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("system", choices=SYSTEM_CHOICES)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True)
     train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
-    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--seed", type=non_negative_int, default=0)
     train.add_argument("--out", type=Path, help="run folder (default runs/SYSTEM_ALGO_KIND_seedN)")
-    train.add_argument("--iterations", type=int, help="PILCO iterations (default per system)")
-    train.add_argument("--steps", type=int, help="DDPG/TD3 environment steps (default per system)")
+    train.add_argument(
+        "--iterations", type=positive_int, help="PILCO iterations (default per system)"
+    )
+    train.add_argument(
+        "--steps", type=positive_int, help="DDPG/TD3 environment steps (default per system)"
+    )
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(func=cmd_train)
 
@@ -278,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
     reproduce.add_argument(
         "--jobs",
-        type=int,
+        type=positive_int,
         help="runs at a time (default: the CPU count; on Ray, as many as the cluster's CPUs)",
     )
     reproduce.add_argument(
@@ -293,7 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="Ray only: the cluster to join ('auto' inside a cluster started with 'ray start', "
         "or HEAD_IP:6379); default: a private Ray instance on this machine",
     )
-    reproduce.add_argument("--seeds", type=int, help="number of seeds (default per profile)")
+    reproduce.add_argument(
+        "--seeds", type=positive_int, help="number of seeds (default per profile)"
+    )
     reproduce.add_argument(
         "--systems", nargs="+", choices=SYSTEM_CHOICES, default=list(SYSTEM_CHOICES)
     )
@@ -310,16 +353,46 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(Exception):
+    """Raised in the main process by SIGTERM, so it stops as cleanly as on Ctrl-C."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+RESUMABLE_COMMANDS = ("reproduce", "train")
+
+
+def _interrupted(args: argparse.Namespace, code: int) -> int:
+    if args.command in RESUMABLE_COMMANDS:
+        print(
+            f"leoc {args.command}: interrupted; finished runs and checkpoints are kept, run the "
+            "same command again to resume",
+            file=sys.stderr,
+        )
+    else:
+        print(f"leoc {args.command}: interrupted", file=sys.stderr)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "reproduce" and args.out is None:
         args.out = str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}")
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         return int(args.func(args))
     except (ValueError, FileNotFoundError) as error:
         print(f"leoc {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        return _interrupted(args, EXIT_SIGINT)
+    except Terminated:
+        return _interrupted(args, EXIT_SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -101,3 +101,19 @@ def save_figure_atomic(figure: Any, path: str | Path, dpi: int = 120) -> Path:
     figure.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
     plt.close(figure)
     return write_bytes_atomic(path, buffer.getvalue())
+
+
+def set_aside(path: str | Path) -> Path:
+    """Rename a damaged file to ``NAME.damaged-YYYYmmdd-HHMMSS[-k]`` beside it and return the
+    new path. Never deleted: the user may want to look at it; never in the way of a rerun."""
+    import time
+
+    path = Path(path)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    target = path.with_name(f"{path.name}.damaged-{stamp}")
+    count = 1
+    while target.exists():
+        count += 1
+        target = path.with_name(f"{path.name}.damaged-{stamp}-{count}")
+    os.replace(path, target)
+    return target

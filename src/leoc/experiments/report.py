@@ -314,24 +314,27 @@ def response_flags(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def robustness_flags(rows: list[dict[str, Any]]) -> list[str]:
-    """Hybrids whose fraction stabilised differs from their linear reference at some scale."""
+    """Hybrids whose fraction stabilised differs from their linear reference's: one sentence
+    per hybrid and scaled parameter, listing the scales where it does."""
     index = {(r["system"], r["controller"], r["parameter"], r["scale"]): r for r in rows}
-    flags = []
+    differing: dict[tuple[str, str, str, str], list[str]] = defaultdict(list)
     for (system, controller, parameter, scale), row in sorted(index.items()):
         if not controller.endswith("hybrid"):
             continue
-        reference = index.get(
-            (system, LINEAR_REFERENCE[controller.split("_")[0]], parameter, scale)
-        )
+        reference_name = LINEAR_REFERENCE[controller.split("_")[0]]
+        reference = index.get((system, reference_name, parameter, scale))
         if reference is None:
             continue
-        if abs(row["fraction_stabilised"] - reference["fraction_stabilised"]) > RELATIVE_TOLERANCE:
-            flags.append(
-                f"**{system} {_label(controller)}**, {parameter} x{scale:g}: stabilised "
-                f"{row['fraction_stabilised']:.0%} of episodes vs "
-                f"{reference['fraction_stabilised']:.0%} for {_label(reference['controller'])}."
+        ours, theirs = row["fraction_stabilised"], reference["fraction_stabilised"]
+        if abs(ours - theirs) > RELATIVE_TOLERANCE:
+            differing[(system, controller, parameter, reference_name)].append(
+                f"x{scale:g} ({ours:.0%} vs {theirs:.0%})"
             )
-    return flags
+    return [
+        f"**{system} {_label(controller)}**, {parameter} scaled: stabilises a different "
+        f"fraction of episodes than {_label(reference)} at " + ", ".join(cells) + "."
+        for (system, controller, parameter, reference), cells in differing.items()
+    ]
 
 
 def swing_up_flags(rows: list[dict[str, Any]]) -> list[str]:
@@ -736,6 +739,12 @@ def render_markdown(
         "with *linear (LQR at PILCO's period)*.",
         "",
     ]
+    aggregated = "; ".join(
+        f"{system}/{controller}: seeds {sorted(run['spec']['seed'] for run in runs)}"
+        for system, by_controller in evaluations.items()
+        for controller, runs in by_controller.items()
+    )
+    lines += [f"Runs aggregated in this report: {aggregated or 'none'}.", ""]
     missing = [
         f"{s}/{c}"
         for s in meta.get("systems", [])

@@ -33,7 +33,7 @@ from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
 from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
 from leoc.experiments.sweep import check_backend, sweep
-from leoc.io import write_json_atomic
+from leoc.io import set_aside, write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.training import evaluate_episodes, evaluation_starts
 
@@ -185,6 +185,22 @@ def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any
     return evaluation
 
 
+def read_meta(path: Path, echo: Callable[[str], None] = print) -> dict[str, Any]:
+    """The folder's ``meta.json`` ({} when absent); a damaged one is set aside with a message
+    (it only describes the last invocation, which this one rewrites)."""
+    if not path.is_file():
+        return {}
+    try:
+        meta = json.loads(path.read_text())
+        if not isinstance(meta, dict):
+            raise ValueError(f"expected a JSON object, found {type(meta).__name__}")
+    except (ValueError, UnicodeDecodeError) as error:
+        aside = set_aside(path)
+        echo(f"damaged {path} ({error}); set aside as {aside.name}")
+        return {}
+    return meta
+
+
 @dataclasses.dataclass(frozen=True)
 class ProfileRunner:
     """The sweep's unit of work for a profile: ``runner(spec, out_dir)`` calls
@@ -222,16 +238,16 @@ def reproduce(
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
     check_backend(backend, address)  # before anything is written
     meta_path = out / META_FILE
-    if meta_path.is_file():
-        previous = json.loads(meta_path.read_text())
-        if previous.get("profile") != profile.name:
-            raise ValueError(
-                f"out: {out} holds a {previous.get('profile')!r} run; use another folder for "
-                f"the {profile.name!r} profile"
-            )
+    meta = read_meta(meta_path, echo)
+    if meta and meta.get("profile") != profile.name:
+        raise ValueError(
+            f"out: {out} holds a {meta.get('profile')!r} run; use another folder for "
+            f"the {profile.name!r} profile"
+        )
     specs = run_specs(profile, tuple(systems), tuple(controllers))
     started = time.perf_counter()
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    # a rerun with other seeds, systems or controllers extends the folder: earlier runs stay on
+    # disk, and the report aggregates exactly the runs of this invocation (and lists them)
     meta.update(
         profile=profile.name,
         description=profile.description,

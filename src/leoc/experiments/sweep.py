@@ -27,6 +27,7 @@ to the run's log and the sweep goes on with the other runs.
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import sys
@@ -39,7 +40,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.io import write_bytes_atomic, write_json_atomic, write_text_atomic
+from leoc.io import set_aside, write_bytes_atomic, write_json_atomic, write_text_atomic
 
 BACKENDS = ("local", "ray")
 DONE_FILE = "evaluation.json"
@@ -197,6 +198,23 @@ def check_backend(backend: str, address: str | None = None) -> None:
         raise ValueError(f"address: only used by the 'ray' backend, found backend {backend!r}")
     if backend == "ray":
         _import_ray()
+
+
+def _finished(done: Path, echo: Callable[[str], None]) -> bool:
+    """Whether ``done`` holds a run's result. A result file that does not parse as a JSON
+    object (truncated, garbled) is set aside with a message naming it, and the run counts as
+    not done, so a damaged file never blocks a sweep."""
+    if not done.is_file():
+        return False
+    try:
+        data = json.loads(done.read_text())
+        if not isinstance(data, dict):
+            raise ValueError(f"expected a JSON object, found {type(data).__name__}")
+    except (ValueError, UnicodeDecodeError) as error:
+        aside = set_aside(done)
+        echo(f"damaged result {done} ({_describe(error)}): set aside as {aside.name}; run again")
+        return False
+    return True
 
 
 def _describe(error: BaseException) -> str:
@@ -644,7 +662,7 @@ def sweep(
     pending: deque[_Attempt] = deque()
     skipped: list[str] = []
     for spec, key in zip(specs, keys, strict=True):
-        if (run_dir(out, spec) / done_file).is_file():
+        if _finished(run_dir(out, spec) / done_file, echo):
             skipped.append(key)
         else:
             pending.append(_Attempt(spec, key, 1, 0.0))

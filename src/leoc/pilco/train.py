@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from leoc.io import save_torch_atomic, write_text_atomic
+from leoc.io import save_torch_atomic, set_aside, write_text_atomic
 from leoc.pilco.gp import GPHyper, GPPosterior, GPSettings, fit_gp
 from leoc.pilco.propagate import Prediction, SaturatedPolicy, predict
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
@@ -431,8 +431,17 @@ def _resume(
     path = run_dir / CHECKPOINT_NAME
     if not path.exists():
         return None
-    saved = torch.load(path, weights_only=False)
-    old = PilcoConfig.from_dict(saved["config"])
+    try:
+        saved = torch.load(path, weights_only=False)
+        old = PilcoConfig.from_dict(saved["config"])
+    except Exception as error:  # truncated or garbled: set it aside and start afresh
+        aside = set_aside(path)
+        print(
+            f"[pilco] damaged checkpoint {path} ({type(error).__name__}: {error}); set aside as "
+            f"{aside.name}, starting the run afresh",
+            flush=True,
+        )
+        return None
     if dataclasses.replace(old, iterations=config.iterations) != config:
         raise ValueError(
             f"resume: the checkpoint in {run_dir} was written with another configuration "
