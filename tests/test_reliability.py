@@ -1,0 +1,199 @@
+"""Reliability of the command line: one-line errors, clean interrupts, damaged files.
+
+(Issue: one Ctrl-C stops cleanly, damaged files never block, every bad input a one-line error.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from leoc.cli import main
+from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, reproduce
+
+RUN_TIMEOUT_S = 600
+INTERRUPT_DEADLINE_S = 10.0
+
+BAD_ARGUMENTS = [
+    (["reproduce", "--jobs", "0"], "--jobs: expected a positive integer, found 0"),
+    (["reproduce", "--jobs", "-2"], "--jobs: expected a positive integer, found -2"),
+    (["reproduce", "--seeds", "0"], "--seeds: expected a positive integer, found 0"),
+    (["reproduce", "--profile", "fast"], "invalid choice: 'fast'"),
+    (["reproduce", "--systems", "acrobot"], "invalid choice: 'acrobot'"),
+    (["reproduce", "--controllers", "lqr"], "invalid choice: 'lqr'"),
+    (["reproduce", "--backend", "spark"], "invalid choice: 'spark'"),
+    (["simulate", "pendulum", "--steps", "0"], "--steps: expected a positive integer, found 0"),
+    (["simulate", "pendulum", "--steps", "ten"], "--steps: invalid positive_int value: 'ten'"),
+    (["simulate", "pendulum", "--band", "-1"], "--band: expected a positive number, found -1"),
+    (["simulate", "pendulum", "--action-repeat", "0"], "--action-repeat: expected a positive"),
+    (["simulate", "pendulum", "--test", "ramp"], "invalid choice: 'ramp'"),
+    (["simulate", "cartpole", "--controller", "/no/such/run"], "does not exist"),
+    (["simulate", "acrobot"], "invalid choice: 'acrobot'"),
+    (["train", "pendulum", "--algo", "ddpg", "--steps", "-5"], "expected a positive integer"),
+    (["train", "pendulum", "--algo", "pilco", "--iterations", "0"], "expected a positive"),
+    (["train", "pendulum", "--algo", "ddpg", "--seed", "-1"], "expected a non-negative"),
+    (["train", "pendulum", "--algo", "sac"], "invalid choice: 'sac'"),
+    (["train", "pendulum"], "the following arguments are required: --algo"),
+    (["lqr", "pendulum", "--q", "1"], "Q"),
+    (["lqr", "pendulum", "--r", "-1"], "R"),
+    (["plot", "/no/such/folder"], "no meta.json"),
+]
+
+
+@pytest.mark.parametrize(("argv", "expected"), BAD_ARGUMENTS, ids=lambda v: " ".join(v))
+def test_every_bad_argument_is_one_line_on_stderr(argv, expected, capsys):
+    try:
+        status = main(argv)
+    except SystemExit as stop:  # argparse exits itself
+        status = stop.code
+    captured = capsys.readouterr()
+    assert status == 2
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    assert expected in lines[0]
+    assert "Traceback" not in captured.err
+
+
+def _smoke_command(out: Path) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "leoc.cli",
+        "reproduce",
+        "--profile",
+        "smoke",
+        "--systems",
+        "pendulum",
+        "--controllers",
+        "linear",
+        "ddpg_hybrid",
+        "pilco_hybrid",
+        "--jobs",
+        "2",
+        "--out",
+        str(out),
+    ]
+
+
+def _numbers(out: Path) -> dict[str, dict]:
+    """Every run's evaluation without its wall times (the only fields allowed to differ)."""
+    found = {}
+    for path in sorted(out.glob(f"runs/*/*/*/{EVALUATION_FILE}")):
+        data = json.loads(path.read_text())
+        for key in ("wall_seconds", "train_wall_seconds"):
+            data.pop(key, None)
+        found[str(path.relative_to(out))] = data
+    return found
+
+
+def _alive_in_group(group: int) -> list[int]:
+    alive = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[2]) == group and fields[0] != "Z":
+                alive.append(int(entry.name))
+    return alive
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> dict[str, dict]:
+    out = tmp_path_factory.mktemp("uninterrupted")
+    subprocess.run(_smoke_command(out), check=True, capture_output=True, timeout=RUN_TIMEOUT_S)
+    return _numbers(out)
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, uninterrupted, signum):
+    command = _smoke_command(tmp_path)
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True
+    )
+    deadline = time.monotonic() + RUN_TIMEOUT_S
+    # wait until the workers run (their logs appear), then interrupt as a terminal would:
+    # SIGINT to the whole process group, SIGTERM to the main process only
+    while not list(tmp_path.glob("runs/*/*/*/train.log")):
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.1)
+    time.sleep(2.0)
+    sent = time.monotonic()
+    if signum == signal.SIGINT:
+        os.killpg(process.pid, signum)
+    else:
+        process.send_signal(signum)
+    stdout, stderr = process.communicate(timeout=60)
+    assert time.monotonic() - sent < INTERRUPT_DEADLINE_S
+    assert process.returncode == 128 + signum
+    assert "Traceback" not in stderr, stderr
+    assert "run the same command again to resume" in stderr
+    time.sleep(0.5)
+    assert _alive_in_group(process.pid) == []  # no worker, no resource tracker left behind
+    for path in tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"):
+        json.loads(path.read_text())  # whatever finished is whole
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    assert rerun.returncode == 0, rerun.stderr
+    assert _numbers(tmp_path) == uninterrupted
+
+
+def _finished_folder(tmp_path: Path) -> Path:
+    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    return tmp_path
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garble", "delete"])
+def test_a_damaged_evaluation_is_set_aside_and_redone(tmp_path, damage, capsys):
+    out = _finished_folder(tmp_path)
+    done = next(out.glob(f"runs/*/*/*/{EVALUATION_FILE}"))
+    original = json.loads(done.read_text())
+    if damage == "truncate":
+        done.write_bytes(done.read_bytes()[:100])
+    elif damage == "garble":
+        done.write_text("not json at all")
+    else:
+        done.unlink()
+    # leoc plot names the damaged file in one line (a deleted result just leaves the report)
+    status = main(["plot", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    if damage == "delete":
+        assert status == 0
+    else:
+        assert status == 2 and len(err) == 1 and str(done) in err[0]
+    messages: list[str] = []
+    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
+    if damage != "delete":
+        assert any(str(done) in m and "set aside" in m for m in messages)
+        assert len(list(done.parent.glob(f"{EVALUATION_FILE}.damaged-*"))) == 1
+    again = json.loads(done.read_text())
+    for key in ("wall_seconds", "train_wall_seconds"):
+        again.pop(key), original.pop(key)
+    assert again == original
+
+
+def test_a_damaged_meta_file_is_set_aside(tmp_path):
+    out = _finished_folder(tmp_path)
+    (out / META_FILE).write_text("{")
+    messages: list[str] = []
+    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
+    assert any("set aside" in m for m in messages)
+    assert json.loads((out / META_FILE).read_text())["profile"] == "quick"
+
+
+def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
+    reproduce(
+        tmp_path, "smoke", controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None
+    )
+    meta = json.loads((tmp_path / META_FILE).read_text())
+    assert meta["seeds"] == [0] and meta["systems"] == ["pendulum"]
+    report = (tmp_path / "report.md").read_text()
+    assert "Runs aggregated in this report: pendulum/linear: seeds [0]." in report
