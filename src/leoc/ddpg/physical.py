@@ -23,7 +23,7 @@ import torch
 from stable_baselines3.td3.policies import Actor
 from torch import Tensor, nn
 
-from leoc.ddpg.policies import HybridActor, action_box
+from leoc.ddpg.policies import HybridActor, action_box, roa_relevance
 from leoc.policies import HybridPolicy, LinearController
 
 __all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
@@ -117,14 +117,24 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
     high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
     if isinstance(actor, HybridActor):
         mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
+        if actor.hybrid.relevance_module is None:
+            relevance: dict[str, object] = {
+                "lambda_init": actor.hybrid.lambda_.detach().cpu().to(DTYPE),
+                "learn_lambda": False,
+            }
+        else:
+            # Rebuilt in float64 from the actor's float64 constructor data (P, rho_in), with the
+            # actor's learned band width, frozen.
+            width = float(actor.hybrid.relevance_module.width.detach())
+            roa_kwargs = {**actor.roa_kwargs, "roa_width_init": width, "learn_width": False}
+            relevance = {"relevance": roa_relevance(roa_kwargs, DTYPE)}
         hybrid = HybridPolicy(
             LinearController(actor.physical_gain.detach().cpu(), actor.physical_bias.cpu()),
             AffineOutput(mlp, centre, half),
             actor.operating_obs.detach().cpu(),
-            lambda_init=actor.hybrid.lambda_.detach().cpu().to(DTYPE),
-            learn_lambda=False,
             action_limit=None,
             saturation="none",
+            **relevance,  # type: ignore[arg-type]
         )
         policy = PhysicalPolicy(hybrid, low, high, hybrid=hybrid)
     else:
