@@ -138,13 +138,15 @@ class GridProof(NamedTuple):
     nodes : int
         Nodes inside the covering set (the certified set grown by half a cell diagonal).
     lipschitz : float
-        Lipschitz constant used for Delta (``LIPSCHITZ_SAFETY`` times the largest gradient
-        norm at the nodes: an estimate).
+        Largest local Lipschitz constant used for Delta (``LIPSCHITZ_SAFETY`` times the largest
+        gradient norm over a node's 3x3 neighbourhood: an estimate, not a bound).
     unproved_nodes : int
-        Covering nodes where ``Delta(c) + L h >= 0``.
-    core_level : float
-        Level below which every unproved point lies: the grid proves the decrease on
-        ``core_level < V <= rho`` given ``lipschitz`` (0 when every node passes).
+        Covering nodes where ``Delta(c) + L_c h >= 0``.
+    core_level, proved_level : float
+        The grid proves the decrease on ``core_level < V < proved_level`` given the Lipschitz
+        estimate (the largest such annulus; ``(0, rho)`` when every node passes). Near a the
+        margin ``L_c h`` outweighs ``|Delta| = O(|z|^2)``; near the certified boundary Delta
+        tends to 0 (that is where rho was cut), so the annulus is narrower than the set.
     """
 
     points_per_axis: int
@@ -153,6 +155,7 @@ class GridProof(NamedTuple):
     lipschitz: float
     unproved_nodes: int
     core_level: float
+    proved_level: float
 
 
 class LyapunovCertificate(NamedTuple):
@@ -372,46 +375,90 @@ def _check_box(box: Any, system: System, name: str) -> np.ndarray:
     return values
 
 
-def _grid_nodes(P: np.ndarray, level: float, points: int) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes (B, 2) of a regular grid over the bounding box of ``{z^T P z <= level}`` that lie
-    in the set, and the spacing (2,)."""
+def _grid_axes(P: np.ndarray, level: float, points: int) -> list[np.ndarray]:
+    """Axes of a regular grid over the bounding box of ``{z^T P z <= level}``."""
     extent = np.sqrt(level * np.diag(np.linalg.inv(P)))
-    axes = [np.linspace(-width, width, points) for width in extent]
-    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
-    inside = np.einsum("bi,ij,bj->b", mesh, P, mesh) <= level
-    return mesh[inside], 2.0 * extent / (points - 1)
+    return [np.linspace(-width, width, points) for width in extent]
+
+
+def _grid_nodes(P: np.ndarray, level: float, points: int) -> np.ndarray:
+    """Nodes (B, 2) of the grid of :func:`_grid_axes` that lie in ``{z^T P z <= level}``."""
+    mesh = np.stack(np.meshgrid(*_grid_axes(P, level, points), indexing="ij"), axis=-1)
+    mesh = mesh.reshape(-1, 2)
+    return mesh[np.einsum("bi,ij,bj->b", mesh, P, mesh) <= level]
+
+
+def _neighbourhood_max(values: np.ndarray) -> np.ndarray:
+    """Largest value over each node's 3x3 neighbourhood (edges padded with themselves)."""
+    padded = np.pad(values, 1, mode="edge")
+    rows, cols = values.shape
+    shifted = [padded[i : i + rows, j : j + cols] for i in range(3) for j in range(3)]
+    return np.max(np.stack(shifted), axis=0)
+
+
+def _largest_gap(lower: np.ndarray, upper: np.ndarray, top: float) -> tuple[float, float]:
+    """Largest interval of [0, top] that meets none of the intervals [lower_i, upper_i]."""
+    best = (0.0, 0.0)
+    reached = 0.0
+    for low, high in sorted(zip(lower.tolist(), upper.tolist(), strict=True)):
+        if low > reached and min(low, top) - reached > best[1] - best[0]:
+            best = (reached, min(low, top))
+        reached = max(reached, high)
+        if reached >= top:
+            break
+    if reached < top and top - reached > best[1] - best[0]:
+        best = (reached, top)
+    return best
 
 
 def _grid_proof(
     system: System, P: np.ndarray, controller: Controller, repeat: int, rho: float, points: int
 ) -> GridProof:
-    """Dense-grid Lipschitz margin of a 2-D certificate (see the module docstring)."""
+    """Dense-grid Lipschitz margin of a 2-D certificate (see the module docstring).
+
+    Every point of the set lies within the half cell diagonal h of a node; the set is grown by
+    ``sqrt(lambda_max(P)) h`` in ``sqrt(V)`` (a norm with that Lipschitz constant) so those
+    nodes are all checked. A node c passes when ``Delta(c) + L_c h < 0``, ``L_c`` the safety
+    factor times the largest gradient norm of Delta over c's 3x3 neighbourhood. A failing node
+    leaves unproved at most its cell, whose levels lie in
+    ``[(sqrt V(c) - s h)^2, (sqrt V(c) + s h)^2]``, s = sqrt(lambda_max(P)); the proved annulus
+    is the largest level interval that none of these meets.
+    """
     P_t = torch.as_tensor(P, dtype=DTYPE)
-    probe_nodes, spacing = _grid_nodes(P, rho, points)
+    scale = math.sqrt(float(np.linalg.eigvalsh(P)[-1]))
+    axes = _grid_axes(P, rho, points)
+    spacing = np.array([axis[1] - axis[0] for axis in axes])
     half_diagonal = 0.5 * float(np.linalg.norm(spacing))
-    # Grow the set by half a cell diagonal in the P-norm (sqrt(V) is a norm with Lipschitz
-    # constant sqrt(lambda_max(P))), so every point of the set has a node within h.
-    grown = (math.sqrt(rho) + math.sqrt(float(np.linalg.eigvalsh(P)[-1])) * half_diagonal) ** 2
-    nodes, _ = _grid_nodes(P, grown, points)
-    del probe_nodes
-    deviation = torch.as_tensor(nodes, dtype=DTYPE).requires_grad_(True)
+    grown = (math.sqrt(rho) + scale * half_diagonal) ** 2
+    axes = _grid_axes(P, grown, points + 2 * int(math.ceil(points * (math.sqrt(grown / rho) - 1))))
+    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    spacing = np.array([axis[1] - axis[0] for axis in axes])
+    half_diagonal = 0.5 * float(np.linalg.norm(spacing))
+    deviation = torch.as_tensor(mesh.reshape(-1, 2), dtype=DTYPE).requires_grad_(True)
     states = deviation + torch.as_tensor(system.operating_state, dtype=DTYPE)
     following, _ = _closed_loop(system, controller, repeat, states)
     change = lyapunov_value(P_t, state_deviation(system, following)) - lyapunov_value(
         P_t, deviation
     )
     (gradient,) = torch.autograd.grad(change.sum(), deviation)
-    lipschitz = LIPSCHITZ_SAFETY * float(gradient.norm(dim=-1).max())
-    failing = (change.detach() + lipschitz * half_diagonal >= 0.0).numpy()
-    values = np.einsum("bi,ij,bj->b", nodes, P, nodes)
-    core = 0.0
-    if failing.any():
-        reach = (
-            math.sqrt(float(values[failing].max()))
-            + math.sqrt(float(np.linalg.eigvalsh(P)[-1])) * half_diagonal
-        )
-        core = min(reach**2, rho)
-    return GridProof(points, spacing, int(nodes.shape[0]), lipschitz, int(failing.sum()), core)
+    norms = gradient.norm(dim=-1).numpy().reshape(mesh.shape[:2])
+    lipschitz = LIPSCHITZ_SAFETY * _neighbourhood_max(norms).reshape(-1)
+    values = np.einsum("bi,ij,bj->b", mesh.reshape(-1, 2), P, mesh.reshape(-1, 2))
+    covering = values <= (math.sqrt(rho) + scale * half_diagonal) ** 2
+    failing = covering & (change.detach().numpy() + lipschitz * half_diagonal >= 0.0)
+    root = np.sqrt(values[failing])
+    lower = np.maximum(root - scale * half_diagonal, 0.0) ** 2
+    upper = (root + scale * half_diagonal) ** 2
+    core, proved = _largest_gap(lower, upper, rho)
+    return GridProof(
+        int(mesh.shape[0]),
+        spacing,
+        int(covering.sum()),
+        float(lipschitz[covering].max()),
+        int(failing.sum()),
+        core,
+        proved,
+    )
 
 
 def certify_level(
@@ -506,7 +553,7 @@ def certify_level(
     for rounds in range(1, MAX_ROUNDS + 1):
         deviation = _uniform_ellipsoid(matrix, rho, samples, rng)
         if use_grid:
-            nodes, _ = _grid_nodes(matrix, rho, int(grid_points))  # type: ignore[arg-type]
+            nodes = _grid_nodes(matrix, rho, int(grid_points))  # type: ignore[arg-type]
             deviation = np.concatenate([deviation, nodes])
         states = torch.as_tensor(deviation, dtype=DTYPE) + operating
         value, violates = _decrease(system, P_t, controller, repeat, states)
