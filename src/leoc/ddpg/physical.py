@@ -17,6 +17,7 @@ with the SB3 actor to float32 precision.
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 import torch
@@ -125,7 +126,9 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
         else:
             # Rebuilt in float64 from the actor's float64 constructor data (P, rho_in), with the
             # actor's learned band width, frozen.
-            width = float(actor.hybrid.relevance_module.width.detach())
+            module = actor.hybrid.relevance_module
+            # float32 sigmoid can round w up to w_max itself; the float64 rebuild needs w < w_max
+            width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
             roa_kwargs = {**actor.roa_kwargs, "roa_width_init": width, "learn_width": False}
             relevance = {"relevance": roa_relevance(roa_kwargs, DTYPE)}
         hybrid = HybridPolicy(
