@@ -85,6 +85,7 @@ from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
 __all__ = [
     "Basin",
     "GridProof",
+    "LinearClosedLoop",
     "LyapunovCertificate",
     "basin_starts",
     "box_fraction",
@@ -123,6 +124,8 @@ GRID_POINTS_2D = 601
 LIPSCHITZ_SAFETY = 2.0
 """Factor on the largest sampled gradient norm of Delta used as its Lipschitz constant."""
 BOX_FRACTION_SAMPLES = 200_000
+SYMMETRY_RTOL = 1e-9
+"""Allowed asymmetry of P, relative to its largest entry."""
 LINEAR_DECREASE_TOL = 0.0
 """The linear check needs max eig(A_cl^T P A_cl - P) < this (strictly negative definite)."""
 
@@ -295,7 +298,7 @@ def _check_matrix(P: Any, size: int) -> np.ndarray:
     matrix = np.asarray(P, dtype=float)
     if matrix.shape != (size, size) or not np.all(np.isfinite(matrix)):
         raise ValueError(f"P: expected finite numbers of shape ({size}, {size}), found {matrix!r}")
-    if not np.allclose(matrix, matrix.T, rtol=0.0, atol=1e-9 * np.abs(matrix).max()):
+    if not np.allclose(matrix, matrix.T, rtol=0.0, atol=SYMMETRY_RTOL * np.abs(matrix).max()):
         raise ValueError(f"P: expected a symmetric matrix, found {matrix.tolist()}")
     smallest = float(np.linalg.eigvalsh(matrix)[0])
     if smallest <= 0.0:
@@ -569,19 +572,24 @@ def certify_level(
     return result(0.0, MAX_ROUNDS)
 
 
-def lqr_closed_loop(design: Any) -> Controller:
-    """``G(o) = W o + b`` of an :class:`~leoc.control.LQRDesign` as a callable with the design's
-    ``action_repeat`` (the actuator clip is inside the step)."""
-    W = torch.as_tensor(design.W, dtype=DTYPE)
-    b = torch.as_tensor(design.b, dtype=DTYPE)
+class LinearClosedLoop:
+    """``G(o) = W o + b`` of an :class:`~leoc.control.LQRDesign`, float64, with the design's
+    ``action_repeat`` (the actuator clip is inside the step). Observation (B, O) -> (B, A)."""
 
-    class _Linear:
-        action_repeat = int(design.action_repeat)
+    is_hybrid = False
 
-        def __call__(self, obs: Tensor) -> Tensor:
-            return obs @ W.T + b
+    def __init__(self, design: Any) -> None:
+        self.W = torch.as_tensor(design.W, dtype=DTYPE)
+        self.b = torch.as_tensor(design.b, dtype=DTYPE)
+        self.action_repeat = check_repeat(design.action_repeat)
 
-    return _Linear()
+    def __call__(self, obs: Tensor) -> Tensor:
+        return obs @ self.W.T + self.b
+
+
+def lqr_closed_loop(design: Any) -> LinearClosedLoop:
+    """The LQR of ``design`` as a controller at the design's control period."""
+    return LinearClosedLoop(design)
 
 
 def certify_lqr(
