@@ -39,6 +39,14 @@ parameter (or a frozen buffer); everything is in the model's ``state_dict`` and 
 SB3's ``save``/``load``. The target actor is built by the same ``make_actor`` and is a hybrid
 too; the soft target update averages ``log_lambda`` along with the MLP weights.
 
+With ``relevance="roa"`` the relevance is :class:`~leoc.policies.ROARelevance` instead: exactly
+1 on the LQR's certified region of attraction :math:`\{V \le \rho_{in}\}` (computed on the
+state deviation recovered from the observation, so it too is unchanged by the action scaling),
+falling to 0 over a band of learnable width ``width_param``. ``P``, :math:`\rho_{in}` and the
+observation layout are constructor data (saved with the model); the width is a parameter that
+the actor loss trains and the soft update averages. On the flat top ``lerp(H, G, 1)`` returns
+:math:`\tilde G` bit for bit, so the actor is the (clipped) LQR there.
+
 References
 ----------
 Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
