@@ -139,6 +139,45 @@ def summary(rows: list[dict], linear: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def plot_curves(out: Path, rows: list[dict]) -> Path | None:
+    """Mean evaluation return against interaction time, one line per run, per system."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    systems = sorted({row["system"] for row in rows})
+    if not systems:
+        return None
+    fig, axes = plt.subplots(1, len(systems), figsize=(6.0 * len(systems), 4.0), squeeze=False)
+    colours = {"paper": "tab:blue", "roa": "tab:orange"}
+    for axis, name in zip(axes[0], systems, strict=True):
+        for row in rows:
+            if row["system"] != name:
+                continue
+            folder = out / f"{name}-{row['relevance']}-seed{row['seed']}"
+            curve = json.loads((folder / "curve.json").read_text())["curve"]
+            seconds = [point["interaction_seconds"] for point in curve]
+            returns = [point["mean_return"] for point in curve]
+            axis.plot(
+                seconds,
+                returns,
+                color=colours[row["relevance"]],
+                alpha=0.8,
+                label=f"{row['relevance']} seed {row['seed']}",
+            )
+        axis.set_title(f"{name}: DDPG hybrids, paper vs ROA relevance")
+        axis.set_xlabel("interaction time [simulated s]")
+        axis.set_ylabel("mean evaluation return")
+        axis.legend(fontsize="small", loc="lower right")
+        axis.grid(True, alpha=0.3)
+    path = out / "learning_curves.png"
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("runs") / "roa-seeds")
@@ -181,6 +220,7 @@ def main() -> None:
                 )
                 (args.out / "summary.md").write_text(summary(rows, linear))
     print(summary(rows, linear))
+    print("learning curves:", plot_curves(args.out, rows))
 
 
 if __name__ == "__main__":
