@@ -55,3 +55,24 @@ def test_help_of_every_command() -> None:
             [sys.executable, "-m", "leoc.cli", command, "--help"], capture_output=True, text=True
         )
         assert result.returncode == 0 and "usage" in result.stdout
+
+
+def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:
+    from leoc.control import certify_lqr
+
+    plot = tmp_path / "roa.png"
+    args = ["roa", "mountaincar", "--json", "--samples", "5000", "--starts", "40"]
+    assert main([*args, "--slice-points", "5", "--plot", str(plot)]) == 0
+    report = json.loads(capsys.readouterr().out)
+    system = make_system("mountaincar")
+    expected = certify_lqr(system, design_lqr(system), samples=5000, seed=0)
+    assert report["certificate"]["rho"] == expected.rho
+    assert report["certificate"]["samples"] == 5000
+    assert report["basins"]["LQR (period 1)"]["certified_set_held"] == 1.0
+    assert plot.is_file()
+    assert (
+        main(["roa", "pendulum", "--action-repeat", "3", "--samples", "2000", "--starts", "20"])
+        == 0
+    )
+    text = capsys.readouterr().out
+    assert "control period 3 step(s)" in text and "violating volume fraction" in text

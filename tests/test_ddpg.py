@@ -398,3 +398,81 @@ def test_hybrid_ddpg_learns_to_hold_pendulum(tmp_path):
     )
     assert result.reached_steps is not None
     assert result.best_return > -600.0  # swing-up in a few seconds, then balanced
+
+
+# ----------------------------------------------------------------------------- relevance="roa"
+
+
+def _roa_model(system_name: str, **kw):
+    env = make_env(system_name)
+    policy_kwargs = hybrid_policy_kwargs(system_name, relevance="roa", net_arch=SMALL_NET)
+    return DDPG(HybridTD3Policy, env, policy_kwargs=policy_kwargs, seed=0, device="cpu", **kw)
+
+
+def _roa_band_obs(model, system, count: int, low: float, high: float) -> torch.Tensor:
+    """float32 observations whose level V / rho_in lies in [low, high] (random directions)."""
+    module = model.actor.hybrid.relevance_module
+    P = np.asarray(model.actor.roa_kwargs["roa_lyapunov_matrix"])
+    rho_in = model.actor.roa_kwargs["roa_rho_in"]
+    rng = np.random.default_rng(0)
+    directions = rng.standard_normal((count, system.state_dim))
+    levels = rng.uniform(low, high, size=count) * rho_in
+    scales = np.sqrt(levels / np.einsum("bi,ij,bj->b", directions, P, directions))
+    states = system.operating_state + scales[:, None] * directions
+    assert module.max_width > 0
+    return system.observe(torch.as_tensor(states)).float()
+
+
+@pytest.mark.parametrize("system_name", ["cartpole", "mountaincar"])
+def test_roa_actor_is_the_lqr_bit_for_bit_inside_the_flat_top(system_name):
+    system = make_system(system_name)
+    model = _roa_model(system_name)
+    generator = torch.Generator().manual_seed(3)
+    with torch.no_grad():
+        for param in model.actor.hybrid.nonlinear.parameters():
+            param.copy_(torch.randn(param.shape, generator=generator))
+    obs = _roa_band_obs(model, system, 256, 0.0, 0.999)
+    with torch.no_grad():
+        action = model.actor(obs)
+        linear = torch.clamp(model.actor.hybrid.linear(obs), -1.0, 1.0)
+        assert torch.equal(model.actor.relevance(obs), torch.ones(256, 1))
+    assert torch.equal(action, linear)
+    # The float64 physical policy: the saturated LQR, and pi(a) = G(a), Jacobian W.
+    design = design_lqr(system)
+    policy = physical_policy(model.actor)
+    obs64 = obs.double()
+    expected = np.clip(
+        obs64.numpy() @ design.W.T + design.b, -system.action_limit, system.action_limit
+    )
+    np.testing.assert_allclose(policy(obs64).numpy(), expected, rtol=0, atol=F64_ATOL)
+    point = torch.as_tensor(system.operating_obs)
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None])[0], point)
+    np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=F64_ATOL)
+
+
+def test_roa_training_step_reaches_width_and_network_and_round_trips(tmp_path):
+    system = make_system("pendulum")
+    model = _roa_model("pendulum", learning_starts=10, batch_size=16)
+    names = {name for name, _ in model.actor.named_parameters()}
+    assert "hybrid.relevance_module.width_param" in names
+    obs = _roa_band_obs(model, system, 32, 1.05, 1.5)  # inside the transition band
+    grads = _actor_loss_grads(model, obs)
+    width_grad = grads["hybrid.relevance_module.width_param"]
+    assert width_grad is not None and float(width_grad.abs()) > 0
+    mlp_grads = [g for name, g in grads.items() if name.startswith("hybrid.nonlinear")]
+    assert mlp_grads and all(g is not None and float(g.abs().sum()) > 0 for g in mlp_grads)
+    # One optimiser step moves the width (the actor's optimiser holds it).
+    before = float(model.actor.hybrid.relevance_module.width.detach())
+    model.actor.optimizer.step()
+    assert float(model.actor.hybrid.relevance_module.width.detach()) != before
+    # SB3 save/load rebuilds the ROA actor with its learned width.
+    model.save(tmp_path / "roa.zip")
+    loaded = DDPG.load(tmp_path / "roa.zip", device="cpu")
+    assert loaded.actor.relevance_kind == "roa" and loaded.actor_target.relevance_kind == "roa"
+    probe = _roa_band_obs(model, system, 16, 0.5, 2.5)
+    with torch.no_grad():
+        torch.testing.assert_close(loaded.actor(probe), model.actor(probe), rtol=0, atol=0)
+    config = DDPGConfig.for_system("pendulum", relevance="roa")
+    assert DDPGConfig.from_dict(config.as_dict()).relevance == "roa"
+    with pytest.raises(ValueError, match="relevance: expected one of"):
+        DDPGConfig.for_system("pendulum", relevance="flat")

@@ -1,4 +1,5 @@
-"""Linearisation, LQR design and stability margins about the operating point."""
+"""Linearisation, LQR design, stability margins and region of attraction about the operating
+point."""
 
 from leoc.control.lqr import (
     DESIGN_METHODS,
@@ -12,13 +13,45 @@ from leoc.control.lqr import (
     observation_gain,
     stable_gain_interval,
 )
+from leoc.control.roa import (
+    Basin,
+    GridProof,
+    LyapunovCertificate,
+    basin_starts,
+    box_fraction,
+    certified_set_check,
+    certify_level,
+    certify_lqr,
+    default_basin_box,
+    empirical_basin,
+    lqr_closed_loop,
+    lyapunov_value,
+    plot_basins,
+    slice_grid,
+    state_deviation,
+)
 
 __all__ = [
     "DESIGN_METHODS",
+    "Basin",
+    "GridProof",
+    "LyapunovCertificate",
     "LQRDesign",
     "Linearisation",
     "StabilityMargins",
+    "basin_starts",
+    "box_fraction",
+    "certified_set_check",
+    "certify_level",
+    "certify_lqr",
     "check_stabilisable",
+    "default_basin_box",
+    "empirical_basin",
+    "lqr_closed_loop",
+    "lyapunov_value",
+    "plot_basins",
+    "slice_grid",
+    "state_deviation",
     "design_lqr",
     "linearise",
     "loop_margins",

@@ -21,6 +21,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Literal
 
+from leoc.policies.relevance import DEFAULT_ROA_WIDTH, RELEVANCE_KINDS
+
 ALGOS = ("ddpg", "td3")
 Algo = Literal["ddpg", "td3"]
 
@@ -75,6 +77,16 @@ class DDPGConfig:
         Train ``log_lambda`` with the actor (False: frozen buffer).
     lqr_method : {"discrete", "continuous"}
         LQR design used for G (see :func:`leoc.control.design_lqr`).
+    relevance : {"paper", "roa"}
+        The hybrid's relevance: the paper's :math:`(1 + d)^{-2}` (``lambda_init``,
+        ``learn_lambda``), or :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's
+        certified region of attraction (``roa_rho_fraction``, ``roa_width``, ``learn_width``).
+    roa_rho_fraction : float in (0, 1]
+        Flat top level as a fraction of the certified rho (``relevance="roa"``).
+    roa_width : float
+        Initial width of the ROA relevance's transition band.
+    learn_width : bool
+        Train the band width with the actor (False: frozen).
     eval_interval : int
         Environment steps between two evaluations.
     eval_episodes : int
@@ -105,6 +117,10 @@ class DDPGConfig:
     lambda_init: float = 1.0
     learn_lambda: bool = True
     lqr_method: str = "discrete"
+    relevance: str = "paper"
+    roa_rho_fraction: float = 1.0
+    roa_width: float = DEFAULT_ROA_WIDTH
+    learn_width: bool = True
     eval_interval: int = 1_000
     eval_episodes: int = 5
 
@@ -145,6 +161,16 @@ class DDPGConfig:
             raise ValueError(
                 f"discount, polyak: expected values in (0, 1], found {self.discount}, {self.polyak}"
             )
+        if self.relevance not in RELEVANCE_KINDS:
+            raise ValueError(
+                f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"
+            )
+        if not 0.0 < self.roa_rho_fraction <= 1.0:
+            raise ValueError(
+                f"roa_rho_fraction: expected a number in (0, 1], found {self.roa_rho_fraction!r}"
+            )
+        if not isinstance(self.roa_width, (int, float)) or not self.roa_width > 0:
+            raise ValueError(f"roa_width: expected a positive number, found {self.roa_width!r}")
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts: expected >= 0, found {self.learning_starts}")
 

@@ -17,13 +17,14 @@ with the SB3 actor to float32 precision.
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 import torch
 from stable_baselines3.td3.policies import Actor
 from torch import Tensor, nn
 
-from leoc.ddpg.policies import HybridActor, action_box
+from leoc.ddpg.policies import HybridActor, action_box, roa_relevance
 from leoc.policies import HybridPolicy, LinearController
 
 __all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
@@ -117,14 +118,26 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
     high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
     if isinstance(actor, HybridActor):
         mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
+        if actor.hybrid.relevance_module is None:
+            relevance: dict[str, object] = {
+                "lambda_init": actor.hybrid.lambda_.detach().cpu().to(DTYPE),
+                "learn_lambda": False,
+            }
+        else:
+            # Rebuilt in float64 from the actor's float64 constructor data (P, rho_in), with the
+            # actor's learned band width, frozen.
+            module = actor.hybrid.relevance_module
+            # float32 sigmoid can round w up to w_max itself; the float64 rebuild needs w < w_max
+            width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
+            roa_kwargs = {**actor.roa_kwargs, "roa_width_init": width, "learn_width": False}
+            relevance = {"relevance": roa_relevance(roa_kwargs, DTYPE)}
         hybrid = HybridPolicy(
             LinearController(actor.physical_gain.detach().cpu(), actor.physical_bias.cpu()),
             AffineOutput(mlp, centre, half),
             actor.operating_obs.detach().cpu(),
-            lambda_init=actor.hybrid.lambda_.detach().cpu().to(DTYPE),
-            learn_lambda=False,
             action_limit=None,
             saturation="none",
+            **relevance,  # type: ignore[arg-type]
         )
         policy = PhysicalPolicy(hybrid, low, high, hybrid=hybrid)
     else:

@@ -39,6 +39,14 @@ parameter (or a frozen buffer); everything is in the model's ``state_dict`` and 
 SB3's ``save``/``load``. The target actor is built by the same ``make_actor`` and is a hybrid
 too; the soft target update averages ``log_lambda`` along with the MLP weights.
 
+With ``relevance="roa"`` the relevance is :class:`~leoc.policies.ROARelevance` instead: exactly
+1 on the LQR's certified region of attraction :math:`\{V \le \rho_{in}\}` (computed on the
+state deviation recovered from the observation, so it too is unchanged by the action scaling),
+falling to 0 over a band of learnable width ``width_param``. ``P``, :math:`\rho_{in}` and the
+observation layout are constructor data (saved with the model); the width is a parameter that
+the actor loss trains and the soft update averages. On the flat top ``lerp(H, G, 1)`` returns
+:math:`\tilde G` bit for bit, so the actor is the (clipped) LQR there.
+
 References
 ----------
 Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
@@ -57,7 +65,8 @@ from gymnasium import spaces
 from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
-from leoc.policies import HybridPolicy, LinearController
+from leoc.policies import HybridPolicy, LinearController, ROARelevance
+from leoc.policies.relevance import DEFAULT_ROA_WIDTH, RELEVANCE_KINDS
 
 __all__ = [
     "HybridActor",
@@ -65,6 +74,7 @@ __all__ = [
     "HybridTD3Policy",
     "action_box",
     "hybrid_policy_kwargs",
+    "roa_relevance_kwargs",
 ]
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
@@ -119,6 +129,24 @@ class HybridActor(Actor):
         Initial diagonal of Lambda (> 0).
     learn_lambda : bool
         Whether ``log_lambda`` is an ``nn.Parameter`` (trained by the actor loss) or a buffer.
+    relevance : {"paper", "roa"}
+        ``paper``: :math:`r = (1 + d)^{-2}` with ``lambda_init``/``learn_lambda``. ``roa``:
+        :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's certified set
+        :math:`\{V \le \rho_{in}\}` (needs the ``roa_*`` arguments;
+        :func:`roa_relevance_kwargs` builds them). The relevance does not depend on the action
+        scaling, so it is the same function in normalised and physical units.
+    roa_obs_layout : list of (kind, state_index)
+        ``System.obs_layout`` (how the observation is built from the state).
+    roa_operating_state : array-like (S,)
+        Operating point in state coordinates.
+    roa_lyapunov_matrix : array-like (S, S)
+        ``P`` of the LQR design.
+    roa_rho_in : float
+        Level of the flat top (at most the certified rho).
+    roa_width_init : float
+        Initial band width (see :class:`~leoc.policies.ROARelevance`).
+    learn_width : bool
+        Whether the band width is trained by the actor loss.
 
     Attributes
     ----------
@@ -148,7 +176,16 @@ class HybridActor(Actor):
         operating_obs: object,
         lambda_init: float | Sequence[float] = 1.0,
         learn_lambda: bool = True,
+        relevance: str = "paper",
+        roa_obs_layout: Sequence[Sequence[Any]] | None = None,
+        roa_operating_state: Sequence[float] | None = None,
+        roa_lyapunov_matrix: Sequence[Sequence[float]] | None = None,
+        roa_rho_in: float | None = None,
+        roa_width_init: float = DEFAULT_ROA_WIDTH,
+        learn_width: bool = True,
     ) -> None:
+        if relevance not in RELEVANCE_KINDS:
+            raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
         super().__init__(
             observation_space,
             action_space,
@@ -168,6 +205,8 @@ class HybridActor(Actor):
         self.operating_obs_init = point.tolist()
         self.lambda_init = lambda_init
         self.learn_lambda = learn_lambda
+        self.relevance_kind = relevance
+        self.roa_kwargs: dict[str, Any] = {}
         self.register_buffer("physical_gain", torch.as_tensor(gain))
         self.register_buffer("physical_bias", torch.as_tensor(bias))
         self.register_buffer("operating_obs", torch.as_tensor(point))
@@ -175,14 +214,44 @@ class HybridActor(Actor):
         linear = LinearController(gain / half[:, None], (bias - centre) / half, dtype=ACTION_DTYPE)
         mlp = self.mu
         del self.mu  # the MLP lives on as hybrid.nonlinear (one copy in the state_dict)
+        if relevance == "paper":
+            self.hybrid = HybridPolicy(
+                linear,
+                mlp,
+                point,
+                lambda_init=lambda_init,
+                learn_lambda=learn_lambda,
+                action_limit=NORMALISED_LIMIT,
+                saturation="clip",
+            )
+            return
+        missing = [
+            name
+            for name, value in (
+                ("roa_obs_layout", roa_obs_layout),
+                ("roa_operating_state", roa_operating_state),
+                ("roa_lyapunov_matrix", roa_lyapunov_matrix),
+                ("roa_rho_in", roa_rho_in),
+            )
+            if value is None
+        ]
+        if missing:
+            raise ValueError(f"relevance='roa' needs {', '.join(missing)}; found None")
+        self.roa_kwargs = {
+            "roa_obs_layout": [[str(kind), int(index)] for kind, index in roa_obs_layout],  # type: ignore[union-attr]
+            "roa_operating_state": np.asarray(roa_operating_state, dtype=np.float64).tolist(),
+            "roa_lyapunov_matrix": np.asarray(roa_lyapunov_matrix, dtype=np.float64).tolist(),
+            "roa_rho_in": float(roa_rho_in),  # type: ignore[arg-type]
+            "roa_width_init": float(roa_width_init),
+            "learn_width": bool(learn_width),
+        }
         self.hybrid = HybridPolicy(
             linear,
             mlp,
             point,
-            lambda_init=lambda_init,
-            learn_lambda=learn_lambda,
             action_limit=NORMALISED_LIMIT,
             saturation="clip",
+            relevance=roa_relevance(self.roa_kwargs, ACTION_DTYPE),
         )
 
     @property
@@ -198,6 +267,8 @@ class HybridActor(Actor):
             operating_obs=self.operating_obs_init,
             lambda_init=self.lambda_init,
             learn_lambda=self.learn_lambda,
+            relevance=self.relevance_kind,
+            **self.roa_kwargs,
         )
         return data
 
@@ -214,9 +285,12 @@ class HybridActor(Actor):
         """
         features = self.extract_features(obs, self.features_extractor)
         hybrid = self.hybrid
-        offset = features - hybrid.operating_point
-        distance = offset.square() @ torch.exp(-hybrid.log_lambda)  # (B,)
-        relevance = torch.reciprocal(torch.square(distance + 1.0)).unsqueeze(-1)  # (B, 1)
+        if hybrid.relevance_module is None:
+            offset = features - hybrid.operating_point
+            distance = offset.square() @ torch.exp(-hybrid.log_lambda)  # (B,)
+            relevance = torch.reciprocal(torch.square(distance + 1.0)).unsqueeze(-1)  # (B, 1)
+        else:  # exactly 1 on the flat top, where lerp returns G bit for bit
+            relevance = hybrid.relevance_module(features)  # (B, 1)
         linear = torch.addmm(hybrid.linear.b, features, hybrid.linear.W.T)  # (B, F)
         blend = torch.lerp(hybrid.nonlinear(features), linear, relevance)
         return torch.clamp(blend, -NORMALISED_LIMIT, NORMALISED_LIMIT)
@@ -237,9 +311,9 @@ class HybridTD3Policy(TD3Policy):
     ----------
     observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
         As for :class:`stable_baselines3.td3.policies.TD3Policy`.
-    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda
+    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance, roa_*, learn_width
         Passed to :class:`HybridActor` (see there); :func:`hybrid_policy_kwargs` builds them
-        from a system's LQR design.
+        from a system's LQR design (and, for ``relevance="roa"``, its certificate).
     """
 
     actor: HybridActor
@@ -256,14 +330,26 @@ class HybridTD3Policy(TD3Policy):
         operating_obs: object,
         lambda_init: float | Sequence[float] = 1.0,
         learn_lambda: bool = True,
+        relevance: str = "paper",
         **kwargs: Any,
     ) -> None:
+        roa_names = (
+            "roa_obs_layout",
+            "roa_operating_state",
+            "roa_lyapunov_matrix",
+            "roa_rho_in",
+            "roa_width_init",
+            "learn_width",
+        )
+        roa = {name: kwargs.pop(name) for name in roa_names if name in kwargs}
         self.hybrid_kwargs = {
             "lqr_gain": np.asarray(lqr_gain, dtype=np.float64).tolist(),
             "lqr_bias": np.asarray(lqr_bias, dtype=np.float64).tolist(),
             "operating_obs": np.asarray(operating_obs, dtype=np.float64).tolist(),
             "lambda_init": lambda_init,
             "learn_lambda": bool(learn_lambda),
+            "relevance": relevance,
+            **roa,
         }
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
@@ -281,11 +367,75 @@ HybridDDPGPolicy = HybridTD3Policy
 """SB3's DDPG uses TD3's policy classes (with one critic); the hybrid policy is shared too."""
 
 
+def roa_relevance(kwargs: dict[str, Any], dtype: torch.dtype) -> ROARelevance:
+    """The :class:`~leoc.policies.ROARelevance` of :class:`HybridActor`'s ``roa_*`` kwargs."""
+    return ROARelevance(
+        [tuple(entry) for entry in kwargs["roa_obs_layout"]],
+        kwargs["roa_operating_state"],
+        kwargs["roa_lyapunov_matrix"],
+        kwargs["roa_rho_in"],
+        width_init=kwargs["roa_width_init"],
+        learn_width=kwargs["learn_width"],
+        dtype=dtype,
+    )
+
+
+def roa_relevance_kwargs(
+    system: Any,
+    design: Any,
+    rho_in_fraction: float = 1.0,
+    width_init: float = DEFAULT_ROA_WIDTH,
+    learn_width: bool = True,
+    certificate: Any = None,
+) -> dict[str, Any]:
+    """``roa_*`` kwargs of :class:`HybridActor` from a system, its LQR design and certificate.
+
+    Parameters
+    ----------
+    system : leoc.systems.System
+    design : LQRDesign
+        The design whose ``W, b`` the actor uses (its ``P`` defines V).
+    rho_in_fraction : float in (0, 1]
+        Flat top level ``rho_in = rho_in_fraction * rho``.
+    width_init, learn_width
+        See :class:`~leoc.policies.ROARelevance`.
+    certificate : LyapunovCertificate, optional
+        Default :func:`leoc.control.certify_lqr` of ``design`` (default options, seed 0).
+
+    Raises
+    ------
+    ValueError
+        If ``rho_in_fraction`` is outside (0, 1] or the design has no certificate (rho = 0).
+    """
+    from leoc.control import certify_lqr
+
+    if not 0.0 < rho_in_fraction <= 1.0:
+        raise ValueError(f"rho_in_fraction: expected a number in (0, 1], found {rho_in_fraction!r}")
+    certificate = certify_lqr(system, design) if certificate is None else certificate
+    if not certificate.certified:
+        raise ValueError(
+            f"relevance='roa': the LQR of {system.name} has no certified region of attraction "
+            f"(rho = 0, linear decrease {certificate.linear_decrease}); use relevance='paper'"
+        )
+    return {
+        "roa_obs_layout": [[kind, int(index)] for kind, index in system.obs_layout],
+        "roa_operating_state": np.asarray(system.operating_state, dtype=np.float64).tolist(),
+        "roa_lyapunov_matrix": np.asarray(design.P, dtype=np.float64).tolist(),
+        "roa_rho_in": float(rho_in_fraction * certificate.rho),
+        "roa_width_init": float(width_init),
+        "learn_width": bool(learn_width),
+    }
+
+
 def hybrid_policy_kwargs(
     system: Any,
     lambda_init: float | Sequence[float] = 1.0,
     learn_lambda: bool = True,
     lqr_method: str = "discrete",
+    relevance: str = "paper",
+    rho_in_fraction: float = 1.0,
+    width_init: float = DEFAULT_ROA_WIDTH,
+    learn_width: bool = True,
     **extra: Any,
 ) -> dict[str, Any]:
     """``policy_kwargs`` for :class:`HybridTD3Policy` from a system's LQR design.
@@ -299,6 +449,10 @@ def hybrid_policy_kwargs(
         See :class:`HybridActor`.
     lqr_method : {"discrete", "continuous"}
         LQR design method.
+    relevance : {"paper", "roa"}
+        The paper's relevance, or the ROA relevance flat on the LQR's certified set
+        (:func:`roa_relevance_kwargs`, with ``rho_in_fraction``, ``width_init``,
+        ``learn_width``).
     **extra
         Further policy kwargs (``net_arch``, ...).
     """
@@ -307,12 +461,19 @@ def hybrid_policy_kwargs(
 
     if isinstance(system, str):
         system = make_system(system)
+    if relevance not in RELEVANCE_KINDS:
+        raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
     design = design_lqr(system, method=lqr_method)  # type: ignore[arg-type]
+    roa: dict[str, Any] = {}
+    if relevance == "roa":
+        roa = roa_relevance_kwargs(system, design, rho_in_fraction, width_init, learn_width)
     return {
         "lqr_gain": design.W.tolist(),
         "lqr_bias": design.b.tolist(),
         "operating_obs": np.asarray(system.operating_obs, dtype=np.float64).tolist(),
         "lambda_init": lambda_init,
         "learn_lambda": learn_lambda,
+        "relevance": relevance,
+        **roa,
         **extra,
     }

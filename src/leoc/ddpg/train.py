@@ -82,6 +82,10 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
             lambda_init=config.lambda_init,
             learn_lambda=config.learn_lambda,
             lqr_method=config.lqr_method,
+            relevance=config.relevance,
+            rho_in_fraction=config.roa_rho_fraction,
+            width_init=config.roa_width,
+            learn_width=config.learn_width,
             **policy_kwargs,
         )
     common: dict[str, Any] = {

@@ -7,14 +7,24 @@ operating point a (Zhang & Capel, L4DC 2021).
 """
 
 from .held import HeldPolicy, lqr_controller, with_control_period
-from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy
+from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy, roa_hybrid
 from .linear import LinearController
 from .mlp import DEFAULT_HIDDEN_SIZES, MLPActor
 from .rbf import RBFNetwork
+from .relevance import (
+    DEFAULT_ROA_WIDTH,
+    RELEVANCE_KINDS,
+    ObservationDeviation,
+    PaperRelevance,
+    ROARelevance,
+    paper_relevance,
+)
 from .saturation import SATURATION_MODES, saturate
 
 __all__ = [
     "DEFAULT_HIDDEN_SIZES",
+    "DEFAULT_ROA_WIDTH",
+    "RELEVANCE_KINDS",
     "SATURATION_MODES",
     "SMOOTH_SATURATION_ATOL",
     "HeldPolicy",
@@ -22,8 +32,13 @@ __all__ = [
     "HybridPolicy",
     "LinearController",
     "MLPActor",
+    "ObservationDeviation",
+    "PaperRelevance",
+    "ROARelevance",
     "RBFNetwork",
     "lqr_controller",
+    "paper_relevance",
+    "roa_hybrid",
     "saturate",
     "with_control_period",
 ]

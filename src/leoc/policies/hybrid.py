@@ -56,8 +56,9 @@ Classical Control Theory", L4DC 2021, eq. 4-5.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -70,10 +71,12 @@ from ._checks import (
     shape_str,
 )
 from .linear import LinearController
+from .relevance import DEFAULT_ROA_WIDTH, ROARelevance, paper_relevance
 from .saturation import apply_saturation, check_saturation_mode
 
-__all__ = ["HybridOutput", "HybridPolicy", "SMOOTH_SATURATION_ATOL"]
+__all__ = ["HybridOutput", "HybridPolicy", "SMOOTH_SATURATION_ATOL", "roa_hybrid"]
 
+DEFAULT_LAMBDA = 1.0  # the paper's initial Lambda: the identity
 SMOOTH_SATURATION_ATOL = 1e-9
 r"""Tolerance, relative to :math:`\max(1, u_{max})`, on :math:`|G(a)|` for ``"sin"``/``"tanh"``.
 
@@ -115,16 +118,24 @@ class HybridPolicy(nn.Module):
     operating_point : array-like
         Operating point :math:`a`, shape (D,), in observation coordinates. Stored as the buffer
         ``operating_point``.
-    lambda_init : float or array-like
-        Initial :math:`\lambda > 0`, scalar (broadcast to all D) or shape (D,).
-    learn_lambda : bool
-        If True, ``log_lambda`` (shape (D,)) is an ``nn.Parameter``; otherwise a buffer.
-        The log keeps :math:`\lambda = \exp(\text{log\_lambda})` positive while training.
+    lambda_init : float or array-like, optional
+        Initial :math:`\lambda > 0` of the paper's relevance, scalar (broadcast to all D) or
+        shape (D,); default 1 (the identity, as in the paper). Only with ``relevance=None``.
+    learn_lambda : bool, optional
+        If True (default), ``log_lambda`` (shape (D,)) is an ``nn.Parameter``; otherwise a
+        buffer. The log keeps :math:`\lambda = \exp(\text{log\_lambda})` positive while
+        training. Only with ``relevance=None``.
     action_limit : float or array-like, optional
         Positive actuator limit :math:`u_{max}`, scalar or shape (F,). ``None``: no saturation.
         Stored as the buffer ``action_limit``.
     saturation : {"clip", "sin", "tanh", "none"}
         How the limit is applied after blending (see :func:`~leoc.policies.saturate`).
+    relevance : nn.Module, optional
+        A relevance module mapping (..., D) to (..., 1) with :math:`r(a) = 1` exactly (checked),
+        e.g. :class:`~leoc.policies.ROARelevance` (flat on the LQR's certified region of
+        attraction; see :func:`roa_hybrid`). Registered as ``relevance_module``. ``None``
+        (default): the paper's :math:`r = (1 + d)^{-2}` with ``log_lambda`` on the policy
+        itself, so state dicts saved before relevance modules existed still load.
 
     Raises
     ------
@@ -146,16 +157,28 @@ class HybridPolicy(nn.Module):
         linear: LinearController,
         nonlinear: nn.Module,
         operating_point: object,
-        lambda_init: float | object = 1.0,
-        learn_lambda: bool = True,
+        lambda_init: float | object | None = None,
+        learn_lambda: bool | None = None,
         action_limit: float | object | None = None,
         saturation: str = "clip",
+        relevance: nn.Module | None = None,
     ):
         super().__init__()
         if not isinstance(linear, LinearController):
             raise TypeError(f"linear must be a LinearController, found {type(linear).__name__}")
         if not isinstance(nonlinear, nn.Module):
             raise TypeError(f"nonlinear must be an nn.Module, found {type(nonlinear).__name__}")
+        if relevance is not None:
+            if not isinstance(relevance, nn.Module):
+                raise TypeError(f"relevance must be an nn.Module, found {type(relevance).__name__}")
+            if lambda_init is not None or learn_lambda is not None:
+                raise ValueError(
+                    "lambda_init, learn_lambda: only for the paper's relevance (relevance=None), "
+                    f"found lambda_init={lambda_init!r}, learn_lambda={learn_lambda!r} with "
+                    f"relevance={type(relevance).__name__}"
+                )
+        lambda_init = DEFAULT_LAMBDA if lambda_init is None else lambda_init
+        learn_lambda = True if learn_lambda is None else learn_lambda
         if not isinstance(learn_lambda, bool):
             raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
         self.saturation = check_saturation_mode(saturation, "saturation")
@@ -169,18 +192,42 @@ class HybridPolicy(nn.Module):
         check_finite(point, "operating_point")
         self.register_buffer("operating_point", point)
 
-        log_lambda = torch.log(self._lambda_vector(lambda_init, obs_dim, dtype).to(device))
-        if learn_lambda:
-            self.log_lambda = nn.Parameter(log_lambda)
-        else:
-            self.register_buffer("log_lambda", log_lambda)
+        # The paper's relevance keeps its parameter on the policy itself (state_dict key
+        # "log_lambda", as before relevance modules existed); any other relevance is the
+        # submodule "relevance_module".
+        self.relevance_module = relevance
+        if relevance is None:
+            log_lambda = torch.log(self._lambda_vector(lambda_init, obs_dim, dtype).to(device))
+            if learn_lambda:
+                self.log_lambda = nn.Parameter(log_lambda)
+            else:
+                self.register_buffer("log_lambda", log_lambda)
 
         self.register_buffer("action_limit", self._limit_tensor(action_limit, act_dim, dtype))
         if self.action_limit is not None:
             self.action_limit = self.action_limit.to(device)
 
         self._check_nonlinear_output(act_dim)
+        self._check_relevance_module()
         self._check_identities_survive_saturation()
+
+    def _check_relevance_module(self) -> None:
+        """A relevance module must map (1, D) to (1, 1) and give exactly r(a) = 1."""
+        if self.relevance_module is None:
+            return
+        probe = self.operating_point[None, :]
+        with torch.no_grad():
+            value = self.relevance_module(probe)
+        if not isinstance(value, Tensor) or tuple(value.shape) != (1, 1):
+            found = tuple(value.shape) if isinstance(value, Tensor) else type(value).__name__
+            raise ValueError(
+                f"relevance must map (1, D) = {shape_str(probe.shape)} to (1, 1), found {found}"
+            )
+        if float(value) != 1.0:
+            raise ValueError(
+                "relevance must be exactly 1 at the operating point (r(a) = 1 keeps "
+                f"pi(a) = G(a)), found r(a) = {float(value)!r}"
+            )
 
     @staticmethod
     def _lambda_vector(lambda_init: object, obs_dim: int, dtype: torch.dtype) -> Tensor:
@@ -250,24 +297,45 @@ class HybridPolicy(nn.Module):
         return self.linear.act_dim
 
     @property
+    def relevance_kind(self) -> str:
+        """``"paper"`` for the default relevance, else the relevance module's class name."""
+        if self.relevance_module is None:
+            return "paper"
+        return type(self.relevance_module).__name__
+
+    def _require_paper(self, what: str) -> None:
+        if self.relevance_module is not None:
+            raise AttributeError(
+                f"{what} belongs to the paper's relevance; this policy's relevance is "
+                f"{self.relevance_kind}"
+            )
+
+    @property
     def lambda_(self) -> Tensor:
         r"""Diagonal of :math:`\Lambda`: :math:`\lambda = \exp(\text{log\_lambda})`, shape (D,)."""
+        self._require_paper("lambda_")
         return torch.exp(self.log_lambda)
 
     def distance(self, x: Tensor) -> Tensor:
         r"""Weighted squared distance :math:`d(x) = \sum_i (x_i - a_i)^2 / \lambda_i`.
 
-        Shapes: ``x`` (..., D) -> (..., 1).
+        Shapes: ``x`` (..., D) -> (..., 1). Only for the paper's relevance.
         """
+        self._require_paper("distance")
         check_last_dim(x, self.obs_dim, self.operating_point.dtype)
         return ((x - self.operating_point).square() / self.lambda_).sum(dim=-1, keepdim=True)
 
     def relevance(self, x: Tensor) -> Tensor:
-        r"""Relevance :math:`r(x) = 1 / (1 + d(x))^2 \in (0, 1]`, equal to 1 only at :math:`a`.
+        r"""Relevance :math:`r(x) \in [0, 1]`, shape (..., 1) for ``x`` (..., D).
 
-        Shapes: ``x`` (..., D) -> (..., 1).
+        The paper's :math:`1 / (1 + d(x))^2` (equal to 1 only at :math:`a`;
+        :func:`~leoc.policies.relevance.paper_relevance`) by default, else the relevance
+        module's (e.g. :class:`~leoc.policies.ROARelevance`, 1 on a certified set).
         """
-        return (1.0 + self.distance(x)).square().reciprocal()
+        if self.relevance_module is not None:
+            return self.relevance_module(x)
+        check_last_dim(x, self.obs_dim, self.operating_point.dtype)
+        return paper_relevance(x, self.operating_point, self.log_lambda)
 
     def blend(self, x: Tensor) -> Tensor:
         r"""Unsaturated blend :math:`r(x) G(x) + (1 - r(x)) H(x)`.
@@ -300,7 +368,121 @@ class HybridPolicy(nn.Module):
         return action
 
     def extra_repr(self) -> str:
+        learned = (
+            f"learn_lambda={isinstance(self.log_lambda, nn.Parameter)}"
+            if self.relevance_module is None
+            else f"relevance={self.relevance_kind}"
+        )
         return (
             f"obs_dim={self.obs_dim}, act_dim={self.act_dim}, saturation={self.saturation!r}, "
-            f"learn_lambda={isinstance(self.log_lambda, nn.Parameter)}"
+            f"{learned}"
         )
+
+
+def roa_hybrid(
+    system: Any,
+    design: Any,
+    nonlinear: nn.Module,
+    certificate: Any = None,
+    rho_in: float | None = None,
+    rho_in_fraction: float = 1.0,
+    width_init: float = DEFAULT_ROA_WIDTH,
+    learn_width: bool = True,
+    action_limit: float | None = None,
+    saturation: str = "clip",
+    **certify_options: Any,
+) -> HybridPolicy:
+    r"""A :class:`HybridPolicy` whose relevance is 1 on the LQR's certified region of attraction.
+
+    One line for either framework, e.g. PILCO's
+    ``roa_hybrid(system, design_lqr(system, action_repeat=3), rbf, saturation="sin")``
+    (wrap it in :class:`~leoc.policies.HeldPolicy` to run it at the design's period).
+
+    Parameters
+    ----------
+    system : leoc.systems.System
+    design : LQRDesign
+        The linear part :math:`G(o) = W o + b` and the Lyapunov matrix :math:`P`, for the
+        control period the hybrid runs at (``design.action_repeat``).
+    nonlinear : nn.Module
+        :math:`H`, (..., D) -> (..., F), float64.
+    certificate : LyapunovCertificate, optional
+        Default: :func:`leoc.control.certify_lqr` of the closed loop
+        :math:`\operatorname{sat}(G)` with this hybrid's saturation and the design's period
+        (``certify_options`` passed on). A given certificate must be for ``design.P`` at
+        ``design.action_repeat``.
+    rho_in : float, optional
+        Level of the flat top, ``0 < rho_in <= rho``; default ``rho_in_fraction * rho``.
+    rho_in_fraction : float in (0, 1]
+    width_init, learn_width
+        See :class:`~leoc.policies.ROARelevance`.
+    action_limit : float, optional
+        Default ``system.action_limit``.
+    saturation : {"clip", "sin", "tanh"}
+        The hybrid's saturation (the certificate is for the same one).
+
+    Raises
+    ------
+    ValueError
+        If the certificate does not match the design, has no certified set, or ``rho_in`` is
+        not in (0, rho].
+    """
+    from leoc.control.roa import certify_lqr
+
+    from .held import with_control_period
+
+    limit = float(system.action_limit if action_limit is None else action_limit)
+    linear = LinearController(design.W, design.b)
+    if certificate is None:
+        check_saturation_mode(saturation, "saturation")
+        limit_t = torch.tensor(limit, dtype=linear.W.dtype)
+
+        def saturated_linear(obs: Tensor) -> Tensor:
+            return apply_saturation(linear(obs), limit_t, saturation)
+
+        closed_loop = with_control_period(_Callable(saturated_linear), design.action_repeat)
+        certificate = certify_lqr(system, design, closed_loop, **certify_options)
+    elif certificate.action_repeat != design.action_repeat or not np.array_equal(
+        certificate.P, design.P
+    ):
+        raise ValueError(
+            f"certificate: expected one for design.P at action_repeat={design.action_repeat}, "
+            f"found action_repeat={certificate.action_repeat} and a different P"
+        )
+    if not certificate.certified:
+        raise ValueError(
+            f"certificate: the LQR has no certified region of attraction (rho = 0, linear "
+            f"decrease {certificate.linear_decrease})"
+        )
+    level = rho_in_fraction * certificate.rho if rho_in is None else float(rho_in)
+    if not 0.0 < level <= certificate.rho:
+        raise ValueError(
+            f"rho_in: expected a level in (0, rho = {certificate.rho:.6g}], found {level!r}"
+        )
+    relevance = ROARelevance(
+        system.obs_layout,
+        system.operating_state,
+        design.P,
+        level,
+        width_init=width_init,
+        learn_width=learn_width,
+    )
+    return HybridPolicy(
+        linear,
+        nonlinear,
+        system.operating_obs,
+        action_limit=limit,
+        saturation=saturation,
+        relevance=relevance,
+    )
+
+
+class _Callable(nn.Module):
+    """A plain function as a module (so it can carry a control period)."""
+
+    def __init__(self, function: Any) -> None:
+        super().__init__()
+        self.function = function
+
+    def forward(self, x: Tensor) -> Tensor:
+        return self.function(x)

@@ -1,0 +1,396 @@
+r"""Relevance functions of the LEOC hybrid: how much the linear part governs at an observation.
+
+Letters: D observation dimension, S state dimension; ``...`` any leading batch shape.
+
+Two relevance modules map an observation batch (..., D) to :math:`r(x) \in [0, 1]`, shape
+(..., 1); :class:`~leoc.policies.HybridPolicy` blends
+:math:`\pi = \operatorname{sat}(r G + (1 - r) H)` with either.
+
+**The paper's relevance** (Zhang & Capel 2021, eq. 5), :class:`PaperRelevance`:
+
+.. math::
+
+    r(x) = \frac{1}{(1 + d(x))^2}, \qquad d(x) = \sum_{i=1}^{D} \frac{(x_i - a_i)^2}{\lambda_i},
+
+equal to 1 only at the operating point :math:`a` (in observation coordinates), with
+:math:`\lambda = \exp(\text{log\_lambda})` learnable or frozen. It guarantees
+:math:`\pi(a) = G(a)` and :math:`\partial \pi / \partial x (a) = W`, nothing more: anywhere
+else the learned part leaks in, and training can shrink :math:`\lambda` until even a small
+disturbance leaves the region the linear part governs.
+
+**The ROA relevance**, :class:`ROARelevance`: flat (exactly 1) on a certified sublevel set of
+the LQR's Lyapunov function and falling smoothly to 0 outside it,
+
+.. math::
+
+    V(z) = z^\top P z, \qquad s(x) = \frac{V(z(x))}{\rho_{in}}, \qquad
+    t(x) = \operatorname{clamp}\Big(\frac{s(x) - 1}{w}, 0, 1\Big), \qquad
+    r(x) = 1 - (10 t^3 - 15 t^4 + 6 t^5),
+
+where :math:`z(x)` is the *state deviation* recovered from the observation
+(:class:`ObservationDeviation`: a plain entry :math:`x_j - a_s`; an angle seen as
+:math:`(\cos\theta, \sin\theta)` gives :math:`\operatorname{wrap}(\operatorname{atan2}(\sin,
+\cos) - a_s) \in [-\pi, \pi)`, the systems' convention), :math:`P` the Riccati solution of the
+LQR design at the hybrid's control period, :math:`\rho_{in} \le \rho` a level no larger than the
+certified one (:func:`leoc.control.certify_lqr`) and :math:`w > 0` the learnable width of the
+transition band :math:`\rho_{in} < V \le (1 + w) \rho_{in}`. The quintic "smootherstep" has
+value 1 and zero first and second derivatives at :math:`t = 0`, value 0 and zero first and second
+derivatives at :math:`t = 1`, so :math:`r` is :math:`C^2` in :math:`V`, hence in :math:`x`
+wherever the wrap is continuous. The wrap jumps only where an angle deviation is
+:math:`\pm\pi`; there :math:`V \ge \pi^2 / (P^{-1})_{ss}` (the minimum of :math:`z^\top P z` on
+:math:`z_s = \pm\pi`), and for systems with angles the width is bounded,
+:math:`w = w_{max} \operatorname{sigmoid}(\text{width\_param})` with
+:math:`w_{max} = \min_s \pi^2 / ((P^{-1})_{ss} \rho_{in}) - 1`, so the band ends strictly before
+the cut and :math:`r \equiv 0` in a neighbourhood of it: :math:`r` is :math:`C^2` on the whole
+observation manifold. Without angles :math:`w = \exp(\text{width\_param})`. Learning moves only
+:math:`w`: it can widen (or sharpen) the transition but :math:`\rho_{in}` is a buffer, so the
+flat top never shrinks.
+
+**Theorem (the hybrid inherits the certified region of attraction).** Assume
+
+1. :math:`\Omega = \{x : V(z(x)) \le \rho\}` is certified for the *linear* closed loop
+   :math:`x^+ = F(x, \operatorname{sat}(G(o(x))))` run at the hybrid's control period (the
+   held map, with the hybrid's own saturation): :math:`V(z(F(x))) < V(z(x))` for every
+   :math:`x \in \Omega \setminus \{a\}` (for a sampling certificate: up to the stated
+   violating-volume bound and confidence; :func:`leoc.control.certify_lqr`);
+2. :math:`\Omega` lies inside one chart of the angle wrap (angular extent below :math:`\pi`)
+   and inside the allowed region of the system (the certificate checks both);
+3. the hybrid uses this relevance with :math:`\rho_{in} \le \rho` and the same :math:`P`,
+   :math:`a` and :math:`G`, and no disturbance acts.
+
+Then on :math:`\Omega_{in} = \{V \le \rho_{in}\} \subseteq \Omega` the relevance is exactly 1,
+so :math:`\pi(x) = \operatorname{sat}(1 \cdot G(x) + 0 \cdot H(x)) = \operatorname{sat}(G(x))`
+(bit for bit when :math:`H(x)` is finite): the hybrid's closed loop *is* the certified linear
+closed loop there. Since :math:`V` strictly decreases along it, :math:`\Omega_{in}` is positively
+invariant for the hybrid, and by the discrete-time Lyapunov theorem (Khalil 2002, Thm 4.1 and
+its discrete analogue; a continuous :math:`V` strictly decreasing on the compact set
+:math:`\Omega_{in} \setminus \{a\}`) every trajectory of the hybrid that enters
+:math:`\Omega_{in}` converges to :math:`a`: the hybrid's basin contains :math:`\Omega_{in}`,
+whatever :math:`H` and :math:`w` are learned. With a disturbance (the impulse test) the same
+holds once the disturbance has stopped, for every state it leaves inside :math:`\Omega_{in}`.
+
+References
+----------
+Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
+Classical Control Theory", L4DC 2021, eq. 4-5.
+H. K. Khalil, *Nonlinear Systems*, 3rd ed., Prentice Hall, 2002, sections 4.1 and 8.2.
+A. Najafi, R. Babuska and G. A. D. Lopes, "A fast sampling method for estimating the domain of
+attraction of nonlinear systems with hybrid controllers", Automatica, 2016.
+K. Perlin, "Improving noise", SIGGRAPH 2002 (the quintic smootherstep).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from ._checks import as_float_tensor, check_finite, check_last_dim, check_shape
+
+__all__ = [
+    "DEFAULT_ROA_WIDTH",
+    "RELEVANCE_KINDS",
+    "ObservationDeviation",
+    "PaperRelevance",
+    "ROARelevance",
+    "paper_relevance",
+]
+
+RELEVANCE_KINDS = ("paper", "roa")
+DEFAULT_ROA_WIDTH = 1.0
+"""Default band width w: the relevance falls from 1 at :math:`V = \\rho_{in}` to 0 at
+:math:`V = 2 \\rho_{in}` (a radius :math:`\\sqrt 2` times the flat top's)."""
+# Smootherstep S(t) = 10 t^3 - 15 t^4 + 6 t^5 (Perlin 2002): S(0) = 0, S(1) = 1, S' = S'' = 0 at
+# both ends.
+_SMOOTHERSTEP = (10.0, -15.0, 6.0)
+_OBS_KINDS = ("state", "cos", "sin")
+SYMMETRY_RTOL = 1e-9  # |P - P^T| allowed, relative to max |P_ij|
+
+
+def paper_relevance(x: Tensor, operating_point: Tensor, log_lambda: Tensor) -> Tensor:
+    r"""The paper's :math:`r(x) = (1 + d(x))^{-2}`, :math:`d = \sum_i (x_i - a_i)^2 / \lambda_i`.
+
+    The one formula behind :class:`PaperRelevance` and :class:`~leoc.policies.HybridPolicy`'s
+    default, so both give the same numbers bit for bit. Shapes: ``x`` (..., D),
+    ``operating_point`` and ``log_lambda`` (D,) -> (..., 1).
+    """
+    distance = ((x - operating_point).square() / torch.exp(log_lambda)).sum(dim=-1, keepdim=True)
+    return (1.0 + distance).square().reciprocal()
+
+
+class PaperRelevance(nn.Module):
+    r"""The paper's relevance :math:`r(x) = (1 + d(x))^{-2}` as a module (eq. 5).
+
+    Parameters
+    ----------
+    operating_point : array-like, shape (D,)
+        :math:`a` in observation coordinates (buffer ``operating_point``).
+    lambda_init : float or array-like (D,)
+        Initial :math:`\lambda > 0`.
+    learn_lambda : bool
+        ``log_lambda`` (D,) is an ``nn.Parameter`` if True, else a buffer.
+    dtype : torch.dtype
+    """
+
+    operating_point: Tensor
+    log_lambda: Tensor
+
+    def __init__(
+        self,
+        operating_point: object,
+        lambda_init: float | object = 1.0,
+        learn_lambda: bool = True,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__()
+        from ._checks import positive_scalar_or_vector
+
+        if not isinstance(learn_lambda, bool):
+            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        point = as_float_tensor(operating_point, "operating_point", dtype)
+        if point.ndim != 1:
+            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
+        check_finite(point, "operating_point")
+        self.register_buffer("operating_point", point)
+        size = point.shape[0]
+        lam = positive_scalar_or_vector(lambda_init, "lambda_init", size, "D", dtype)
+        log_lambda = torch.log(lam.expand(size).clone())
+        if learn_lambda:
+            self.log_lambda = nn.Parameter(log_lambda)
+        else:
+            self.register_buffer("log_lambda", log_lambda)
+
+    @property
+    def lambda_(self) -> Tensor:
+        r""":math:`\lambda = \exp(\text{log\_lambda})`, shape (D,)."""
+        return torch.exp(self.log_lambda)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Relevance (..., 1) of observations ``x`` (..., D)."""
+        check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
+        return paper_relevance(x, self.operating_point, self.log_lambda)
+
+
+def _layout_plan(
+    obs_layout: Sequence[Any], state_dim: int
+) -> tuple[tuple[str, int, int, int], ...]:
+    """One entry ``(kind, state_index, column, sin_column)`` per state entry, in state order:
+    ``kind`` is "state" (observed as is in ``column``) or "angle" (cos in ``column``, sin in
+    ``sin_column``)."""
+    columns: dict[int, dict[str, int]] = {}
+    for column, component in enumerate(obs_layout):
+        kind, index = str(component[0]), int(component[1])
+        if kind not in _OBS_KINDS or not 0 <= index < state_dim:
+            raise ValueError(
+                f"obs_layout[{column}]: expected (kind, state_index) with kind in {_OBS_KINDS} "
+                f"and 0 <= state_index < {state_dim}, found {tuple(component)!r}"
+            )
+        columns.setdefault(index, {})[kind] = column
+    plan = []
+    for index in range(state_dim):
+        seen = columns.get(index, {})
+        if "state" in seen:
+            plan.append(("state", index, seen["state"], -1))
+        elif "cos" in seen and "sin" in seen:
+            plan.append(("angle", index, seen["cos"], seen["sin"]))
+        else:
+            raise ValueError(
+                f"obs_layout: state entry {index} must be observed as itself or as both its "
+                f"cos and sin, found {sorted(seen) or 'nothing'}"
+            )
+    return tuple(plan)
+
+
+class ObservationDeviation(nn.Module):
+    r"""The state deviation :math:`z = x - a` recovered from an observation (..., D) -> (..., S).
+
+    A state entry observed as itself gives :math:`o_j - a_s`; an angle observed as
+    :math:`(\cos\theta, \sin\theta)` gives :math:`\operatorname{wrap}(\operatorname{atan2}(\sin
+    \theta, \cos\theta) - a_s) \in [-\pi, \pi)` (the wrap of
+    :func:`leoc.systems.base.wrap_angle`, so the deviation is the one the systems and
+    :func:`leoc.control.certify_lqr` use).
+
+    Parameters
+    ----------
+    obs_layout : sequence of (kind, state_index)
+        How each observation entry is built (``System.obs_layout``), kind in
+        {"state", "cos", "sin"}.
+    operating_state : array-like, shape (S,)
+        The operating point :math:`a` in state coordinates.
+    dtype : torch.dtype
+    """
+
+    operating_state: Tensor
+
+    def __init__(
+        self, obs_layout: Sequence[Any], operating_state: object, dtype: torch.dtype = torch.float64
+    ) -> None:
+        super().__init__()
+        state = as_float_tensor(operating_state, "operating_state", dtype)
+        if state.ndim != 1:
+            raise ValueError(f"operating_state must have shape (S,), found {tuple(state.shape)}")
+        check_finite(state, "operating_state")
+        self.layout = [(str(kind), int(index)) for kind, index in obs_layout]
+        self.plan = _layout_plan(self.layout, state.shape[0])
+        self.register_buffer("operating_state", state)
+
+    @property
+    def obs_dim(self) -> int:
+        return len(self.layout)
+
+    @property
+    def state_dim(self) -> int:
+        return len(self.plan)
+
+    @property
+    def angle_indices(self) -> tuple[int, ...]:
+        return tuple(index for kind, index, _, _ in self.plan if kind == "angle")
+
+    def forward(self, obs: Tensor) -> Tensor:
+        """State deviation (..., S) of observations (..., D)."""
+        check_last_dim(obs, self.obs_dim, self.operating_state.dtype, "obs")
+        entries = []
+        for kind, index, column, sin_column in self.plan:
+            if kind == "state":
+                entries.append(obs[..., column] - self.operating_state[index])
+            else:
+                angle = torch.atan2(obs[..., sin_column], obs[..., column])
+                deviation = angle - self.operating_state[index]
+                entries.append(torch.remainder(deviation + math.pi, 2.0 * math.pi) - math.pi)
+        return torch.stack(entries, dim=-1)
+
+
+def chart_width_limit(P: np.ndarray, angle_indices: Sequence[int], rho_in: float) -> float:
+    r"""Largest band width :math:`w_{max}` that keeps the band inside the angle chart.
+
+    :math:`\min_{z : z_s = \pm\pi} z^\top P z = \pi^2 / (P^{-1})_{ss}`, so the band
+    :math:`V \le (1 + w) \rho_{in}` stays off the wrap cut iff
+    :math:`w < \pi^2 / ((P^{-1})_{ss} \rho_{in}) - 1` for every angle :math:`s`. ``inf``
+    without angles.
+    """
+    if not angle_indices:
+        return math.inf
+    inverse = np.linalg.inv(P)
+    cut = min(math.pi**2 / float(inverse[s, s]) for s in angle_indices)
+    return cut / rho_in - 1.0
+
+
+class ROARelevance(nn.Module):
+    r"""Relevance that is exactly 1 on a certified sublevel set :math:`\{V \le \rho_{in}\}`.
+
+    :math:`r = 1 - S(t)`, :math:`t = \operatorname{clamp}((V / \rho_{in} - 1) / w, 0, 1)`,
+    :math:`S` the quintic smootherstep; see the module docstring for the formula, the band
+    width bound and the theorem. Shapes: observation (..., D) -> relevance (..., 1).
+
+    Parameters
+    ----------
+    obs_layout : sequence of (kind, state_index)
+        ``System.obs_layout``.
+    operating_state : array-like, shape (S,)
+        :math:`a` in state coordinates.
+    P : array-like, shape (S, S)
+        Symmetric positive definite Lyapunov matrix (the LQR design's Riccati solution at the
+        hybrid's control period).
+    rho_in : float
+        Level of the flat top (> 0; at most the certified :math:`\rho`, which
+        :func:`~leoc.policies.roa_hybrid` checks).
+    width_init : float
+        Initial band width :math:`w > 0` (below :math:`w_{max}` when there are angles).
+    learn_width : bool
+        ``width_param`` is an ``nn.Parameter`` if True, else a buffer.
+    dtype : torch.dtype
+
+    Attributes
+    ----------
+    max_width : float
+        :math:`w_{max}` (``inf`` without angles).
+    """
+
+    lyapunov_matrix: Tensor
+    rho_in: Tensor
+    width_param: Tensor
+
+    def __init__(
+        self,
+        obs_layout: Sequence[Any],
+        operating_state: object,
+        P: object,
+        rho_in: float,
+        width_init: float = DEFAULT_ROA_WIDTH,
+        learn_width: bool = True,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__()
+        if not isinstance(learn_width, bool):
+            raise TypeError(f"learn_width must be a bool, found {type(learn_width).__name__}")
+        self.deviation = ObservationDeviation(obs_layout, operating_state, dtype)
+        size = self.deviation.state_dim
+        matrix = as_float_tensor(P, "P", torch.float64)
+        check_shape(matrix, "P", (size, size), "(S, S)")
+        check_finite(matrix, "P")
+        matrix_np = matrix.numpy()
+        if not np.allclose(
+            matrix_np, matrix_np.T, rtol=0.0, atol=SYMMETRY_RTOL * np.abs(matrix_np).max()
+        ):
+            raise ValueError(f"P must be symmetric, found {matrix_np.tolist()}")
+        if float(np.linalg.eigvalsh(matrix_np)[0]) <= 0.0:
+            raise ValueError(
+                f"P must be positive definite, found eigenvalues "
+                f"{np.linalg.eigvalsh(matrix_np).tolist()}"
+            )
+        for name, value in (("rho_in", rho_in), ("width_init", width_init)):
+            if not isinstance(value, (int, float, np.floating)) or not 0.0 < value < math.inf:
+                raise ValueError(f"{name} must be a positive finite number, found {value!r}")
+        self.max_width = chart_width_limit(matrix_np, self.deviation.angle_indices, float(rho_in))
+        if not width_init < self.max_width:
+            raise ValueError(
+                f"width_init must be below the chart's limit w_max = {self.max_width:.6g} (the "
+                f"band V <= (1 + w) rho_in must end before an angle deviation of pi), found "
+                f"{width_init!r}; with rho_in = {rho_in!r} choose a smaller width or rho_in"
+            )
+        self.register_buffer("lyapunov_matrix", matrix.to(dtype))
+        self.register_buffer("rho_in", torch.tensor(float(rho_in), dtype=dtype))
+        raw = torch.tensor(self._raw_width(float(width_init)), dtype=dtype)
+        if learn_width:
+            self.width_param = nn.Parameter(raw)
+        else:
+            self.register_buffer("width_param", raw)
+
+    def _raw_width(self, width: float) -> float:
+        if math.isinf(self.max_width):
+            return math.log(width)
+        fraction = width / self.max_width
+        return math.log(fraction / (1.0 - fraction))
+
+    @property
+    def width(self) -> Tensor:
+        r"""Band width :math:`w` (scalar tensor): :math:`w_{max}\,\operatorname{sigmoid}` of
+        ``width_param`` with angles, :math:`\exp` of it without."""
+        if math.isinf(self.max_width):
+            return torch.exp(self.width_param)
+        return self.max_width * torch.sigmoid(self.width_param)
+
+    def lyapunov(self, x: Tensor) -> Tensor:
+        r""":math:`V(z(x)) = z^\top P z` of observations (..., D) -> (..., 1)."""
+        z = self.deviation(x)
+        return ((z @ self.lyapunov_matrix) * z).sum(dim=-1, keepdim=True)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Relevance (..., 1) of observations ``x`` (..., D)."""
+        level = self.lyapunov(x) / self.rho_in
+        t = torch.clamp((level - 1.0) / self.width, min=0.0, max=1.0)
+        c3, c4, c5 = _SMOOTHERSTEP
+        # Horner form of 10 t^3 - 15 t^4 + 6 t^5; at t = 0 every term is an exact 0, so r = 1
+        # exactly on the flat top.
+        return 1.0 - t * t * t * (c3 + t * (c4 + t * c5))
+
+    def extra_repr(self) -> str:
+        learned = isinstance(self.width_param, nn.Parameter)
+        return (
+            f"state_dim={self.deviation.state_dim}, rho_in={float(self.rho_in):.6g}, "
+            f"max_width={self.max_width:.6g}, learn_width={learned}"
+        )
