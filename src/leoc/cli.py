@@ -478,7 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(func=cmd_train)
 
-    from leoc.experiments.profiles import CONTROLLERS, PROFILE_NAMES
+    from leoc.experiments.profiles import CONTROLLERS, DEFAULT_CONTROLLERS, PROFILE_NAMES
 
     reproduce = commands.add_parser(
         "reproduce",
@@ -520,7 +520,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--systems", nargs="+", choices=SYSTEM_CHOICES, default=list(SYSTEM_CHOICES)
     )
     reproduce.add_argument(
-        "--controllers", nargs="+", choices=CONTROLLERS, default=list(CONTROLLERS)
+        "--controllers",
+        nargs="+",
+        choices=CONTROLLERS,
+        default=list(DEFAULT_CONTROLLERS),
+        help="controllers to run (default: the two linear references and the paper's four; "
+        "add ddpg_hybrid_roa / pilco_hybrid_roa for the ROA-relevance hybrids)",
     )
     reproduce.set_defaults(func=cmd_reproduce)
 

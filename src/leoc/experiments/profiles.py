@@ -12,11 +12,16 @@ CONTROLLERS = (
     "linear_pilco",
     "ddpg_baseline",
     "ddpg_hybrid",
+    "ddpg_hybrid_roa",
     "pilco_baseline",
     "pilco_hybrid",
+    "pilco_hybrid_roa",
 )
+# What `leoc reproduce` runs unless --controllers says otherwise: the paper's controllers and the
+# two linear references (the ROA-relevance hybrids are added on request).
+DEFAULT_CONTROLLERS = tuple(name for name in CONTROLLERS if not name.endswith("_roa"))
 LINEAR_CONTROLLERS = ("linear", "linear_pilco")
-TRAINED_CONTROLLERS = CONTROLLERS[2:]
+TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in ("linear", "linear_pilco"))
 # The linear reference of each framework: the LQR designed and run at that framework's control
 # period (DDPG acts every simulator step, PILCO holds each action for ``action_repeat`` steps).
 LINEAR_REFERENCE = {"ddpg": "linear", "pilco": "linear_pilco"}
@@ -25,8 +30,10 @@ CONTROLLER_LABELS = {
     "linear_pilco": "linear (LQR at PILCO's period)",
     "ddpg_baseline": "DDPG baseline",
     "ddpg_hybrid": "DDPG hybrid",
+    "ddpg_hybrid_roa": "DDPG hybrid (ROA relevance)",
     "pilco_baseline": "PILCO baseline",
     "pilco_hybrid": "PILCO hybrid",
+    "pilco_hybrid_roa": "PILCO hybrid (ROA relevance)",
 }
 
 
@@ -132,13 +139,18 @@ class RunSpec(NamedTuple):
 
     @property
     def hybrid(self) -> bool:
-        return self.controller.endswith("hybrid")
+        return "_hybrid" in self.controller
+
+    @property
+    def relevance(self) -> str:
+        """The hybrid's relevance: ``roa`` for the ``*_hybrid_roa`` controllers, else ``paper``."""
+        return "roa" if self.controller.endswith("_roa") else "paper"
 
 
 def run_specs(
     profile: Profile,
     systems: tuple[str, ...] = SYSTEM_NAMES,
-    controllers: tuple[str, ...] = CONTROLLERS,
+    controllers: tuple[str, ...] = DEFAULT_CONTROLLERS,
 ) -> list[RunSpec]:
     """Every run of a profile, the longest first (cart-pole, PILCO) to balance the workers."""
     for name in systems:

@@ -274,6 +274,52 @@ def improvement_rows(evaluations: Evaluations) -> list[dict[str, Any]]:
     return rows
 
 
+def roa_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
+    """Rows: system, controller, its period, the certified rho and extent of the LQR at that
+    period, the certified set's share of the basin box, and the controller's empirical basin:
+    share of the box held, share of the certified set held (mean over seeds)."""
+    rows = []
+    for system, by_controller in evaluations.items():
+        for controller in _ordered(by_controller):
+            runs = [run for run in by_controller[controller] if run.get("roa")]
+            if not runs:
+                continue
+            first = runs[0]["roa"]
+            inside = [run["roa"]["certified_set_held"] for run in runs]
+            rows.append(
+                {
+                    "system": system,
+                    "controller": controller,
+                    "action_repeat": runs[0].get("action_repeat", 1),
+                    "rho": first["certificate"]["rho"],
+                    "extent": first["certificate"]["extent"],
+                    "samples": first["certificate"]["samples"],
+                    "violation_bound": first["certificate"]["violation_bound"],
+                    "confidence": first["certificate"]["confidence"],
+                    "certified_box_fraction": first["certified_box_fraction"],
+                    "basin_box_fraction": float(
+                        np.mean([run["roa"]["basin_box_fraction"] for run in runs])
+                    ),
+                    "certified_set_held": None if None in inside else float(np.mean(inside)),
+                    "n_runs": len(runs),
+                }
+            )
+    return rows
+
+
+def roa_flags(rows: list[dict[str, Any]]) -> list[str]:
+    """Hybrids whose empirical basin does not contain their LQR's certified set."""
+    return [
+        f"**{row['system']} {_label(row['controller'])}** holds only "
+        f"{row['certified_set_held']:.0%} of the starts in its LQR's certified region of "
+        "attraction."
+        for row in rows
+        if "_hybrid" in row["controller"]
+        and row["certified_set_held"] is not None
+        and row["certified_set_held"] < 1.0
+    ]
+
+
 # ------------------------------------------------------------------------------------ checks
 def _differs(value: float, reference: float, peak: float) -> bool:
     if math.isnan(value) or math.isnan(reference):
@@ -289,7 +335,7 @@ def response_flags(rows: list[dict[str, Any]]) -> list[str]:
     flags = []
     for (system, test, controller), row in index.items():
         framework = controller.split("_")[0]
-        if controller in LINEAR_CONTROLLERS or not controller.endswith("hybrid"):
+        if controller in LINEAR_CONTROLLERS or "_hybrid" not in controller:
             continue
         reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
         if reference is None:
@@ -319,7 +365,7 @@ def robustness_flags(rows: list[dict[str, Any]]) -> list[str]:
     index = {(r["system"], r["controller"], r["parameter"], r["scale"]): r for r in rows}
     differing: dict[tuple[str, str, str, str], list[str]] = defaultdict(list)
     for (system, controller, parameter, scale), row in sorted(index.items()):
-        if not controller.endswith("hybrid"):
+        if "_hybrid" not in controller:
             continue
         reference_name = LINEAR_REFERENCE[controller.split("_")[0]]
         reference = index.get((system, reference_name, parameter, scale))
@@ -432,6 +478,37 @@ def plot_robustness(rows: list[dict[str, Any]], path: Path) -> Path:
     return save_figure(figure, path)
 
 
+def plot_roa(rows: list[dict[str, Any]], path: Path) -> Path:
+    """Empirical basins: per system, each controller's share of the basin box held and of its
+    LQR's certified set held, beside the certified set's own share of the box."""
+    plt = _pyplot()
+    systems = list(dict.fromkeys(row["system"] for row in rows))
+    figure, axes = plt.subplots(1, len(systems), figsize=(4.8 * len(systems), 3.6), squeeze=False)
+    for axis, system in zip(axes[0], systems, strict=True):
+        selected = [row for row in rows if row["system"] == system]
+        positions = np.arange(len(selected))
+        box = [row["basin_box_fraction"] for row in selected]
+        inside = [row["certified_set_held"] or 0.0 for row in selected]
+        axis.bar(positions - 0.2, box, 0.4, label="share of the basin box held", color="#1f77b4")
+        axis.bar(
+            positions + 0.2, inside, 0.4, label="share of the certified set held", color="#2ca02c"
+        )
+        axis.axhline(
+            selected[0]["certified_box_fraction"],
+            color="#222222",
+            linestyle=":",
+            label="certified set's share of the box (LQR at dt)",
+        )
+        axis.set_xticks(positions)
+        axis.set_xticklabels(
+            [_label(row["controller"]) for row in selected], rotation=40, ha="right", fontsize=7
+        )
+        axis.set_ylim(0.0, 1.05)
+        axis.set_title(f"{system}: empirical basins")
+    legend_below(figure, axes_handles(axes))
+    return save_figure(figure, path)
+
+
 def plot_relevance(evaluations: Evaluations, path: Path) -> Path | None:
     """Figure 4: main coordinate and r(x) along a swing-up, a grid of systems (rows) x hybrid
     controllers (columns), first seed."""
@@ -522,6 +599,23 @@ def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
             f"| {_pm(row['settling_time_mean'], row['settling_time_std'])} "
             f"| {_number(row['settling_seconds_mean'])} "
             f"| {row['n_settled']}/{row['n_runs']} | {row['n_terminated']}/{row['n_runs']} {paper}"
+        )
+    return lines
+
+
+def roa_table(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [
+        "| system | controller | period | certified rho (LQR at that period) | extent per state "
+        "| certified share of the box | basin: box held | basin: certified set held |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        extent = ", ".join(FMT.format(value) for value in row["extent"])
+        inside = "-" if row["certified_set_held"] is None else f"{row['certified_set_held']:.0%}"
+        lines.append(
+            f"| {row['system']} | {_label(row['controller'])} | {row['action_repeat']} "
+            f"| {FMT.format(row['rho'])} | ± [{extent}] | {row['certified_box_fraction']:.0%} "
+            f"| {row['basin_box_fraction']:.0%} | {inside} |"
         )
     return lines
 
@@ -636,11 +730,13 @@ def write_report(out_dir: str | Path) -> Path:
         for run in runs
     )
     seeds = seed_statistics(evaluations)
+    roa = roa_summary(evaluations)
     improvements = improvement_rows(evaluations)
     flags = {
         "responses": response_flags(responses),
         "robustness": robustness_flags(robustness),
         "swing_up": swing_up_flags(swing_up),
+        "roa": roa_flags(roa),
     }
     write_json_atomic(
         out / "results.json",
@@ -650,6 +746,7 @@ def write_report(out_dir: str | Path) -> Path:
             "robustness": robustness,
             "swing_up": swing_up,
             "seed_statistics": seeds,
+            "region_of_attraction": roa,
             "probability_of_improvement": improvements,
             "learning_curves": curves,
             "flags": flags,
@@ -687,6 +784,9 @@ def write_report(out_dir: str | Path) -> Path:
     if robustness:
         plot_robustness(robustness, out / "robustness.png")
         figures.append(("Robustness (paper figure 8)", "robustness.png"))
+    if roa:
+        plot_roa(roa, out / "basins.png")
+        figures.append(("Empirical basins and the certified region of attraction", "basins.png"))
     if plot_relevance(evaluations, out / "relevance.png"):
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
     path = out / "report.md"
@@ -699,6 +799,7 @@ def write_report(out_dir: str | Path) -> Path:
             "swing_up": swing_up,
             "seeds": seeds,
             "improvements": improvements,
+            "roa": roa,
         },
         flags,
         figures,
@@ -753,7 +854,7 @@ def render_markdown(
     ]
     if missing:
         lines += [f"Runs without results (failed or not run yet): {', '.join(missing)}.", ""]
-    all_flags = flags["responses"] + flags["robustness"] + flags["swing_up"]
+    all_flags = flags["responses"] + flags["robustness"] + flags["swing_up"] + flags["roa"]
     lines += ["## Summary", ""]
     lines += _flag_block(
         all_flags,
@@ -829,6 +930,28 @@ def render_markdown(
     ]
     lines += _flag_block(flags["swing_up"], "every learned controller swings up and holds.")
     lines += swing_up_table(tables["swing_up"])
+    lines += [
+        "",
+        "## Region of attraction",
+        "",
+        "For each controller: the sampling certificate of the region of attraction of the LQR "
+        "designed for the controller's period (V = (x - a)^T P (x - a) decreases along the "
+        "nonlinear, saturated, held closed loop on {V <= rho}; `leoc roa`), and the "
+        "controller's empirical basin: the share of seeded starts in the basin box, and of "
+        "starts uniform in that certified set, that converge and hold. A hybrid whose basin "
+        "contains the set holds 100% of the latter.",
+        "",
+    ]
+    if tables["roa"]:
+        first = tables["roa"][0]
+        lines += [
+            f"Certificates: {first['samples']} samples per round; with confidence "
+            f"{first['confidence']:g} the violating share of the set is below "
+            f"{first['violation_bound']:.2g}.",
+            "",
+        ]
+    lines += _flag_block(flags["roa"], "every hybrid holds its LQR's whole certified set.")
+    lines += roa_table(tables["roa"])
     n_seeds = len(meta.get("seeds", []))
     lines += [
         "",

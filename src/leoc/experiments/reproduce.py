@@ -31,10 +31,17 @@ import torch
 
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
-from leoc.experiments.profiles import CONTROLLERS, Profile, RunSpec, get_profile, run_specs
+from leoc.experiments.profiles import (
+    DEFAULT_CONTROLLERS,
+    Profile,
+    RunSpec,
+    get_profile,
+    run_specs,
+)
 from leoc.experiments.sweep import check_backend, sweep
 from leoc.io import set_aside, write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
 
 EVALUATION_FILE = "evaluation.json"
@@ -100,6 +107,7 @@ def train_controller(
             spec.system,
             hybrid=spec.hybrid,
             seed=spec.seed,
+            relevance=spec.relevance,
             run_dir=train_dir,
             iterations=profile.pilco_iterations.get(spec.system),
             progress=True,
@@ -113,12 +121,40 @@ def train_controller(
             algo="ddpg",
             hybrid=spec.hybrid,
             seed=spec.seed,
+            relevance=spec.relevance,
             run_dir=train_dir,
             total_steps=profile.ddpg_steps.get(spec.system),
             progress=False,
             **profile.ddpg_overrides,
         )
     return result.policy, _curve(result.curve)
+
+
+def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[str, Any]:
+    """The certificate of the LQR designed for the controller's period, and the controller's
+    empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
+    certified set (1.0 when the controller's basin contains it, on those starts)."""
+    from leoc.control import certify_lqr, design_lqr
+    from leoc.control.roa import (
+        basin_starts,
+        box_fraction,
+        certified_set_check,
+        default_basin_box,
+        empirical_basin,
+    )
+
+    period = control_period(controller)
+    certificate = certify_lqr(system, design_lqr(system, action_repeat=period))
+    box = default_basin_box(system)
+    basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
+    inside = certified_set_check(system, controller, certificate) if certificate.certified else None
+    return {
+        "certificate": certificate.summary(),
+        "box": box.tolist(),
+        "certified_box_fraction": box_fraction(certificate, box) if certificate.certified else 0.0,
+        "basin_box_fraction": float(basin.held.mean()),
+        "certified_set_held": None if inside is None else float(inside.held.mean()),
+    }
 
 
 def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str, Any]:
@@ -138,6 +174,7 @@ def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str,
     trace = relevance_trace(system, controller, spec.seed)
     return {
         "action_repeat": control_period(controller),
+        "roa": region_of_attraction(system, controller),
         "responses": responses,
         "robustness": [
             {**point._asdict(), "return_mean": point.return_mean}
@@ -218,7 +255,7 @@ def reproduce(
     jobs: int | None = None,
     seeds: int | None = None,
     systems: Sequence[str] = SYSTEM_NAMES,
-    controllers: Sequence[str] = CONTROLLERS,
+    controllers: Sequence[str] = DEFAULT_CONTROLLERS,
     echo: Callable[[str], None] = print,
     backend: str = "local",
     address: str | None = None,

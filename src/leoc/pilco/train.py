@@ -35,7 +35,8 @@ from leoc.io import save_torch_atomic, set_aside, write_text_atomic
 from leoc.pilco.gp import GPHyper, GPPosterior, GPSettings, fit_gp
 from leoc.pilco.propagate import Prediction, SaturatedPolicy, predict
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
-from leoc.policies import HeldPolicy, HybridPolicy, LinearController, RBFNetwork
+from leoc.policies import HeldPolicy, HybridPolicy, LinearController, RBFNetwork, roa_hybrid
+from leoc.policies.relevance import RELEVANCE_KINDS
 from leoc.systems import make_system
 from leoc.systems.base import DTYPE, System
 from leoc.systems.rollout import RandomController
@@ -97,7 +98,11 @@ class PilcoConfig:
     lambda_init : float
         Initial diagonal of the hybrid's Lambda (paper: identity).
     learn_lambda : bool
-        Optimise Lambda with the RBF parameters.
+        Optimise Lambda (paper relevance) or the transition width (ROA relevance) with the RBF
+        parameters.
+    relevance : {"paper", "roa"}
+        The hybrid's relevance: the paper's r(x) = 1 / (1 + d)^2, or exactly 1 on the certified
+        region of attraction of the LQR at ``action_repeat`` (:func:`leoc.policies.roa_hybrid`).
     gp : GPSettings
         GP fitting settings (sparse beyond ``gp.max_full_points`` data).
     num_threads : int or None
@@ -123,6 +128,7 @@ class PilcoConfig:
     hybrid_method: str = "quadrature"
     lambda_init: float = 1.0
     learn_lambda: bool = True
+    relevance: str = "paper"
     gp: GPSettings = dataclasses.field(default_factory=GPSettings)
     num_threads: int | None = None
     stop_after_held: int = 0
@@ -144,6 +150,33 @@ class PilcoConfig:
             gp = GPSettings(**gp)
         gp = dataclasses.replace(gp or GPSettings(), **gp_over)
         return cls(system=name, gp=gp, **{**SYSTEM_DEFAULTS[name], **own})
+
+    def __post_init__(self) -> None:
+        for name in (
+            "iterations",
+            "horizon",
+            "action_repeat",
+            "episode_steps",
+            "num_basis",
+            "policy_iterations",
+            "quadrature_order",
+            "eval_episodes",
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected a positive integer, found {value!r}")
+        for name in ("initial_rollouts", "seed", "stop_after_held"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
+        for name in ("cost_width", "lambda_init"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not 0 < value < math.inf:
+                raise ValueError(f"{name}: expected a positive number, found {value!r}")
+        if self.relevance not in RELEVANCE_KINDS:
+            raise ValueError(
+                f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -235,6 +268,8 @@ def build_policy(
     from leoc.control.lqr import design_lqr
 
     design = design_lqr(system, action_repeat=config.action_repeat)
+    if config.relevance == "roa":
+        return roa_hybrid(system, design, rbf, learn_width=config.learn_lambda, saturation="sin")
     return HybridPolicy(
         LinearController(design.W, design.b),
         rbf,
