@@ -296,7 +296,8 @@ def roa_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
                     "samples": first["certificate"]["samples"],
                     "violation_bound": first["certificate"]["violation_bound"],
                     "confidence": first["certificate"]["confidence"],
-                    "certified_box_fraction": first["certified_box_fraction"],
+                    # runs written before the fraction was stored alone hold [fraction, error]
+                    "certified_box_fraction": float(np.ravel(first["certified_box_fraction"])[0]),
                     "basin_box_fraction": float(
                         np.mean([run["roa"]["basin_box_fraction"] for run in runs])
                     ),
@@ -497,7 +498,7 @@ def plot_roa(rows: list[dict[str, Any]], path: Path) -> Path:
             selected[0]["certified_box_fraction"],
             color="#222222",
             linestyle=":",
-            label="certified set's share of the box (LQR at dt)",
+            label="certified set's share of the box (LQR at the first row's period)",
         )
         axis.set_xticks(positions)
         axis.set_xticklabels(

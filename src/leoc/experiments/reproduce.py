@@ -151,7 +151,9 @@ def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[st
     return {
         "certificate": certificate.summary(),
         "box": box.tolist(),
-        "certified_box_fraction": box_fraction(certificate, box) if certificate.certified else 0.0,
+        "certified_box_fraction": box_fraction(certificate, box)[0]
+        if certificate.certified
+        else 0.0,
         "basin_box_fraction": float(basin.held.mean()),
         "certified_set_held": None if inside is None else float(inside.held.mean()),
     }
