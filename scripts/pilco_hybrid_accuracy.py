@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from leoc.pilco.config import PilcoConfig
 from leoc.pilco.moments import observation_moments
+from leoc.pilco.policy import build_policy, obs_layout
 from leoc.pilco.propagate import action_moments, observe_torch
-from leoc.pilco.train import PilcoConfig, build_policy, obs_layout
 from leoc.systems import make_system
 
 SAMPLES = 1_000_000

@@ -383,7 +383,8 @@ TINY = dict(
 
 
 def test_train_save_load_and_resume(tmp_path) -> None:
-    from leoc.pilco.train import load_pilco_controller, train_pilco
+    from leoc.pilco.checkpoint import load_pilco_controller
+    from leoc.pilco.train import train_pilco
     from leoc.policies import HeldPolicy
     from leoc.training import CURVE_COLUMNS
 
@@ -446,7 +447,8 @@ def test_train_save_load_and_resume(tmp_path) -> None:
 @pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
 def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
     from leoc.control import design_lqr
-    from leoc.pilco.train import PilcoConfig, build_policy
+    from leoc.pilco.config import PilcoConfig
+    from leoc.pilco.policy import build_policy
     from leoc.systems import make_system
 
     system = make_system(name)
@@ -502,3 +504,27 @@ def test_recomputing_bilinear_exp_has_the_plain_gradients() -> None:
     assert torch.autograd.gradcheck(WeightedExpBilinear.apply, (left, right, weights))
     plain = (weights * torch.exp(left @ right.transpose(-1, -2))).sum((-1, -2))
     torch.testing.assert_close(WeightedExpBilinear.apply(left, right, weights), plain)
+
+
+@pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
+def test_cost_distance_is_the_physical_target_distance(name) -> None:
+    from leoc.pilco.objective import cost_spec
+    from leoc.systems import make_system
+
+    system = make_system(name)
+    spec = cost_spec(system, width=1.0)
+    gen = torch.Generator().manual_seed(0)
+    states = torch.randn(50, system.state_dim, generator=gen, dtype=DTYPE)
+    obs = system.observe(states)
+    distance = ((obs - spec.target) @ spec.factor.T).square().sum(-1)
+    if name == "pendulum":  # the rod's tip against the upright tip
+        length = system.params.length
+        theta = states[:, 0]
+        expected = (length * torch.sin(theta)) ** 2 + (length * torch.cos(theta) - length) ** 2
+    elif name == "cartpole":  # the pole's tip against the upright tip over the track centre
+        length = 2.0 * system.params.half_length
+        x, theta = states[:, 0], states[:, 2]
+        expected = (x + length * torch.sin(theta)) ** 2 + (length * torch.cos(theta) - length) ** 2
+    else:  # the car's position against the hilltop
+        expected = states[:, 0] ** 2
+    torch.testing.assert_close(distance, expected)

@@ -61,7 +61,7 @@ def load_trained_controller(run_dir: str | Path, system: str | None = None) -> t
             f"not for {system!r}"
         )
     if (folder / PILCO_MARKER).is_file():
-        from leoc.pilco.train import load_pilco_controller
+        from leoc.pilco.checkpoint import load_pilco_controller
 
         return load_pilco_controller(folder)
     from leoc.ddpg.train import load_ddpg_controller

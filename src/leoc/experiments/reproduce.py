@@ -83,7 +83,7 @@ def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
 
 def pilco_action_repeat(profile: Profile) -> int:
     """PILCO's control period under ``profile`` (its override, else the PILCO default)."""
-    from leoc.pilco.train import PilcoConfig
+    from leoc.pilco.config import PilcoConfig
 
     return int(profile.pilco_overrides.get("action_repeat", PilcoConfig.action_repeat))
 

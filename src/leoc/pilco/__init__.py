@@ -6,9 +6,15 @@
 - :mod:`~leoc.pilco.cost`: saturating cost and its expectation;
 - :mod:`~leoc.pilco.propagate`: long-term prediction over the horizon;
 - :mod:`~leoc.pilco.rollout`: real rollouts and the hold test;
-- :mod:`~leoc.pilco.train`: configuration, training loop, save/load/resume.
+- :mod:`~leoc.pilco.config`: the validated settings and per-system defaults;
+- :mod:`~leoc.pilco.policy`: the RBF baseline and the hybrid, built from the initial data;
+- :mod:`~leoc.pilco.objective`: the predicted horizon cost and its L-BFGS minimisation;
+- :mod:`~leoc.pilco.checkpoint`: resumable checkpoint and saved controller;
+- :mod:`~leoc.pilco.train`: the training loop only.
 """
 
+from leoc.pilco.checkpoint import load_pilco_controller
+from leoc.pilco.config import PilcoConfig
 from leoc.pilco.cost import expected_saturating_cost, saturating_cost
 from leoc.pilco.gp import CholeskyError, GPPosterior, GPSettings, fit_gp, gp_predict
 from leoc.pilco.moments import (
@@ -21,12 +27,7 @@ from leoc.pilco.moments import (
     sin_squash_moments,
 )
 from leoc.pilco.propagate import SaturatedPolicy, action_moments, predict
-from leoc.pilco.train import (
-    PilcoConfig,
-    PilcoResult,
-    load_pilco_controller,
-    train_pilco,
-)
+from leoc.pilco.train import PilcoResult, train_pilco
 
 __all__ = [
     "CholeskyError",

@@ -240,6 +240,19 @@ class System:
         """Analytic continuous-time linearisation ``(A, B)`` about the operating point."""
         raise NotImplementedError
 
+    def cost_factor(self) -> np.ndarray:
+        """Factor ``F`` (K, O) of PILCO's saturating cost on the observation deviation:
+        ``c = 1 - exp(-|F (o - o(a))|^2 / (2 width^2))``. Default: the observation entries of
+        the main coordinate (its cos and sin for an angle); systems override it with their
+        physical target distance (e.g. a pendulum's tip)."""
+        rows = []
+        for column, component in enumerate(self.obs_layout):
+            if component.state_index == self.main_index:
+                row = np.zeros(self.obs_dim)
+                row[column] = 1.0
+                rows.append(row)
+        return np.asarray(rows)
+
     def clip_action(self, action: Tensor) -> Tensor:
         return torch.clamp(action, -self.action_limit, self.action_limit)
 

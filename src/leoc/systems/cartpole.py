@@ -151,6 +151,13 @@ class CartPole(System):
     def action_limit(self) -> float:
         return float(self.params.max_force)
 
+    def cost_factor(self) -> np.ndarray:
+        """PILCO's cost distance: the pole tip to its upright position over the track centre,
+        ``(x + L sin)^2 + L^2 (cos - 1)^2`` with L the pole length (observation
+        ``[x, x_dot, cos, sin, theta_dot]``)."""
+        length = 2.0 * self.params.half_length
+        return np.array([[1.0, 0.0, 0.0, length, 0.0], [0.0, 0.0, length, 0.0, 0.0]])
+
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return cartpole_step(state, action, self.params)
 

@@ -125,6 +125,12 @@ class Pendulum(System):
     def action_limit(self) -> float:
         return float(self.params.max_torque)
 
+    def cost_factor(self) -> np.ndarray:
+        """PILCO's cost distance: the rod tip to the upright tip,
+        ``l^2 ((cos - 1)^2 + sin^2)`` (observation ``[cos, sin, theta_dot]``)."""
+        length = self.params.length
+        return np.array([[length, 0.0, 0.0], [0.0, length, 0.0]])
+
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return pendulum_step(state, action, self.params)
 

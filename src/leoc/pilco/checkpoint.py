@@ -1,0 +1,129 @@
+"""PILCO's run state on disk: the resumable checkpoint and the saved controller.
+
+``checkpoint.pt`` holds everything needed to resume (data, RNG states, GP hyper-parameters,
+policy); ``controller.pt`` the policy, GP posterior and config. Both are written atomically; a
+damaged checkpoint is set aside and the run starts afresh.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+from torch import nn
+
+from leoc.io import save_torch_atomic, set_aside
+from leoc.pilco.config import PilcoConfig
+from leoc.pilco.gp import GPHyper, GPPosterior
+from leoc.pilco.policy import build_policy
+from leoc.policies import HeldPolicy
+from leoc.systems import make_system
+from leoc.systems.base import System
+
+CHECKPOINT_NAME = "checkpoint.pt"
+CONTROLLER_NAME = "controller.pt"
+
+
+class RunState(NamedTuple):
+    iteration: int
+    inputs: np.ndarray
+    targets: np.ndarray
+    interaction_steps: int
+    log: list[dict[str, Any]]
+    rng_state: dict[str, Any]
+    hyper: GPHyper | None
+
+
+def save_checkpoint(
+    run_dir: Path,
+    config: PilcoConfig,
+    state: RunState,
+    policy: nn.Module,
+    model: GPPosterior | None,
+    generator: torch.Generator,
+) -> None:
+    save_torch_atomic(
+        {
+            "config": config.to_dict(),
+            "iteration": state.iteration,
+            "inputs": state.inputs,
+            "targets": state.targets,
+            "interaction_steps": state.interaction_steps,
+            "log": state.log,
+            "rng_state": state.rng_state,
+            "torch_rng_state": generator.get_state(),
+            "hyper": None if state.hyper is None else state.hyper._asdict(),
+            "policy_state": policy.state_dict(),
+            "model": None if model is None else model._asdict(),
+        },
+        run_dir / CHECKPOINT_NAME,
+    )
+    save_torch_atomic(
+        {
+            "config": config.to_dict(),
+            "policy_state": policy.state_dict(),
+            "model": None if model is None else model._asdict(),
+        },
+        run_dir / CONTROLLER_NAME,
+    )
+
+
+def resume_checkpoint(
+    run_dir: Path, config: PilcoConfig, system: System, generator: torch.Generator
+) -> tuple[RunState, nn.Module, GPPosterior | None] | None:
+    path = run_dir / CHECKPOINT_NAME
+    if not path.exists():
+        return None
+    try:
+        saved = torch.load(path, weights_only=False)
+        old = PilcoConfig.from_dict(saved["config"])
+    except Exception as error:  # truncated or garbled: set it aside and start afresh
+        aside = set_aside(path)
+        print(
+            f"[pilco] damaged checkpoint {path} ({type(error).__name__}: {error}); set aside as "
+            f"{aside.name}, starting the run afresh",
+            flush=True,
+        )
+        return None
+    if dataclasses.replace(old, iterations=config.iterations) != config:
+        raise ValueError(
+            f"resume: the checkpoint in {run_dir} was written with another configuration "
+            f"({saved['config']}); use a new run_dir or resume=False"
+        )
+    generator.set_state(saved["torch_rng_state"])
+    policy = build_policy(system, config, generator)
+    policy.load_state_dict(saved["policy_state"])
+    hyper = None if saved["hyper"] is None else GPHyper(**saved["hyper"])
+    model = None if saved["model"] is None else GPPosterior(**saved["model"])
+    state = RunState(
+        saved["iteration"],
+        saved["inputs"],
+        saved["targets"],
+        saved["interaction_steps"],
+        saved["log"],
+        saved["rng_state"],
+        hyper,
+    )
+    return state, policy, model
+
+
+def load_pilco_controller(run_dir: str | Path) -> nn.Module:
+    """The trained policy of a run folder at its control period (a
+    :class:`~leoc.policies.HeldPolicy`: observations -> physical actions)."""
+    path = Path(run_dir) / CONTROLLER_NAME
+    try:
+        saved = torch.load(path, weights_only=False)
+        config = PilcoConfig.from_dict(saved["config"])
+    except FileNotFoundError:
+        raise
+    except Exception as error:  # a truncated or garbled file: name it
+        raise ValueError(
+            f"controller: {path} could not be read as a PILCO controller "
+            f"({type(error).__name__}: {error})"
+        ) from error
+    policy = build_policy(make_system(config.system), config, torch.Generator().manual_seed(0))
+    policy.load_state_dict(saved["policy_state"])
+    return HeldPolicy(policy.eval(), config.action_repeat).eval()
