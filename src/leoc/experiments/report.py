@@ -27,6 +27,7 @@ from leoc.evaluation.plots import (
 )
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
+from leoc.experiments.layout import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import (
     CONTROLLER_LABELS,
@@ -34,7 +35,6 @@ from leoc.experiments.profiles import (
     LINEAR_CONTROLLERS,
     LINEAR_REFERENCE,
 )
-from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.experiments.stats import (
     MIN_RUNS_FOR_INTERVAL,
     curve_bands,

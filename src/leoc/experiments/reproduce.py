@@ -1,14 +1,7 @@
 """``leoc reproduce``: train (or design) and evaluate every controller of the paper, in parallel
 worker processes, resumable, and write the report.
 
-Layout of an output folder ``OUT``::
-
-    OUT/runs/SYSTEM/CONTROLLER/seedN/train/        the trainer's own run folder
-    OUT/runs/SYSTEM/CONTROLLER/seedN/train.log     the worker's output (progress)
-    OUT/runs/SYSTEM/CONTROLLER/seedN/evaluation.json   written last, atomically: the run is done
-    OUT/results.json, *.csv, *.png, report.md      the aggregated report (see report.py)
-
-A run whose ``evaluation.json`` exists is skipped on rerun; an interrupted run is started again
+The layout of an output folder is :mod:`leoc.experiments.layout`. A run whose ``evaluation.json`` exists is skipped on rerun; an interrupted run is started again
 (PILCO resumes from its own checkpoint). Nothing is ever half-written: every file goes through a
 temporary file and ``os.replace``.
 """
@@ -31,6 +24,13 @@ import torch
 
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
+from leoc.experiments.layout import (
+    EVALUATION_FILE,
+    LOG_FILE,
+    META_FILE,
+    SWING_UP_EPISODES,
+    run_dir_of,
+)
 from leoc.experiments.profiles import (
     DEFAULT_CONTROLLERS,
     Profile,
@@ -44,16 +44,7 @@ from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
 
-EVALUATION_FILE = "evaluation.json"
-LOG_FILE = "train.log"
-META_FILE = "meta.json"
 WORKER_THREADS = 1
-# Swing-up episodes of every evaluated controller (the trainers' evaluation starts).
-SWING_UP_EPISODES = 5
-
-
-def run_dir_of(out_dir: Path, spec: RunSpec) -> Path:
-    return out_dir / "runs" / spec.system / spec.controller / f"seed{spec.seed}"
 
 
 def versions() -> dict[str, str]:
