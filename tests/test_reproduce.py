@@ -17,7 +17,7 @@ from leoc.cli import main
 from leoc.control import design_lqr
 from leoc.evaluation.rollout import response_test
 from leoc.experiments.controllers import load_trained_controller
-from leoc.experiments.profiles import CONTROLLERS, get_profile, run_specs
+from leoc.experiments.profiles import DEFAULT_CONTROLLERS, get_profile, run_specs
 from leoc.experiments.reproduce import EVALUATION_FILE, reproduce, run_dir_of
 from leoc.policies import LinearController
 from leoc.systems import make_system
@@ -124,7 +124,7 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
             controller: json.loads(
                 (out / "runs" / system / controller / "seed0" / EVALUATION_FILE).read_text()
             )
-            for controller in CONTROLLERS
+            for controller in DEFAULT_CONTROLLERS
         }
         assert runs["pilco_hybrid"]["action_repeat"] == runs["linear_pilco"]["action_repeat"] == 3
         assert runs["ddpg_hybrid"]["action_repeat"] == runs["linear"]["action_repeat"] == 1
@@ -148,7 +148,7 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
         printed = _simulate_json(system, run_folder)
         assert printed["action_repeat"] == 3
         np.testing.assert_array_equal(np.asarray(printed["deviation"]), saved)
-    assert {row["controller"] for row in results["responses"]} == set(CONTROLLERS)
+    assert {row["controller"] for row in results["responses"]} == set(DEFAULT_CONTROLLERS)
     report = (out / "report.md").read_text()
     assert "## Summary" in report and "Model selection: the final controller" in report
 
