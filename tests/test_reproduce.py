@@ -149,8 +149,41 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
         assert printed["action_repeat"] == 3
         np.testing.assert_array_equal(np.asarray(printed["deviation"]), saved)
     assert {row["controller"] for row in results["responses"]} == set(DEFAULT_CONTROLLERS)
+    _damaged_run_folders_are_one_line_errors(out, systems[0])
     report = (out / "report.md").read_text()
     assert "## Summary" in report and "Model selection: the final controller" in report
+
+
+def _damaged_run_folders_are_one_line_errors(out: Path, system: str) -> None:
+    """A truncated controller.pt / model.zip or a garbled or missing config.json: `leoc
+    simulate` fails with one line that names the file."""
+    import shutil
+
+    cases = [
+        ("pilco_hybrid", "controller.pt", "truncate"),
+        ("ddpg_hybrid", "model.zip", "truncate"),
+        ("ddpg_hybrid", "config.json", "garble"),
+        ("ddpg_hybrid", "config.json", "delete"),
+    ]
+    for index, (controller, name, damage) in enumerate(cases):
+        copy = out / f"damaged{index}"
+        shutil.copytree(out / "runs" / system / controller / "seed0" / "train", copy)
+        target = copy / name
+        if damage == "truncate":
+            target.write_bytes(target.read_bytes()[:200])
+        elif damage == "garble":
+            target.write_text("{not json")
+        else:
+            target.unlink()
+        result = subprocess.run(
+            [sys.executable, "-m", "leoc.cli", "simulate", system, "--controller", str(copy)],
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT_S,
+        )
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2, (name, damage, result.stderr)
+        assert len(lines) == 1 and str(target) in lines[0], (name, damage, result.stderr)
 
 
 def _simulate_json(system: str, run_folder: Path) -> dict:
