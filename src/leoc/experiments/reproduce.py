@@ -1,7 +1,8 @@
 """``leoc reproduce``: train (or design) and evaluate every controller of the paper, in parallel
 worker processes, resumable, and write the report.
 
-The layout of an output folder is :mod:`leoc.experiments.layout`. A run whose ``evaluation.json`` exists is skipped on rerun; an interrupted run is started again
+The layout of an output folder is :mod:`leoc.experiments.layout`. A run whose
+``evaluation.json`` exists is skipped on rerun; an interrupted run is started again
 (PILCO resumes from its own checkpoint). Nothing is ever half-written: every file goes through a
 temporary file and ``os.replace``.
 """
