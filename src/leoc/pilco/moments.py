@@ -11,8 +11,9 @@ of :math:`y = f(x)` (no linearisation) and the input-output covariance in PILCO'
 - :func:`linear_moments` for :math:`W x + b`;
 - :func:`observation_moments` for the observation map (state entries and cos/sin of angles);
 - :func:`sin_squash_moments` for :math:`u_{max} \sin(u / u_{max})`;
-- :func:`gp_moments` for the GP predictive distribution and, with ``variance=False``, for the RBF
-  controller (the same sum of squared-exponential bumps; Deisenroth 2010, sec. 2.3.2-2.3.3).
+- :func:`gp_moments` for the GP predictive distribution and :func:`rbf_moments` for the RBF
+  controller, both by :func:`se_sum_moments` (the same sum of squared-exponential bumps;
+  Deisenroth 2010, sec. 2.3.2-2.3.3).
 
 The hybrid policy's relevance :math:`r(x) = (1 + d(x))^{-2}` has no closed form under a Gaussian;
 :func:`quadrature_moments` integrates any function by tensor Gauss-Hermite quadrature (exact for
@@ -35,7 +36,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.pilco.gp import GPPosterior, cholesky_jitter
+from leoc.linalg import cholesky_jitter, log_det_cholesky, symmetrise, weighted_exp_bilinear
+from leoc.pilco.gp import GPPosterior, pair_indices, pair_weights
 
 HALF_PI = 0.5 * math.pi
 
@@ -55,11 +57,6 @@ class QuadratureMoments(NamedTuple):
     mean: Tensor
     cov: Tensor
     cross: Tensor
-
-
-def symmetrise(matrix: Tensor) -> Tensor:
-    """(A + A^T) / 2: removes the round-off asymmetry that products like W S W^T accumulate."""
-    return 0.5 * (matrix + matrix.transpose(-1, -2))
 
 
 def linear_moments(mean: Tensor, cov: Tensor, weight: Tensor, bias: Tensor) -> MomentMatch:
@@ -151,148 +148,23 @@ def observation_moments(
     return MomentMatch(out_mean, symmetrise(out_cov), selector * slope[None, :])
 
 
-def _se_first_moments(
-    support: Tensor, beta: Tensor, log_ls: Tensor, log_signal: Tensor, mean: Tensor, cov: Tensor
-) -> tuple[Tensor, Tensor, Tensor]:
-    r"""Mean and io of :math:`y_a = \sum_i \beta_{ai} k_a(x, z_i)`, and :math:`\nu_i = z_i - \mu`.
+class _ScaledInverses(NamedTuple):
+    """Log-determinants (E + P,) and inverses (E + P, D, D) of the SPD matrices
+    ``I + s Sigma s`` for the scales ``s`` of the E outputs, then of the P output pairs."""
 
-    With :math:`\tilde\nu = \Lambda_a^{-1/2}\nu` and the SPD matrix
-    :math:`B_a = I + \Lambda_a^{-1/2} \Sigma \Lambda_a^{-1/2}` (eigenvalues >= 1, so its Cholesky
-    factor is always well conditioned, unlike :math:`\Sigma + \Lambda_a` itself):
+    log_det: Tensor
+    inverse: Tensor
 
-    .. math::
 
-        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \tilde\nu_i^\top B_a^{-1} \tilde\nu_i),
-        \quad E[y_a] = \beta_a^\top q_a, \quad
-        \Sigma^{-1}\operatorname{Cov}[x, y_a] = (\Sigma + \Lambda_a)^{-1} \sum_i \beta_{ai}
-            q_{ai} \nu_i = \Lambda_a^{-1/2} B_a^{-1} \sum_i \beta_{ai} q_{ai} \tilde\nu_i.
-
-    Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,);
-    returns mean (E,), io (D, E), nu (M, D).
+def _scaled_inverses(scales: Tensor, cov: Tensor) -> _ScaledInverses:
+    r"""One batched Cholesky for every :math:`B = I + \operatorname{diag}(s) \Sigma
+    \operatorname{diag}(s)` of a step (eigenvalues >= 1: well conditioned whatever
+    :math:`\Sigma`, so its explicit inverse is accurate). Shapes: ``scales`` (K, D) -> (K, D, D).
     """
-    dim = mean.shape[0]
-    inv_ls = torch.exp(-log_ls)  # (E, D)
-    nu = support - mean  # (M, D)
-    nu_scaled = nu[None] * inv_ls[:, None, :]  # (E, M, D)
-    b_mat = torch.eye(dim, dtype=mean.dtype) + inv_ls[:, :, None] * cov * inv_ls[:, None, :]
-    chol = cholesky_jitter(b_mat, "I + L^-1/2 S L^-1/2")
-    solved = torch.cholesky_solve(nu_scaled.transpose(-1, -2), chol)  # (E, D, M)
-    quad = (nu_scaled.transpose(-1, -2) * solved).sum(-2)  # (E, M)
-    log_det = 2.0 * torch.log(chol.diagonal(dim1=-2, dim2=-1)).sum(-1)  # (E,)
-    q = torch.exp(2.0 * log_signal[:, None] - 0.5 * log_det[:, None] - 0.5 * quad)
-    weighted = beta * q  # (E, M)
-    out_mean = weighted.sum(-1)
-    io = (inv_ls * (solved @ weighted[..., None])[..., 0]).T  # (D, E)
-    return out_mean, io, nu
-
-
-# From this many support points on, Q is recomputed in the backward pass instead of stored:
-# storing it costs P M^2 doubles per horizon step (0.5 GB over 40 steps at M = 400, E = 4),
-# recomputing costs one more batched matmul and exp per step.
-RECOMPUTE_MIN_SUPPORT = 300
-
-
-class WeightedExpBilinear(torch.autograd.Function):
-    r""":math:`v_p = \sum_{ij} W_{pij} \exp((L_p R_p^\top)_{ij})` with the exponential
-    recomputed in the backward pass, so only L, R (P, M, K) and W are kept.
-
-    Gradients: with :math:`G_p = v'_p\, W_p \odot \exp(L_p R_p^\top)`,
-    :math:`\partial L_p = G_p R_p`, :math:`\partial R_p = G_p^\top L_p` and
-    :math:`\partial W_p = v'_p \exp(L_p R_p^\top)`. First order only.
-    """
-
-    @staticmethod
-    def forward(ctx, left: Tensor, right: Tensor, weights: Tensor) -> Tensor:
-        ctx.save_for_backward(left, right, weights)
-        q = torch.exp(left @ right.transpose(-1, -2))
-        return (weights * q).sum(dim=(-1, -2))
-
-    @staticmethod
-    def backward(ctx, grad: Tensor):
-        left, right, weights = ctx.saved_tensors
-        q = torch.exp(left @ right.transpose(-1, -2)) * grad[:, None, None]
-        grad_weights = q if ctx.needs_input_grad[2] else None
-        g = q * weights
-        return g @ right, g.transpose(-1, -2) @ left, grad_weights
-
-
-def pair_indices(num_outputs: int) -> tuple[Tensor, Tensor]:
-    """Output pairs ``a <= b`` (P = E (E + 1) / 2 of them): Q_ba = Q_ab^T, so half suffices."""
-    pairs = torch.triu_indices(num_outputs, num_outputs)
-    return pairs[0], pairs[1]
-
-
-def pair_weights(beta: Tensor, inv_k: Tensor | None = None) -> Tensor:
-    r"""Weights :math:`\beta_a \beta_b^\top - \delta_{ab} \Xi_a` (P, M, M) of the pairs ``a <= b``.
-
-    With them one elementwise contraction per pair gives both :math:`\beta_a^\top Q_{ab} \beta_b`
-    and, for ``a = b``, the :math:`-\operatorname{tr}(\Xi_a Q_{aa})` of the GP variance. They do
-    not depend on the input distribution, so a GP computes them once per model.
-    """
-    first, second = pair_indices(beta.shape[0])
-    weights = beta[first][:, :, None] * beta[second][:, None, :]
-    if inv_k is not None:
-        same = (first == second).to(beta.dtype)[:, None, None]
-        weights = weights - same * inv_k[first]
-    return weights
-
-
-def _se_second_moments(
-    nu: Tensor, log_ls: Tensor, log_signal: Tensor, cov: Tensor, weights: Tensor
-) -> Tensor:
-    r"""The (E, E) matrix :math:`\sum_{ij} [\beta_a\beta_b^\top - \delta_{ab}\Xi_a]_{ij} Q_{ab,ij}`.
-
-    Deisenroth (2010, eq. 2.53):
-    :math:`Q_{ab,ij} = k_a(z_i, \mu) k_b(z_j, \mu) |R|^{-1/2}
-    \exp(\tfrac12 w_{ij}^\top R^{-1} \Sigma w_{ij})` with
-    :math:`R = \Sigma (\Lambda_a^{-1} + \Lambda_b^{-1}) + I` and
-    :math:`w_{ij} = \Lambda_a^{-1} \nu_i + \Lambda_b^{-1} \nu_j`.
-
-    Numerics:
-
-    - with :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` (diagonal) and the SPD
-      :math:`B = I + P^{1/2} \Sigma P^{1/2}` (eigenvalues >= 1), :math:`|R| = |B|` and
-      :math:`R^{-1}\Sigma = P^{-1/2} (I - B^{-1}) P^{-1/2}`: no non-symmetric solve;
-    - writing :math:`P^{-1/2} w_{ij} = p_i + s_j` and :math:`T = I - B^{-1}`, the exponent is
-      :math:`\rho_i + \gamma_j + p_i^\top T s_j`, a rank-(D + 2) bilinear form: one batched
-      matmul of (M, D + 2) by (D + 2, M) gives :math:`\log Q` without the (M, M, D) tensor of
-      the naive formula or any (M, M) broadcast, then one ``exp`` (everything summed in log
-      space first, so nothing overflows: :math:`Q_{ab,ij} \le \alpha_a^2 \alpha_b^2`) and one
-      batched dot with the weights. Only Q, (P, M, M), is kept for the backward pass;
-    - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`).
-
-    Shapes: ``nu`` (M, D), ``log_ls`` (E, D), ``log_signal`` (E,), ``cov`` (D, D),
-    ``weights`` (P, M, M) from :func:`pair_weights` -> (E, E).
-    """
-    dim, num_outputs, num_support = cov.shape[0], log_ls.shape[0], nu.shape[0]
-    first, second = pair_indices(num_outputs)
-    inv_ls2 = torch.exp(-2.0 * log_ls)  # (E, D) diagonal of Lambda^-1
-    prec = inv_ls2[first] + inv_ls2[second]  # (P, D)
-    sqrt_prec = prec.sqrt()
-    eye = torch.eye(dim, dtype=cov.dtype)
-    b_mat = eye + sqrt_prec[:, :, None] * cov * sqrt_prec[:, None, :]  # (P, D, D)
-    chol = cholesky_jitter(b_mat, "I + P^1/2 S P^1/2")
-    log_det = 2.0 * torch.log(chol.diagonal(dim1=-2, dim2=-1)).sum(-1)  # (P,)
-    t_mat = eye - torch.cholesky_inverse(chol)  # (P, D, D), symmetric
-    row = nu * (inv_ls2[first] / sqrt_prec)[:, None, :]  # (P, M, D): p_i
-    col = nu * (inv_ls2[second] / sqrt_prec)[:, None, :]  # (P, M, D): s_j
-    row_t = row @ t_mat
-    sq_dist = (nu * torch.exp(-log_ls)[:, None, :]).square().sum(-1)  # (E, M)
-    log_k = 2.0 * log_signal[:, None] - 0.5 * sq_dist  # (E, M) log k_a(z_i, mu)
-    row_log = log_k[first] + 0.5 * (row_t * row).sum(-1) - 0.5 * log_det[:, None]  # (P, M)
-    col_log = log_k[second] + 0.5 * ((col @ t_mat) * col).sum(-1)  # (P, M)
-    ones = torch.ones(first.shape[0], num_support, 1, dtype=cov.dtype)
-    left = torch.cat([row_t, row_log[..., None], ones], dim=-1)  # (P, M, D + 2)
-    right = torch.cat([col, ones, col_log[..., None]], dim=-1)  # (P, M, D + 2)
-    if num_support >= RECOMPUTE_MIN_SUPPORT:
-        values = WeightedExpBilinear.apply(left, right, weights)
-    else:
-        q = torch.exp(left @ right.transpose(-1, -2))  # (P, M, M)
-        values = (weights * q).sum(dim=(-1, -2))  # (P,)
-    upper = torch.zeros(num_outputs, num_outputs, dtype=cov.dtype).index_put(
-        (first, second), values
-    )
-    return upper + upper.T - torch.diag(upper.diagonal())
+    eye = torch.eye(cov.shape[0], dtype=cov.dtype)
+    b_mat = eye + scales[:, :, None] * cov * scales[:, None, :]
+    chol = cholesky_jitter(b_mat, "I + s S s")
+    return _ScaledInverses(log_det_cholesky(chol), torch.cholesky_inverse(chol))
 
 
 def se_sum_moments(
@@ -310,18 +182,77 @@ def se_sum_moments(
     ``gp_variance``: y is a GP prediction and each output's variance gains the expected
     posterior variance :math:`\alpha_a^2 - \operatorname{tr}(\Xi_a Q_{aa})` (Deisenroth 2010,
     eq. 2.55; the trace comes in through ``weights``); otherwise y is a deterministic RBF
-    network. ``weights`` defaults to :func:`pair_weights` of ``beta`` (no GP term).
+    network. ``weights`` defaults to :func:`~leoc.pilco.gp.pair_weights` of ``beta`` (no GP
+    term).
+
+    **Mean and io.** With :math:`\nu_i = z_i - \mu`, :math:`\tilde\nu = \Lambda_a^{-1/2}\nu` and
+    the SPD :math:`B_a = I + \Lambda_a^{-1/2} \Sigma \Lambda_a^{-1/2}` (eigenvalues >= 1, unlike
+    :math:`\Sigma + \Lambda_a` itself):
+
+    .. math::
+
+        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \tilde\nu_i^\top B_a^{-1} \tilde\nu_i),
+        \quad E[y_a] = \beta_a^\top q_a, \quad
+        \Sigma^{-1}\operatorname{Cov}[x, y_a] = \Lambda_a^{-1/2} B_a^{-1} \sum_i \beta_{ai}
+            q_{ai} \tilde\nu_i.
+
+    **Second moments** (Deisenroth 2010, eq. 2.53):
+    :math:`E[y_a y_b] = \sum_{ij} [\beta_a\beta_b^\top - \delta_{ab}\Xi_a]_{ij} Q_{ab,ij}` with
+    :math:`Q_{ab,ij} = k_a(z_i, \mu) k_b(z_j, \mu) |R|^{-1/2}
+    \exp(\tfrac12 w_{ij}^\top R^{-1} \Sigma w_{ij})`, :math:`R = \Sigma (\Lambda_a^{-1} +
+    \Lambda_b^{-1}) + I` and :math:`w_{ij} = \Lambda_a^{-1} \nu_i + \Lambda_b^{-1} \nu_j`.
+    Numerics:
+
+    - with :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` (diagonal) and the SPD
+      :math:`B_{ab} = I + P^{1/2} \Sigma P^{1/2}`, :math:`|R| = |B_{ab}|` and
+      :math:`R^{-1}\Sigma = P^{-1/2} (I - B_{ab}^{-1}) P^{-1/2}`: no non-symmetric solve, and
+      all E + P matrices B of the step share one batched Cholesky factorisation;
+    - writing :math:`P^{-1/2} w_{ij} = p_i + s_j` and :math:`T = I - B_{ab}^{-1}`, the exponent is
+      :math:`\rho_i + \gamma_j + p_i^\top T s_j`, a bilinear form of rank D + 2 in the rows
+      :math:`[T p_i, \rho_i, 1]` and :math:`[s_j, 1, \gamma_j]`: no (M, M, D) tensor, everything
+      summed in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
+      \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
+      weights in cache-sized row blocks, never storing Q;
+    - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`), and one gather
+      spreads them over the symmetric (E, E) result.
 
     Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,),
-    ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M).
+    ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M) -> mean (E,), cov (E, E), io (D, E).
     """
-    out_mean, io, nu = _se_first_moments(support, beta, log_ls, log_signal, mean, cov)
+    num_outputs = beta.shape[0]
+    first, second, pair_of = pair_indices(num_outputs)
+    nu = support - mean  # (M, D)
+    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of Lambda^-1/2
+    inv_ls2 = inv_ls.square()  # (E, D) diagonal of Lambda^-1
+    sqrt_prec = (inv_ls2[first] + inv_ls2[second]).sqrt()  # (P, D) diagonal of P^1/2
+    inverses = _scaled_inverses(torch.cat([inv_ls, sqrt_prec]), cov)
+    log_det_out, log_det_pair = inverses.log_det[:num_outputs], inverses.log_det[num_outputs:]
+    # Mean and io.
+    nu_scaled = nu * inv_ls[:, None, :]  # (E, M, D)
+    solved = nu_scaled @ inverses.inverse[:num_outputs]  # (E, M, D) rows B_a^-1 nu~_i
+    sq_scaled = nu_scaled.square().sum(-1)  # (E, M)
+    log_q = -0.5 * ((solved * nu_scaled).sum(-1) + log_det_out[:, None])
+    weighted = beta * torch.exp(2.0 * log_signal[:, None] + log_q)  # (E, M) beta_ai q_ai
+    out_mean = weighted.sum(-1)
+    io = (inv_ls * (weighted[:, None, :] @ solved)[:, 0]).T  # (D, E)
+    # Second moments.
+    t_mat = torch.eye(cov.shape[0], dtype=cov.dtype) - inverses.inverse[num_outputs:]
+    row = nu * (inv_ls2[first] / sqrt_prec)[:, None, :]  # (P, M, D): p_i
+    col = nu * (inv_ls2[second] / sqrt_prec)[:, None, :]  # (P, M, D): s_j
+    row_t = row @ t_mat
+    log_k = 2.0 * log_signal[:, None] - 0.5 * sq_scaled  # (E, M) log k_a(z_i, mu)
+    row_log = log_k[first] + 0.5 * ((row_t * row).sum(-1) - log_det_pair[:, None])  # (P, M)
+    col_log = log_k[second] + 0.5 * ((col @ t_mat) * col).sum(-1)  # (P, M)
+    ones = torch.ones(first.shape[0], nu.shape[0], 1, dtype=cov.dtype)
+    left = torch.cat([row_t, row_log[..., None], ones], dim=-1)  # (P, M, D + 2)
+    right = torch.cat([col, ones, col_log[..., None]], dim=-1)  # (P, M, D + 2)
     weights = pair_weights(beta) if weights is None else weights
-    second = _se_second_moments(nu, log_ls, log_signal, cov, weights)
-    out_cov = second - out_mean[:, None] * out_mean[None, :]
+    second_moment = weighted_exp_bilinear(left, right, weights)[pair_of]  # (E, E)
+    # Exactly symmetric already (a gather of pair values minus an outer product).
+    out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
     if gp_variance:
         out_cov = out_cov + torch.diag(torch.exp(2.0 * log_signal))
-    return MomentMatch(out_mean, symmetrise(out_cov), io)
+    return MomentMatch(out_mean, out_cov, io)
 
 
 def gp_moments(post: GPPosterior, mean: Tensor, cov: Tensor) -> MomentMatch:
