@@ -124,15 +124,20 @@ class WeightedExpBilinear(torch.autograd.Function):
         right_t = right.transpose(-1, -2)
         need_factors = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
         value = left.new_zeros(batch)
-        grad_left = torch.empty_like(left) if need_factors else None
-        grad_right = torch.zeros_like(right) if need_factors else None
+        grad_left, grad_right_t = None, None
+        if need_factors:
+            grad_left = torch.empty_like(left)
+            # dv/dR accumulated transposed, (B, K, N) += L_block^T G_block: both operands in
+            # their natural layout, measurably faster than G_block^T L_block into (B, N, K).
+            grad_right_t = left.new_zeros(batch, left.shape[2], right.shape[1])
         for start in range(0, rows, step):
             block = slice(start, start + step)
             g_block = _exp_block(left[:, block], right_t, weights[:, block])  # (B, rows, N)
             value += g_block.sum(dim=(-1, -2))
             if need_factors:
                 grad_left[:, block] = torch.bmm(g_block, right)
-                grad_right.baddbmm_(g_block.transpose(-1, -2), left[:, block])
+                grad_right_t.baddbmm_(left[:, block].transpose(-1, -2), g_block)
+        grad_right = None if grad_right_t is None else grad_right_t.transpose(-1, -2)
         ctx.save_for_backward(left, right, grad_left, grad_right)
         return value
 

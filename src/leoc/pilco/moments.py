@@ -27,6 +27,7 @@ KIT 2010, sec. 2.3 and appendix A.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -67,36 +68,74 @@ def linear_moments(mean: Tensor, cov: Tensor, weight: Tensor, bias: Tensor) -> M
     return MomentMatch(weight @ mean + bias, symmetrise(weight @ cov @ weight.T), weight.T)
 
 
+def _sine_product_cov(e_sin: Tensor, e_cos: Tensor, cov: Tensor) -> Tensor:
+    r"""Covariance of :math:`\sin a_i` and :math:`\sin a_j` for jointly Gaussian ``a``.
+
+    With :math:`C = \operatorname{Cov}[a]`, :math:`E[\sin a_i] = e^{-C_{ii}/2} \sin \mu_i` and
+    :math:`E[\cos a_i] = e^{-C_{ii}/2} \cos \mu_i` (``e_sin``, ``e_cos``), the product rule
+    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))` gives
+
+    .. math::
+
+        \operatorname{Cov}[\sin a_i, \sin a_j] = E[\cos a_i] E[\cos a_j] \sinh C_{ij}
+            + E[\sin a_i] E[\sin a_j] (\cosh C_{ij} - 1).
+
+    :math:`\cosh C - 1` is evaluated as :math:`2 \sinh^2(C / 2)`: no cancellation when C is
+    small (a collapsed covariance near the operating point), unlike the difference of the two
+    cosine terms. Exactly symmetric for a symmetric ``cov``. Shapes: (K,), (K,), (K, K).
+    """
+    cosh_minus_one = 2.0 * torch.sinh(0.5 * cov).square()
+    return (e_cos[:, None] * e_cos[None, :]) * torch.sinh(cov) + (
+        e_sin[:, None] * e_sin[None, :]
+    ) * cosh_minus_one
+
+
 def sin_squash_moments(mean: Tensor, cov: Tensor, limit: Tensor | float) -> MomentMatch:
     r"""Moments of :math:`y = u_{max} \sin(u / u_{max})` for :math:`u \sim \mathcal N(m, S)`.
 
     With :math:`v = u / u_{max}` and :math:`\sigma_i^2 = S_{ii} / u_{max}^2`,
+    :math:`E[\sin v_i] = e^{-\sigma_i^2/2} \sin m_i`, the covariance of two sines by
+    :func:`_sine_product_cov`, and by Stein's lemma
+    :math:`\operatorname{Cov}[u, y_i] = S_{:i} E[\cos v_i]`, so ``io = diag(E[cos v])``.
 
-    .. math::
-
-        E[\sin v_i] = e^{-\sigma_i^2/2} \sin m_i, \qquad
-        E[\sin v_i \sin v_j] = \tfrac12\big(e^{-\operatorname{var}(v_i - v_j)/2}\cos(m_i - m_j)
-            - e^{-\operatorname{var}(v_i + v_j)/2} \cos(m_i + m_j)\big),
-
-    and by Stein's lemma :math:`\operatorname{Cov}[u, y_i] = S_{:i} E[\cos v_i]`, so
-    ``io = diag(E[cos v])``.
-
-    Shapes: ``mean`` (E,), ``cov`` (E, E), ``limit`` scalar or (E,).
+    Shapes: ``mean`` (E,), ``cov`` (E, E) (symmetric), ``limit`` scalar or (E,).
     """
     limit_t = torch.as_tensor(limit, dtype=mean.dtype).expand_as(mean)
     v_mean = mean / limit_t
     v_cov = cov / (limit_t[:, None] * limit_t[None, :])
-    var = v_cov.diagonal()
-    damp = torch.exp(-0.5 * var)
+    damp = torch.exp(-0.5 * v_cov.diagonal())
     e_sin, e_cos = damp * torch.sin(v_mean), damp * torch.cos(v_mean)
-    var_diff = var[:, None] + var[None, :] - 2.0 * v_cov
-    var_sum = var[:, None] + var[None, :] + 2.0 * v_cov
-    e_sin_sin = 0.5 * (
-        torch.exp(-0.5 * var_diff) * torch.cos(v_mean[:, None] - v_mean[None, :])
-        - torch.exp(-0.5 * var_sum) * torch.cos(v_mean[:, None] + v_mean[None, :])
-    )
-    cov_out = (e_sin_sin - e_sin[:, None] * e_sin[None, :]) * limit_t[:, None] * limit_t[None, :]
-    return MomentMatch(limit_t * e_sin, symmetrise(cov_out), torch.diag(e_cos))
+    cov_out = _sine_product_cov(e_sin, e_cos, v_cov) * (limit_t[:, None] * limit_t[None, :])
+    return MomentMatch(limit_t * e_sin, cov_out, torch.diag(e_cos))
+
+
+OBSERVATION_KINDS = ("state", "sin", "cos")
+
+
+class _LayoutConstants(NamedTuple):
+    """Constant tensors of an observation layout (O entries over S state entries)."""
+
+    index: Tensor  # (O,) state entry of each observation entry
+    trig: Tensor  # (O,) bool, sin or cos entry
+    both_trig: Tensor  # (O, O) bool
+    phase: Tensor  # (O,) pi/2 for cos (cos x = sin(x + pi/2)), else 0
+    selector: Tensor  # (S, O) one-hot: selector[i, k] = 1 if entry k reads state i
+
+
+@functools.cache
+def _layout_constants(
+    layout: tuple[tuple[str, int], ...], state_dim: int, dtype: torch.dtype
+) -> _LayoutConstants:
+    """Built once per layout (cached; the tensors are never written to)."""
+    kinds = [kind for kind, _ in layout]
+    unknown = sorted(set(kinds) - set(OBSERVATION_KINDS))
+    if unknown:
+        raise ValueError(f"layout: kinds must be among {OBSERVATION_KINDS}, found {unknown}")
+    index = torch.tensor([i for _, i in layout])
+    trig = torch.tensor([kind != "state" for kind in kinds])
+    phase = torch.tensor([HALF_PI if kind == "cos" else 0.0 for kind in kinds], dtype=dtype)
+    selector = torch.nn.functional.one_hot(index, state_dim).to(dtype).T
+    return _LayoutConstants(index, trig, trig[:, None] & trig[None, :], phase, selector)
 
 
 def observation_moments(
@@ -114,38 +153,23 @@ def observation_moments(
         \operatorname{Cov}[x, \sin(x_i + \varphi)] = \Sigma_{:i}\, e^{-\Sigma_{ii}/2}
             \cos(\mu_i + \varphi),
 
-    the second by Stein's lemma, and products of two sines by
-    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))`.
+    the second by Stein's lemma (which also gives the covariance of a trigonometric and a plain
+    entry), and the covariance of two trigonometric entries by :func:`_sine_product_cov`.
 
-    Shapes: ``mean`` (S,), ``cov`` (S, S) -> mean (O,), cov (O, O), io (S, O).
+    Shapes: ``mean`` (S,), ``cov`` (S, S) (symmetric) -> mean (O,), cov (O, O), io (S, O).
     """
-    index = torch.tensor([i for _, i in layout])
-    trig = torch.tensor([kind != "state" for kind, _ in layout])
-    phase = torch.tensor(
-        [HALF_PI if kind == "cos" else 0.0 for kind, _ in layout], dtype=mean.dtype
-    )
-    mu = mean[index] + phase
-    sub_cov = cov[index][:, index]  # (O, O) covariance of the underlying state entries
-    var = sub_cov.diagonal()
-    damp = torch.exp(-0.5 * var)
-    out_mean = torch.where(trig, damp * torch.sin(mu), mean[index])
-    slope = torch.where(trig, damp * torch.cos(mu), torch.ones_like(mu))  # E[d o_k / d x_i]
-    var_diff = var[:, None] + var[None, :] - 2.0 * sub_cov
-    var_sum = var[:, None] + var[None, :] + 2.0 * sub_cov
-    trig_cov = (
-        0.5
-        * (
-            torch.exp(-0.5 * var_diff) * torch.cos(mu[:, None] - mu[None, :])
-            - torch.exp(-0.5 * var_sum) * torch.cos(mu[:, None] + mu[None, :])
-        )
-        - out_mean[:, None] * out_mean[None, :]
-    )
+    const = _layout_constants(tuple(map(tuple, layout)), mean.shape[0], mean.dtype)
+    mu = mean[const.index] + const.phase
+    sub_cov = cov[const.index[:, None], const.index[None, :]]  # (O, O) of the state entries
+    damp = torch.exp(-0.5 * sub_cov.diagonal())
+    e_sin, e_cos = damp * torch.sin(mu), damp * torch.cos(mu)
+    out_mean = torch.where(const.trig, e_sin, mu)  # plain entries have phase 0
+    slope = torch.where(const.trig, e_cos, 1.0)  # E[d o_k / d x_i]
     # Any pair with at least one plain state entry: Stein's lemma gives Sigma_ij E[o_i'] E[o_j'].
-    stein_cov = sub_cov * slope[:, None] * slope[None, :]
-    both_trig = trig[:, None] & trig[None, :]
-    out_cov = torch.where(both_trig, trig_cov, stein_cov)
-    selector = torch.nn.functional.one_hot(index, mean.shape[0]).to(mean.dtype).T  # (S, O)
-    return MomentMatch(out_mean, symmetrise(out_cov), selector * slope[None, :])
+    stein_cov = sub_cov * (slope[:, None] * slope[None, :])
+    trig_cov = _sine_product_cov(e_sin, e_cos, sub_cov)
+    out_cov = torch.where(const.both_trig, trig_cov, stein_cov)
+    return MomentMatch(out_mean, out_cov, const.selector * slope[None, :])
 
 
 class _ScaledInverses(NamedTuple):
