@@ -172,23 +172,10 @@ def observation_moments(
     return MomentMatch(out_mean, out_cov, const.selector * slope[None, :])
 
 
-class _ScaledInverses(NamedTuple):
-    """Log-determinants (E + P,) and inverses (E + P, D, D) of the SPD matrices
-    ``I + s Sigma s`` for the scales ``s`` of the E outputs, then of the P output pairs."""
-
-    log_det: Tensor
-    inverse: Tensor
-
-
-def _scaled_inverses(scales: Tensor, cov: Tensor) -> _ScaledInverses:
-    r"""One batched Cholesky for every :math:`B = I + \operatorname{diag}(s) \Sigma
-    \operatorname{diag}(s)` of a step (eigenvalues >= 1: well conditioned whatever
-    :math:`\Sigma`, so its explicit inverse is accurate). Shapes: ``scales`` (K, D) -> (K, D, D).
-    """
-    eye = torch.eye(cov.shape[0], dtype=cov.dtype)
-    b_mat = eye + scales[:, :, None] * cov * scales[:, None, :]
-    chol = cholesky_jitter(b_mat, "I + s S s")
-    return _ScaledInverses(log_det_cholesky(chol), torch.cholesky_inverse(chol))
+def _pairs(values: Tensor, index: Tensor) -> Tensor:
+    """``values[index]`` along the first axis; the identity for one output (E = P = 1, the
+    usual single-action RBF policy), which saves an indexing op and its backward."""
+    return values if values.shape[0] == 1 else values[index]
 
 
 def se_sum_moments(
@@ -209,32 +196,40 @@ def se_sum_moments(
     network. ``weights`` defaults to :func:`~leoc.pilco.gp.pair_weights` of ``beta`` (no GP
     term).
 
-    **Mean and io.** With :math:`\nu_i = z_i - \mu`, :math:`\tilde\nu = \Lambda_a^{-1/2}\nu` and
-    the SPD :math:`B_a = I + \Lambda_a^{-1/2} \Sigma \Lambda_a^{-1/2}` (eigenvalues >= 1, unlike
-    :math:`\Sigma + \Lambda_a` itself):
+    **Mean and io.** With :math:`\nu_i = z_i - \mu`, :math:`S_a = \Lambda_a^{-1/2}` and the SPD
+    :math:`B_a = I + S_a \Sigma S_a` (eigenvalues >= 1, unlike :math:`\Sigma + \Lambda_a`), and
+    :math:`F_a = S_a B_a^{-1} S_a = (\Sigma + \Lambda_a)^{-1}`:
 
     .. math::
 
-        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \tilde\nu_i^\top B_a^{-1} \tilde\nu_i),
+        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \nu_i^\top F_a \nu_i),
         \quad E[y_a] = \beta_a^\top q_a, \quad
-        \Sigma^{-1}\operatorname{Cov}[x, y_a] = \Lambda_a^{-1/2} B_a^{-1} \sum_i \beta_{ai}
-            q_{ai} \tilde\nu_i.
+        \Sigma^{-1}\operatorname{Cov}[x, y_a] = F_a \sum_i \beta_{ai} q_{ai} \nu_i.
 
     **Second moments** (Deisenroth 2010, eq. 2.53):
     :math:`E[y_a y_b] = \sum_{ij} [\beta_a\beta_b^\top - \delta_{ab}\Xi_a]_{ij} Q_{ab,ij}` with
     :math:`Q_{ab,ij} = k_a(z_i, \mu) k_b(z_j, \mu) |R|^{-1/2}
     \exp(\tfrac12 w_{ij}^\top R^{-1} \Sigma w_{ij})`, :math:`R = \Sigma (\Lambda_a^{-1} +
     \Lambda_b^{-1}) + I` and :math:`w_{ij} = \Lambda_a^{-1} \nu_i + \Lambda_b^{-1} \nu_j`.
-    Numerics:
+    With the diagonal :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` and the SPD
+    :math:`B_{ab} = I + P^{1/2} \Sigma P^{1/2}`, :math:`|R| = |B_{ab}|` and
+    :math:`R^{-1}\Sigma = P^{-1/2} T P^{-1/2}` with :math:`T = I - B_{ab}^{-1}`, so that
 
-    - with :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` (diagonal) and the SPD
-      :math:`B_{ab} = I + P^{1/2} \Sigma P^{1/2}`, :math:`|R| = |B_{ab}|` and
-      :math:`R^{-1}\Sigma = P^{-1/2} (I - B_{ab}^{-1}) P^{-1/2}`: no non-symmetric solve, and
-      all E + P matrices B of the step share one batched Cholesky factorisation;
-    - writing :math:`P^{-1/2} w_{ij} = p_i + s_j` and :math:`T = I - B_{ab}^{-1}`, the exponent is
-      :math:`\rho_i + \gamma_j + p_i^\top T s_j`, a bilinear form of rank D + 2 in the rows
-      :math:`[T p_i, \rho_i, 1]` and :math:`[s_j, 1, \gamma_j]`: no (M, M, D) tensor, everything
-      summed in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
+    .. math::
+
+        \log Q_{ab,ij} = c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i + \tfrac12 \nu_j^\top
+            A_{ba} \nu_j + \nu_i^\top G_{ab} \nu_j, \qquad
+        c_{ab} = 2 \log\alpha_a + 2 \log\alpha_b - \tfrac12 \log|B_{ab}|,
+
+    with :math:`C_a = \Lambda_a^{-1} P^{-1/2}`, :math:`G_{ab} = C_a T C_b` and
+    :math:`A_{ab} = C_a T C_a - \Lambda_a^{-1}` (all diagonal scalings of T). Numerics:
+
+    - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, and
+      every quadratic form :math:`\nu_i^\top F \nu_i` one batched matmul;
+    - :math:`\log Q` is a bilinear form of rank D + 2 in the rows
+      :math:`[G_{ab}^\top \nu_i, c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i, 1]` and
+      :math:`[\nu_j, 1, \tfrac12 \nu_j^\top A_{ba} \nu_j]`: no (M, M, D) tensor, everything summed
+      in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
       \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
       weights in cache-sized row blocks, never storing Q;
     - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`), and one gather
@@ -243,39 +238,51 @@ def se_sum_moments(
     Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,),
     ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M) -> mean (E,), cov (E, E), io (D, E).
     """
-    num_outputs = beta.shape[0]
+    num_outputs, dim = log_ls.shape
     first, second, pair_of = pair_indices(num_outputs)
     nu = support - mean  # (M, D)
-    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of Lambda^-1/2
-    inv_ls2 = inv_ls.square()  # (E, D) diagonal of Lambda^-1
-    sqrt_prec = (inv_ls2[first] + inv_ls2[second]).sqrt()  # (P, D) diagonal of P^1/2
-    inverses = _scaled_inverses(torch.cat([inv_ls, sqrt_prec]), cov)
-    log_det_out, log_det_pair = inverses.log_det[:num_outputs], inverses.log_det[num_outputs:]
+    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of S_a = Lambda_a^-1/2
+    inv_ls2 = inv_ls.square()  # (E, D) diagonal of Lambda_a^-1
+    prec_first, prec_second = _pairs(inv_ls2, first), _pairs(inv_ls2, second)
+    sqrt_prec = (prec_first + prec_second).sqrt()  # (P, D) diagonal of P^1/2
+    scales = torch.cat([inv_ls, sqrt_prec])  # (E + P, D)
+    eye = torch.eye(dim, dtype=cov.dtype)
+    b_mat = eye + scales[:, :, None] * cov * scales[:, None, :]  # (E + P, D, D)
+    chol = cholesky_jitter(b_mat, "I + s S s")
+    log_det = log_det_cholesky(chol)  # (E + P,)
+    b_inv = torch.cholesky_inverse(chol)  # (E + P, D, D), well conditioned (eigenvalues <= 1)
+    f_mat = inv_ls[:, :, None] * b_inv[:num_outputs] * inv_ls[:, None, :]  # (E, D, D)
+    t_mat = eye - b_inv[num_outputs:]  # (P, D, D)
+    c_first = (prec_first / sqrt_prec)[:, :, None]  # (P, D, 1) diagonal of C_a
+    c_second = (prec_second / sqrt_prec)[:, None, :]  # (P, 1, D) diagonal of C_b
+    g_mat = c_first * t_mat * c_second
+    a_first = c_first * t_mat * c_first.transpose(-1, -2) - torch.diag_embed(prec_first)
+    a_second = c_second.transpose(-1, -2) * t_mat * c_second - torch.diag_embed(prec_second)
+    # Every quadratic form nu_i^T X nu_i of the step (X = F_a, A_ab, A_ba) in one matmul.
+    forms = torch.cat([f_mat, a_first, a_second])  # (E + 2P, D, D)
+    quad = ((nu @ forms) * nu).sum(-1)  # (E + 2P, M)
+    num_pairs = first.shape[0]
+    quad_f, quad_first, quad_second = quad.split([num_outputs, num_pairs, num_pairs])
     # Mean and io.
-    nu_scaled = nu * inv_ls[:, None, :]  # (E, M, D)
-    solved = nu_scaled @ inverses.inverse[:num_outputs]  # (E, M, D) rows B_a^-1 nu~_i
-    sq_scaled = nu_scaled.square().sum(-1)  # (E, M)
-    log_q = -0.5 * ((solved * nu_scaled).sum(-1) + log_det_out[:, None])
-    weighted = beta * torch.exp(2.0 * log_signal[:, None] + log_q)  # (E, M) beta_ai q_ai
-    out_mean = weighted.sum(-1)
-    io = (inv_ls * (weighted[:, None, :] @ solved)[:, 0]).T  # (D, E)
+    log_scale = 2.0 * log_signal  # (E,) log alpha^2
+    weighted = beta * torch.exp(log_scale[:, None] - 0.5 * (quad_f + log_det[:num_outputs, None]))
+    out_mean = weighted.sum(-1)  # (E,)
+    io = (f_mat @ (weighted @ nu)[:, :, None])[..., 0].T  # (D, E)
     # Second moments.
-    t_mat = torch.eye(cov.shape[0], dtype=cov.dtype) - inverses.inverse[num_outputs:]
-    row = nu * (inv_ls2[first] / sqrt_prec)[:, None, :]  # (P, M, D): p_i
-    col = nu * (inv_ls2[second] / sqrt_prec)[:, None, :]  # (P, M, D): s_j
-    row_t = row @ t_mat
-    log_k = 2.0 * log_signal[:, None] - 0.5 * sq_scaled  # (E, M) log k_a(z_i, mu)
-    row_log = log_k[first] + 0.5 * ((row_t * row).sum(-1) - log_det_pair[:, None])  # (P, M)
-    col_log = log_k[second] + 0.5 * ((col @ t_mat) * col).sum(-1)  # (P, M)
-    ones = torch.ones(first.shape[0], nu.shape[0], 1, dtype=cov.dtype)
-    left = torch.cat([row_t, row_log[..., None], ones], dim=-1)  # (P, M, D + 2)
-    right = torch.cat([col, ones, col_log[..., None]], dim=-1)  # (P, M, D + 2)
+    constant = (
+        _pairs(log_scale, first) + _pairs(log_scale, second) - 0.5 * log_det[num_outputs:]
+    )  # (P,) c_ab
+    ones = torch.ones(num_pairs, nu.shape[0], 1, dtype=cov.dtype)
+    row_log = constant[:, None, None] + 0.5 * quad_first[..., None]  # (P, M, 1)
+    left = torch.cat([nu @ g_mat, row_log, ones], dim=-1)  # (P, M, D + 2)
+    right = torch.cat([nu.expand(num_pairs, -1, -1), ones, 0.5 * quad_second[..., None]], dim=-1)
     weights = pair_weights(beta) if weights is None else weights
-    second_moment = weighted_exp_bilinear(left, right, weights)[pair_of]  # (E, E)
+    values = weighted_exp_bilinear(left, right, weights)  # (P,)
+    second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
     # Exactly symmetric already (a gather of pair values minus an outer product).
     out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
     if gp_variance:
-        out_cov = out_cov + torch.diag(torch.exp(2.0 * log_signal))
+        out_cov = out_cov + torch.diag(torch.exp(log_scale))
     return MomentMatch(out_mean, out_cov, io)
 
 
