@@ -12,6 +12,8 @@ Letters: B batch, K rank of a bilinear form, M rows/columns of the matrices it g
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import torch
 from torch import Tensor
 
@@ -89,16 +91,34 @@ def _exp_block(left: Tensor, right_t: Tensor, weights: Tensor) -> Tensor:
     return torch.bmm(left, right_t).exp_().mul_(weights)
 
 
-def _exp_bilinear_value(left: Tensor, right: Tensor, weights: Tensor) -> Tensor:
-    """The value of :class:`WeightedExpBilinear` alone, block by block (no gradient)."""
-    batch, rows, _ = left.shape
+class _BlockwiseResult(NamedTuple):
+    value: Tensor  # (B,)
+    grad_left: Tensor | None  # (B, M, K) dv/dL
+    grad_right: Tensor | None  # (B, N, K) dv/dR
+
+
+def _blockwise(left: Tensor, right: Tensor, weights: Tensor, gradients: bool) -> _BlockwiseResult:
+    """Value of :class:`WeightedExpBilinear` and, if ``gradients``, dv/dL and dv/dR, one row
+    block of G at a time."""
+    batch, rows, rank = left.shape
     step = _block_rows(batch, right.shape[1])
     right_t = right.transpose(-1, -2)
     value = left.new_zeros(batch)
+    grad_left, grad_right_t = None, None
+    if gradients:
+        grad_left = torch.empty_like(left)
+        # dv/dR accumulated transposed, (B, K, N) += L_block^T G_block: both operands in their
+        # natural layout, faster in our measurements than G_block^T L_block into (B, N, K).
+        grad_right_t = left.new_zeros(batch, rank, right.shape[1])
     for start in range(0, rows, step):
         block = slice(start, start + step)
-        value += _exp_block(left[:, block], right_t, weights[:, block]).sum(dim=(-1, -2))
-    return value
+        g_block = _exp_block(left[:, block], right_t, weights[:, block])  # (B, rows, N)
+        value += g_block.sum(dim=(-1, -2))
+        if gradients:
+            grad_left[:, block] = torch.bmm(g_block, right)
+            grad_right_t.baddbmm_(left[:, block].transpose(-1, -2), g_block)
+    grad_right = None if grad_right_t is None else grad_right_t.transpose(-1, -2)
+    return _BlockwiseResult(value, grad_left, grad_right)
 
 
 class WeightedExpBilinear(torch.autograd.Function):
@@ -111,35 +131,19 @@ class WeightedExpBilinear(torch.autograd.Function):
     block is in cache: the (B, M, M) matrix G is never stored, only the two (B, M, K) gradients
     (a horizon of 40 steps with B = 10, M = 400 would otherwise keep 0.5 GB of G for the
     backward pass, or evaluate the exponentials twice). The backward pass only scales them by
-    the incoming gradient. If ``weights`` needs a gradient, :math:`\exp(L_b R_b^\top)` is
-    recomputed block by block in the backward pass instead of stored. First order only.
+    the incoming gradient. If ``weights`` needs a gradient (the RBF policy, whose M is small),
+    :math:`\exp(L_b R_b^\top)` is recomputed in the backward pass instead of stored. First
+    order only.
 
     Shapes: ``left`` (B, M, K), ``right`` (B, N, K), ``weights`` (B, M, N) -> (B,).
     """
 
     @staticmethod
     def forward(ctx, left: Tensor, right: Tensor, weights: Tensor) -> Tensor:
-        batch, rows, _ = left.shape
-        step = _block_rows(batch, right.shape[1])
-        right_t = right.transpose(-1, -2)
-        need_factors = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
-        value = left.new_zeros(batch)
-        grad_left, grad_right_t = None, None
-        if need_factors:
-            grad_left = torch.empty_like(left)
-            # dv/dR accumulated transposed, (B, K, N) += L_block^T G_block: both operands in
-            # their natural layout, measurably faster than G_block^T L_block into (B, N, K).
-            grad_right_t = left.new_zeros(batch, left.shape[2], right.shape[1])
-        for start in range(0, rows, step):
-            block = slice(start, start + step)
-            g_block = _exp_block(left[:, block], right_t, weights[:, block])  # (B, rows, N)
-            value += g_block.sum(dim=(-1, -2))
-            if need_factors:
-                grad_left[:, block] = torch.bmm(g_block, right)
-                grad_right_t.baddbmm_(left[:, block].transpose(-1, -2), g_block)
-        grad_right = None if grad_right_t is None else grad_right_t.transpose(-1, -2)
-        ctx.save_for_backward(left, right, grad_left, grad_right)
-        return value
+        gradients = ctx.needs_input_grad[0] or ctx.needs_input_grad[1]
+        result = _blockwise(left, right, weights, gradients)
+        ctx.save_for_backward(left, right, result.grad_left, result.grad_right)
+        return result.value
 
     @staticmethod
     def backward(ctx, grad: Tensor):
@@ -163,4 +167,4 @@ def weighted_exp_bilinear(left: Tensor, right: Tensor, weights: Tensor) -> Tenso
     """
     if torch.is_grad_enabled() and any(t.requires_grad for t in (left, right, weights)):
         return WeightedExpBilinear.apply(left, right, weights)
-    return _exp_bilinear_value(left, right, weights)
+    return _blockwise(left, right, weights, gradients=False).value
