@@ -495,7 +495,7 @@ def test_pendulum_hybrid_swings_up_and_holds(tmp_path) -> None:
 
 
 def test_recomputing_bilinear_exp_has_the_plain_gradients() -> None:
-    from leoc.pilco.moments import WeightedExpBilinear
+    from leoc.linalg import WeightedExpBilinear
 
     gen = torch.Generator().manual_seed(0)
     left = (0.3 * torch.randn(3, 5, 4, generator=gen, dtype=DTYPE)).requires_grad_()

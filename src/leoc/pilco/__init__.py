@@ -1,8 +1,11 @@
 """PILCO (Deisenroth & Rasmussen, ICML 2011) for the RBF baseline and the LEOC hybrid.
 
-- :mod:`~leoc.pilco.gp`: GP dynamics model (exact, FITC beyond ``max_full_points`` data);
+- :mod:`~leoc.pilco.gp`: GP dynamics model (exact, FITC beyond ``max_full_points`` data) and the
+  output-pair weights that moment matching contracts with;
 - :mod:`~leoc.pilco.moments`: exact moment matching (GP, RBF, linear, sin squash, cos/sin
   augmentation) and Gauss-Hermite quadrature for the hybrid;
+- :mod:`leoc.linalg` (one level down, shared): Cholesky with jitter, symmetrising, and the
+  blockwise exp-bilinear kernel of the GP second moments;
 - :mod:`~leoc.pilco.cost`: saturating cost and its expectation;
 - :mod:`~leoc.pilco.propagate`: long-term prediction over the horizon;
 - :mod:`~leoc.pilco.rollout`: real rollouts and the hold test;

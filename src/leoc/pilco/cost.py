@@ -25,7 +25,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from leoc.pilco.gp import cholesky_jitter
+from leoc.linalg import cholesky_jitter
 
 
 def saturating_cost(x: Tensor, target: Tensor, factor: Tensor) -> Tensor:

@@ -35,6 +35,7 @@ E. Snelson and Z. Ghahramani, "Sparse Gaussian processes using pseudo-inputs", N
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -42,53 +43,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from leoc.linalg import CholeskyError as CholeskyError  # re-exported: raised by fit_gp
+from leoc.linalg import cholesky_jitter, log_det_cholesky, symmetrise
+
 DTYPE = torch.float64
 LOG_2PI = math.log(2.0 * math.pi)
-# Cholesky with escalating jitter: start at JITTER_START * mean(diag), multiply by JITTER_GROWTH
-# until JITTER_MAX * mean(diag) (a larger jitter would change the model, so we stop and raise).
-JITTER_START = 1e-10
-JITTER_GROWTH = 10.0
-JITTER_MAX = 1e-3
 # The smallest spread used to scale initial length-scales (a constant input column).
 MIN_INPUT_STD = 1e-3
-
-
-class CholeskyError(RuntimeError):
-    """Raised when a covariance stays numerically indefinite even with the largest jitter."""
-
-
-def cholesky_jitter(matrix: Tensor, name: str = "matrix") -> Tensor:
-    """Lower Cholesky factor of a (batch of) symmetric matrix, adding jitter only if needed.
-
-    Tries ``matrix`` first, then ``matrix + eps I`` with ``eps = JITTER_START * mean(diag)``
-    growing by ``JITTER_GROWTH`` up to ``JITTER_MAX * mean(diag)``; the jitter is a constant, so
-    gradients flow through ``matrix`` unchanged.
-
-    Shapes: ``matrix`` (..., K, K) -> (..., K, K).
-
-    Raises
-    ------
-    CholeskyError
-        If the matrix is still not positive definite at the largest jitter (or not finite).
-    """
-    factor, info = torch.linalg.cholesky_ex(matrix)
-    if not bool((info != 0).any()):
-        return factor
-    scale = matrix.diagonal(dim1=-2, dim2=-1).mean(dim=-1).detach().abs().clamp(min=1e-300)
-    eye = torch.eye(matrix.shape[-1], dtype=matrix.dtype, device=matrix.device)
-    jitter = JITTER_START
-    while jitter <= JITTER_MAX:
-        shifted = matrix + (jitter * scale)[..., None, None] * eye
-        factor, info = torch.linalg.cholesky_ex(shifted)
-        if not bool((info != 0).any()):
-            return factor
-        jitter *= JITTER_GROWTH
-    raise CholeskyError(
-        f"{name}: Cholesky failed even with jitter {JITTER_MAX:g} * mean(diag); the matrix of "
-        f"shape {tuple(matrix.shape)} is indefinite or not finite "
-        f"(finite: {bool(torch.isfinite(matrix).all())}). Check the data for duplicates with "
-        "conflicting targets or NaNs, or raise the noise floor."
-    )
 
 
 @dataclasses.dataclass
@@ -159,13 +120,14 @@ def se_kernel(x1: Tensor, x2: Tensor, log_lengthscales: Tensor, log_signal: Tens
     Shapes: ``x1`` (N, D), ``x2`` (M, D), ``log_lengthscales`` (E, D), ``log_signal`` (E,)
     -> (E, N, M).
     """
-    inv_ls = torch.exp(-log_lengthscales)[:, None, :]  # (E, 1, D)
-    a = x1[None] * inv_ls
-    b = x2[None] * inv_ls
+    num_rows, num_cols, dim = x1.shape[0], x2.shape[0], x1.shape[1]
     # Squared distances by differences (not the |a|^2 + |b|^2 - 2ab expansion): exact to
-    # round-off and never negative, at O(E N M D) memory, which is small here.
-    sq = (a[:, :, None, :] - b[:, None, :, :]).square().sum(-1)
-    return torch.exp(2.0 * log_signal)[:, None, None] * torch.exp(-0.5 * sq)
+    # round-off and never negative. The squared differences (N M, D) do not depend on the
+    # output, so one matmul with the E inverse squared length-scales weighs them for every
+    # output at once; autograd keeps only them (a constant), never an (E, N, M, D) tensor.
+    diff_sq = (x1[:, None, :] - x2[None, :, :]).square().reshape(num_rows * num_cols, dim)
+    sq = (torch.exp(-2.0 * log_lengthscales) @ diff_sq.T).reshape(-1, num_rows, num_cols)
+    return torch.exp(2.0 * log_signal[:, None, None] - 0.5 * sq)
 
 
 def _noise_var(hyper: GPHyper, floor_var: Tensor) -> Tensor:
@@ -203,7 +165,7 @@ def exact_nll(hyper: GPHyper, inputs: Tensor, targets: Tensor, floor_var: Tensor
     eye = torch.eye(num, dtype=inputs.dtype)
     chol = cholesky_jitter(gram + _noise_var(hyper, floor_var)[:, None, None] * eye, "K + s2 I")
     alpha = torch.cholesky_solve(targets.T[:, :, None], chol)[..., 0]  # (E, N)
-    log_det = 2.0 * torch.log(chol.diagonal(dim1=-2, dim2=-1)).sum(-1)
+    log_det = log_det_cholesky(chol)
     return (0.5 * (targets.T * alpha).sum(-1) + 0.5 * log_det + 0.5 * num * LOG_2PI).sum()
 
 
@@ -244,9 +206,7 @@ def fitc_nll(
     weighted = terms.v @ (y / terms.gamma)[..., None]  # (E, M, 1)
     proj = torch.linalg.solve_triangular(terms.chol_a, weighted, upper=False)[..., 0]
     quad = (y.square() / terms.gamma).sum(-1) - proj.square().sum(-1)
-    log_det = torch.log(terms.gamma).sum(-1) + 2.0 * torch.log(
-        terms.chol_a.diagonal(dim1=-2, dim2=-1)
-    ).sum(-1)
+    log_det = torch.log(terms.gamma).sum(-1) + log_det_cholesky(terms.chol_a)
     return (0.5 * quad + 0.5 * log_det + 0.5 * inputs.shape[0] * LOG_2PI).sum()
 
 
@@ -355,10 +315,37 @@ def fit_gp(
     return posterior(hyper, x, y, floor_var, inducing)
 
 
-def _pair_weights(beta: Tensor, inv_k: Tensor) -> Tensor:
-    from leoc.pilco.moments import pair_weights  # moments imports this module
+@functools.cache
+def pair_indices(num_outputs: int) -> tuple[Tensor, Tensor, Tensor]:
+    """Output pairs ``a <= b`` (P = E (E + 1) / 2 of them): Q_ba = Q_ab^T, so half suffices.
 
-    return pair_weights(beta, inv_k)
+    Returns ``first`` (P,), ``second`` (P,) and ``pair_of`` (E, E), the index of the pair
+    ``(min(a, b), max(a, b))``, which spreads P pair values over a symmetric (E, E) matrix in
+    one gather. Cached per E (constant tensors, never written to).
+    """
+    first, second = torch.triu_indices(num_outputs, num_outputs)
+    pair_of = torch.empty(num_outputs, num_outputs, dtype=torch.long)
+    pair_of[first, second] = torch.arange(first.shape[0])
+    pair_of[second, first] = torch.arange(first.shape[0])
+    return first, second, pair_of
+
+
+def pair_weights(beta: Tensor, inv_k: Tensor | None = None) -> Tensor:
+    r"""Weights :math:`\beta_a \beta_b^\top - \delta_{ab} \Xi_a` (P, M, M) of the pairs ``a <= b``.
+
+    With them one elementwise contraction per pair gives both :math:`\beta_a^\top Q_{ab} \beta_b`
+    and, for ``a = b``, the :math:`-\operatorname{tr}(\Xi_a Q_{aa})` of the GP variance
+    (:math:`\Xi_a` is symmetric, so the trace is the elementwise sum). They do not depend on
+    the input distribution, so a GP computes them once per model.
+
+    Shapes: ``beta`` (E, M), ``inv_k`` (E, M, M) -> (P, M, M).
+    """
+    first, second, _ = pair_indices(beta.shape[0])
+    weights = beta[first][:, :, None] * beta[second][:, None, :]
+    if inv_k is not None:
+        same = (first == second).to(beta.dtype)[:, None, None]
+        weights = weights - same * inv_k[first]
+    return weights
 
 
 def posterior(
@@ -382,7 +369,7 @@ def posterior(
                 noise_var,
                 hyper.log_noise,
                 False,
-                _pair_weights(beta, inv_k),
+                pair_weights(beta, inv_k),
             )
         terms = _fitc_terms(hyper, inputs, inducing, floor_var)
         # With K_mm = L L^T: K_mm + K_mn Gamma^-1 K_nm = L A L^T, hence
@@ -396,7 +383,7 @@ def posterior(
         middle = eye - torch.cholesky_inverse(terms.chol_a)
         l_inv = torch.linalg.solve_triangular(terms.chol_mm, eye.expand_as(middle), upper=False)
         inv_k = l_inv.transpose(-1, -2) @ middle @ l_inv
-        inv_k = 0.5 * (inv_k + inv_k.transpose(-1, -2))  # symmetrise the round-off
+        inv_k = symmetrise(inv_k)  # remove the round-off asymmetry of the triple product
         return GPPosterior(
             inducing,
             beta,
@@ -406,11 +393,11 @@ def posterior(
             noise_var,
             hyper.log_noise,
             True,
-            _pair_weights(beta, inv_k),
+            pair_weights(beta, inv_k),
         )
 
 
-PREDICT_CHUNK = 4096  # inputs per kernel block in gp_predict (bounds the (E, B, M, D) memory)
+PREDICT_CHUNK = 1024  # inputs per kernel block in gp_predict (bounds the (B M, D) memory)
 
 
 def gp_predict(post: GPPosterior, x: Tensor) -> tuple[Tensor, Tensor]:

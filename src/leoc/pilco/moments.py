@@ -11,8 +11,9 @@ of :math:`y = f(x)` (no linearisation) and the input-output covariance in PILCO'
 - :func:`linear_moments` for :math:`W x + b`;
 - :func:`observation_moments` for the observation map (state entries and cos/sin of angles);
 - :func:`sin_squash_moments` for :math:`u_{max} \sin(u / u_{max})`;
-- :func:`gp_moments` for the GP predictive distribution and, with ``variance=False``, for the RBF
-  controller (the same sum of squared-exponential bumps; Deisenroth 2010, sec. 2.3.2-2.3.3).
+- :func:`gp_moments` for the GP predictive distribution and :func:`rbf_moments` for the RBF
+  controller, both by :func:`se_sum_moments` (the same sum of squared-exponential bumps;
+  Deisenroth 2010, sec. 2.3.2-2.3.3).
 
 The hybrid policy's relevance :math:`r(x) = (1 + d(x))^{-2}` has no closed form under a Gaussian;
 :func:`quadrature_moments` integrates any function by tensor Gauss-Hermite quadrature (exact for
@@ -26,6 +27,7 @@ KIT 2010, sec. 2.3 and appendix A.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -35,7 +37,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.pilco.gp import GPPosterior, cholesky_jitter
+from leoc.linalg import cholesky_jitter, log_det_cholesky, symmetrise, weighted_exp_bilinear
+from leoc.pilco.gp import GPPosterior, pair_indices, pair_weights
 
 HALF_PI = 0.5 * math.pi
 
@@ -57,11 +60,6 @@ class QuadratureMoments(NamedTuple):
     cross: Tensor
 
 
-def symmetrise(matrix: Tensor) -> Tensor:
-    """(A + A^T) / 2: removes the round-off asymmetry that products like W S W^T accumulate."""
-    return 0.5 * (matrix + matrix.transpose(-1, -2))
-
-
 def linear_moments(mean: Tensor, cov: Tensor, weight: Tensor, bias: Tensor) -> MomentMatch:
     """Moments of ``y = W x + b``: ``W mu + b``, ``W Sigma W^T``, io ``= W^T``.
 
@@ -70,36 +68,74 @@ def linear_moments(mean: Tensor, cov: Tensor, weight: Tensor, bias: Tensor) -> M
     return MomentMatch(weight @ mean + bias, symmetrise(weight @ cov @ weight.T), weight.T)
 
 
+def _sine_product_cov(e_sin: Tensor, e_cos: Tensor, cov: Tensor) -> Tensor:
+    r"""Covariance of :math:`\sin a_i` and :math:`\sin a_j` for jointly Gaussian ``a``.
+
+    With :math:`C = \operatorname{Cov}[a]`, :math:`E[\sin a_i] = e^{-C_{ii}/2} \sin \mu_i` and
+    :math:`E[\cos a_i] = e^{-C_{ii}/2} \cos \mu_i` (``e_sin``, ``e_cos``), the product rule
+    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))` gives
+
+    .. math::
+
+        \operatorname{Cov}[\sin a_i, \sin a_j] = E[\cos a_i] E[\cos a_j] \sinh C_{ij}
+            + E[\sin a_i] E[\sin a_j] (\cosh C_{ij} - 1).
+
+    :math:`\cosh C - 1` is evaluated as :math:`2 \sinh^2(C / 2)`: no cancellation when C is
+    small (a collapsed covariance near the operating point), unlike the difference of the two
+    cosine terms. Exactly symmetric for a symmetric ``cov``. Shapes: (K,), (K,), (K, K).
+    """
+    cosh_minus_one = 2.0 * torch.sinh(0.5 * cov).square()
+    return (e_cos[:, None] * e_cos[None, :]) * torch.sinh(cov) + (
+        e_sin[:, None] * e_sin[None, :]
+    ) * cosh_minus_one
+
+
 def sin_squash_moments(mean: Tensor, cov: Tensor, limit: Tensor | float) -> MomentMatch:
     r"""Moments of :math:`y = u_{max} \sin(u / u_{max})` for :math:`u \sim \mathcal N(m, S)`.
 
     With :math:`v = u / u_{max}` and :math:`\sigma_i^2 = S_{ii} / u_{max}^2`,
+    :math:`E[\sin v_i] = e^{-\sigma_i^2/2} \sin m_i`, the covariance of two sines by
+    :func:`_sine_product_cov`, and by Stein's lemma
+    :math:`\operatorname{Cov}[u, y_i] = S_{:i} E[\cos v_i]`, so ``io = diag(E[cos v])``.
 
-    .. math::
-
-        E[\sin v_i] = e^{-\sigma_i^2/2} \sin m_i, \qquad
-        E[\sin v_i \sin v_j] = \tfrac12\big(e^{-\operatorname{var}(v_i - v_j)/2}\cos(m_i - m_j)
-            - e^{-\operatorname{var}(v_i + v_j)/2} \cos(m_i + m_j)\big),
-
-    and by Stein's lemma :math:`\operatorname{Cov}[u, y_i] = S_{:i} E[\cos v_i]`, so
-    ``io = diag(E[cos v])``.
-
-    Shapes: ``mean`` (E,), ``cov`` (E, E), ``limit`` scalar or (E,).
+    Shapes: ``mean`` (E,), ``cov`` (E, E) (symmetric), ``limit`` scalar or (E,).
     """
     limit_t = torch.as_tensor(limit, dtype=mean.dtype).expand_as(mean)
     v_mean = mean / limit_t
     v_cov = cov / (limit_t[:, None] * limit_t[None, :])
-    var = v_cov.diagonal()
-    damp = torch.exp(-0.5 * var)
+    damp = torch.exp(-0.5 * v_cov.diagonal())
     e_sin, e_cos = damp * torch.sin(v_mean), damp * torch.cos(v_mean)
-    var_diff = var[:, None] + var[None, :] - 2.0 * v_cov
-    var_sum = var[:, None] + var[None, :] + 2.0 * v_cov
-    e_sin_sin = 0.5 * (
-        torch.exp(-0.5 * var_diff) * torch.cos(v_mean[:, None] - v_mean[None, :])
-        - torch.exp(-0.5 * var_sum) * torch.cos(v_mean[:, None] + v_mean[None, :])
-    )
-    cov_out = (e_sin_sin - e_sin[:, None] * e_sin[None, :]) * limit_t[:, None] * limit_t[None, :]
-    return MomentMatch(limit_t * e_sin, symmetrise(cov_out), torch.diag(e_cos))
+    cov_out = _sine_product_cov(e_sin, e_cos, v_cov) * (limit_t[:, None] * limit_t[None, :])
+    return MomentMatch(limit_t * e_sin, cov_out, torch.diag(e_cos))
+
+
+OBSERVATION_KINDS = ("state", "sin", "cos")
+
+
+class _LayoutConstants(NamedTuple):
+    """Constant tensors of an observation layout (O entries over S state entries)."""
+
+    index: Tensor  # (O,) state entry of each observation entry
+    trig: Tensor  # (O,) bool, sin or cos entry
+    both_trig: Tensor  # (O, O) bool
+    phase: Tensor  # (O,) pi/2 for cos (cos x = sin(x + pi/2)), else 0
+    selector: Tensor  # (S, O) one-hot: selector[i, k] = 1 if entry k reads state i
+
+
+@functools.cache
+def _layout_constants(
+    layout: tuple[tuple[str, int], ...], state_dim: int, dtype: torch.dtype
+) -> _LayoutConstants:
+    """Built once per layout (cached; the tensors are never written to)."""
+    kinds = [kind for kind, _ in layout]
+    unknown = sorted(set(kinds) - set(OBSERVATION_KINDS))
+    if unknown:
+        raise ValueError(f"layout: kinds must be among {OBSERVATION_KINDS}, found {unknown}")
+    index = torch.tensor([i for _, i in layout])
+    trig = torch.tensor([kind != "state" for kind in kinds])
+    phase = torch.tensor([HALF_PI if kind == "cos" else 0.0 for kind in kinds], dtype=dtype)
+    selector = torch.nn.functional.one_hot(index, state_dim).to(dtype).T
+    return _LayoutConstants(index, trig, trig[:, None] & trig[None, :], phase, selector)
 
 
 def observation_moments(
@@ -117,182 +153,29 @@ def observation_moments(
         \operatorname{Cov}[x, \sin(x_i + \varphi)] = \Sigma_{:i}\, e^{-\Sigma_{ii}/2}
             \cos(\mu_i + \varphi),
 
-    the second by Stein's lemma, and products of two sines by
-    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))`.
+    the second by Stein's lemma (which also gives the covariance of a trigonometric and a plain
+    entry), and the covariance of two trigonometric entries by :func:`_sine_product_cov`.
 
-    Shapes: ``mean`` (S,), ``cov`` (S, S) -> mean (O,), cov (O, O), io (S, O).
+    Shapes: ``mean`` (S,), ``cov`` (S, S) (symmetric) -> mean (O,), cov (O, O), io (S, O).
     """
-    index = torch.tensor([i for _, i in layout])
-    trig = torch.tensor([kind != "state" for kind, _ in layout])
-    phase = torch.tensor(
-        [HALF_PI if kind == "cos" else 0.0 for kind, _ in layout], dtype=mean.dtype
-    )
-    mu = mean[index] + phase
-    sub_cov = cov[index][:, index]  # (O, O) covariance of the underlying state entries
-    var = sub_cov.diagonal()
-    damp = torch.exp(-0.5 * var)
-    out_mean = torch.where(trig, damp * torch.sin(mu), mean[index])
-    slope = torch.where(trig, damp * torch.cos(mu), torch.ones_like(mu))  # E[d o_k / d x_i]
-    var_diff = var[:, None] + var[None, :] - 2.0 * sub_cov
-    var_sum = var[:, None] + var[None, :] + 2.0 * sub_cov
-    trig_cov = (
-        0.5
-        * (
-            torch.exp(-0.5 * var_diff) * torch.cos(mu[:, None] - mu[None, :])
-            - torch.exp(-0.5 * var_sum) * torch.cos(mu[:, None] + mu[None, :])
-        )
-        - out_mean[:, None] * out_mean[None, :]
-    )
+    const = _layout_constants(tuple(map(tuple, layout)), mean.shape[0], mean.dtype)
+    mu = mean[const.index] + const.phase
+    sub_cov = cov[const.index[:, None], const.index[None, :]]  # (O, O) of the state entries
+    damp = torch.exp(-0.5 * sub_cov.diagonal())
+    e_sin, e_cos = damp * torch.sin(mu), damp * torch.cos(mu)
+    out_mean = torch.where(const.trig, e_sin, mu)  # plain entries have phase 0
+    slope = torch.where(const.trig, e_cos, 1.0)  # E[d o_k / d x_i]
     # Any pair with at least one plain state entry: Stein's lemma gives Sigma_ij E[o_i'] E[o_j'].
-    stein_cov = sub_cov * slope[:, None] * slope[None, :]
-    both_trig = trig[:, None] & trig[None, :]
-    out_cov = torch.where(both_trig, trig_cov, stein_cov)
-    selector = torch.nn.functional.one_hot(index, mean.shape[0]).to(mean.dtype).T  # (S, O)
-    return MomentMatch(out_mean, symmetrise(out_cov), selector * slope[None, :])
+    stein_cov = sub_cov * (slope[:, None] * slope[None, :])
+    trig_cov = _sine_product_cov(e_sin, e_cos, sub_cov)
+    out_cov = torch.where(const.both_trig, trig_cov, stein_cov)
+    return MomentMatch(out_mean, out_cov, const.selector * slope[None, :])
 
 
-def _se_first_moments(
-    support: Tensor, beta: Tensor, log_ls: Tensor, log_signal: Tensor, mean: Tensor, cov: Tensor
-) -> tuple[Tensor, Tensor, Tensor]:
-    r"""Mean and io of :math:`y_a = \sum_i \beta_{ai} k_a(x, z_i)`, and :math:`\nu_i = z_i - \mu`.
-
-    With :math:`\tilde\nu = \Lambda_a^{-1/2}\nu` and the SPD matrix
-    :math:`B_a = I + \Lambda_a^{-1/2} \Sigma \Lambda_a^{-1/2}` (eigenvalues >= 1, so its Cholesky
-    factor is always well conditioned, unlike :math:`\Sigma + \Lambda_a` itself):
-
-    .. math::
-
-        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \tilde\nu_i^\top B_a^{-1} \tilde\nu_i),
-        \quad E[y_a] = \beta_a^\top q_a, \quad
-        \Sigma^{-1}\operatorname{Cov}[x, y_a] = (\Sigma + \Lambda_a)^{-1} \sum_i \beta_{ai}
-            q_{ai} \nu_i = \Lambda_a^{-1/2} B_a^{-1} \sum_i \beta_{ai} q_{ai} \tilde\nu_i.
-
-    Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,);
-    returns mean (E,), io (D, E), nu (M, D).
-    """
-    dim = mean.shape[0]
-    inv_ls = torch.exp(-log_ls)  # (E, D)
-    nu = support - mean  # (M, D)
-    nu_scaled = nu[None] * inv_ls[:, None, :]  # (E, M, D)
-    b_mat = torch.eye(dim, dtype=mean.dtype) + inv_ls[:, :, None] * cov * inv_ls[:, None, :]
-    chol = cholesky_jitter(b_mat, "I + L^-1/2 S L^-1/2")
-    solved = torch.cholesky_solve(nu_scaled.transpose(-1, -2), chol)  # (E, D, M)
-    quad = (nu_scaled.transpose(-1, -2) * solved).sum(-2)  # (E, M)
-    log_det = 2.0 * torch.log(chol.diagonal(dim1=-2, dim2=-1)).sum(-1)  # (E,)
-    q = torch.exp(2.0 * log_signal[:, None] - 0.5 * log_det[:, None] - 0.5 * quad)
-    weighted = beta * q  # (E, M)
-    out_mean = weighted.sum(-1)
-    io = (inv_ls * (solved @ weighted[..., None])[..., 0]).T  # (D, E)
-    return out_mean, io, nu
-
-
-# From this many support points on, Q is recomputed in the backward pass instead of stored:
-# storing it costs P M^2 doubles per horizon step (0.5 GB over 40 steps at M = 400, E = 4),
-# recomputing costs one more batched matmul and exp per step.
-RECOMPUTE_MIN_SUPPORT = 300
-
-
-class WeightedExpBilinear(torch.autograd.Function):
-    r""":math:`v_p = \sum_{ij} W_{pij} \exp((L_p R_p^\top)_{ij})` with the exponential
-    recomputed in the backward pass, so only L, R (P, M, K) and W are kept.
-
-    Gradients: with :math:`G_p = v'_p\, W_p \odot \exp(L_p R_p^\top)`,
-    :math:`\partial L_p = G_p R_p`, :math:`\partial R_p = G_p^\top L_p` and
-    :math:`\partial W_p = v'_p \exp(L_p R_p^\top)`. First order only.
-    """
-
-    @staticmethod
-    def forward(ctx, left: Tensor, right: Tensor, weights: Tensor) -> Tensor:
-        ctx.save_for_backward(left, right, weights)
-        q = torch.exp(left @ right.transpose(-1, -2))
-        return (weights * q).sum(dim=(-1, -2))
-
-    @staticmethod
-    def backward(ctx, grad: Tensor):
-        left, right, weights = ctx.saved_tensors
-        q = torch.exp(left @ right.transpose(-1, -2)) * grad[:, None, None]
-        grad_weights = q if ctx.needs_input_grad[2] else None
-        g = q * weights
-        return g @ right, g.transpose(-1, -2) @ left, grad_weights
-
-
-def pair_indices(num_outputs: int) -> tuple[Tensor, Tensor]:
-    """Output pairs ``a <= b`` (P = E (E + 1) / 2 of them): Q_ba = Q_ab^T, so half suffices."""
-    pairs = torch.triu_indices(num_outputs, num_outputs)
-    return pairs[0], pairs[1]
-
-
-def pair_weights(beta: Tensor, inv_k: Tensor | None = None) -> Tensor:
-    r"""Weights :math:`\beta_a \beta_b^\top - \delta_{ab} \Xi_a` (P, M, M) of the pairs ``a <= b``.
-
-    With them one elementwise contraction per pair gives both :math:`\beta_a^\top Q_{ab} \beta_b`
-    and, for ``a = b``, the :math:`-\operatorname{tr}(\Xi_a Q_{aa})` of the GP variance. They do
-    not depend on the input distribution, so a GP computes them once per model.
-    """
-    first, second = pair_indices(beta.shape[0])
-    weights = beta[first][:, :, None] * beta[second][:, None, :]
-    if inv_k is not None:
-        same = (first == second).to(beta.dtype)[:, None, None]
-        weights = weights - same * inv_k[first]
-    return weights
-
-
-def _se_second_moments(
-    nu: Tensor, log_ls: Tensor, log_signal: Tensor, cov: Tensor, weights: Tensor
-) -> Tensor:
-    r"""The (E, E) matrix :math:`\sum_{ij} [\beta_a\beta_b^\top - \delta_{ab}\Xi_a]_{ij} Q_{ab,ij}`.
-
-    Deisenroth (2010, eq. 2.53):
-    :math:`Q_{ab,ij} = k_a(z_i, \mu) k_b(z_j, \mu) |R|^{-1/2}
-    \exp(\tfrac12 w_{ij}^\top R^{-1} \Sigma w_{ij})` with
-    :math:`R = \Sigma (\Lambda_a^{-1} + \Lambda_b^{-1}) + I` and
-    :math:`w_{ij} = \Lambda_a^{-1} \nu_i + \Lambda_b^{-1} \nu_j`.
-
-    Numerics:
-
-    - with :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` (diagonal) and the SPD
-      :math:`B = I + P^{1/2} \Sigma P^{1/2}` (eigenvalues >= 1), :math:`|R| = |B|` and
-      :math:`R^{-1}\Sigma = P^{-1/2} (I - B^{-1}) P^{-1/2}`: no non-symmetric solve;
-    - writing :math:`P^{-1/2} w_{ij} = p_i + s_j` and :math:`T = I - B^{-1}`, the exponent is
-      :math:`\rho_i + \gamma_j + p_i^\top T s_j`, a rank-(D + 2) bilinear form: one batched
-      matmul of (M, D + 2) by (D + 2, M) gives :math:`\log Q` without the (M, M, D) tensor of
-      the naive formula or any (M, M) broadcast, then one ``exp`` (everything summed in log
-      space first, so nothing overflows: :math:`Q_{ab,ij} \le \alpha_a^2 \alpha_b^2`) and one
-      batched dot with the weights. Only Q, (P, M, M), is kept for the backward pass;
-    - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`).
-
-    Shapes: ``nu`` (M, D), ``log_ls`` (E, D), ``log_signal`` (E,), ``cov`` (D, D),
-    ``weights`` (P, M, M) from :func:`pair_weights` -> (E, E).
-    """
-    dim, num_outputs, num_support = cov.shape[0], log_ls.shape[0], nu.shape[0]
-    first, second = pair_indices(num_outputs)
-    inv_ls2 = torch.exp(-2.0 * log_ls)  # (E, D) diagonal of Lambda^-1
-    prec = inv_ls2[first] + inv_ls2[second]  # (P, D)
-    sqrt_prec = prec.sqrt()
-    eye = torch.eye(dim, dtype=cov.dtype)
-    b_mat = eye + sqrt_prec[:, :, None] * cov * sqrt_prec[:, None, :]  # (P, D, D)
-    chol = cholesky_jitter(b_mat, "I + P^1/2 S P^1/2")
-    log_det = 2.0 * torch.log(chol.diagonal(dim1=-2, dim2=-1)).sum(-1)  # (P,)
-    t_mat = eye - torch.cholesky_inverse(chol)  # (P, D, D), symmetric
-    row = nu * (inv_ls2[first] / sqrt_prec)[:, None, :]  # (P, M, D): p_i
-    col = nu * (inv_ls2[second] / sqrt_prec)[:, None, :]  # (P, M, D): s_j
-    row_t = row @ t_mat
-    sq_dist = (nu * torch.exp(-log_ls)[:, None, :]).square().sum(-1)  # (E, M)
-    log_k = 2.0 * log_signal[:, None] - 0.5 * sq_dist  # (E, M) log k_a(z_i, mu)
-    row_log = log_k[first] + 0.5 * (row_t * row).sum(-1) - 0.5 * log_det[:, None]  # (P, M)
-    col_log = log_k[second] + 0.5 * ((col @ t_mat) * col).sum(-1)  # (P, M)
-    ones = torch.ones(first.shape[0], num_support, 1, dtype=cov.dtype)
-    left = torch.cat([row_t, row_log[..., None], ones], dim=-1)  # (P, M, D + 2)
-    right = torch.cat([col, ones, col_log[..., None]], dim=-1)  # (P, M, D + 2)
-    if num_support >= RECOMPUTE_MIN_SUPPORT:
-        values = WeightedExpBilinear.apply(left, right, weights)
-    else:
-        q = torch.exp(left @ right.transpose(-1, -2))  # (P, M, M)
-        values = (weights * q).sum(dim=(-1, -2))  # (P,)
-    upper = torch.zeros(num_outputs, num_outputs, dtype=cov.dtype).index_put(
-        (first, second), values
-    )
-    return upper + upper.T - torch.diag(upper.diagonal())
+def _pairs(values: Tensor, index: Tensor) -> Tensor:
+    """``values[index]`` along the first axis; the identity for one output (E = P = 1, the
+    usual single-action RBF policy), which saves an indexing op and its backward."""
+    return values if values.shape[0] == 1 else values[index]
 
 
 def se_sum_moments(
@@ -310,18 +193,97 @@ def se_sum_moments(
     ``gp_variance``: y is a GP prediction and each output's variance gains the expected
     posterior variance :math:`\alpha_a^2 - \operatorname{tr}(\Xi_a Q_{aa})` (Deisenroth 2010,
     eq. 2.55; the trace comes in through ``weights``); otherwise y is a deterministic RBF
-    network. ``weights`` defaults to :func:`pair_weights` of ``beta`` (no GP term).
+    network. ``weights`` defaults to :func:`~leoc.pilco.gp.pair_weights` of ``beta`` (no GP
+    term).
+
+    **Mean and io.** With :math:`\nu_i = z_i - \mu`, :math:`S_a = \Lambda_a^{-1/2}` and the SPD
+    :math:`B_a = I + S_a \Sigma S_a` (eigenvalues >= 1, unlike :math:`\Sigma + \Lambda_a`), and
+    :math:`F_a = S_a B_a^{-1} S_a = (\Sigma + \Lambda_a)^{-1}`:
+
+    .. math::
+
+        q_{ai} = \alpha_a^2 |B_a|^{-1/2} \exp(-\tfrac12 \nu_i^\top F_a \nu_i),
+        \quad E[y_a] = \beta_a^\top q_a, \quad
+        \Sigma^{-1}\operatorname{Cov}[x, y_a] = F_a \sum_i \beta_{ai} q_{ai} \nu_i.
+
+    **Second moments** (Deisenroth 2010, eq. 2.53):
+    :math:`E[y_a y_b] = \sum_{ij} [\beta_a\beta_b^\top - \delta_{ab}\Xi_a]_{ij} Q_{ab,ij}` with
+    :math:`Q_{ab,ij} = k_a(z_i, \mu) k_b(z_j, \mu) |R|^{-1/2}
+    \exp(\tfrac12 w_{ij}^\top R^{-1} \Sigma w_{ij})`, :math:`R = \Sigma (\Lambda_a^{-1} +
+    \Lambda_b^{-1}) + I` and :math:`w_{ij} = \Lambda_a^{-1} \nu_i + \Lambda_b^{-1} \nu_j`.
+    With the diagonal :math:`P = \Lambda_a^{-1} + \Lambda_b^{-1}` and the SPD
+    :math:`B_{ab} = I + P^{1/2} \Sigma P^{1/2}`, :math:`|R| = |B_{ab}|` and
+    :math:`R^{-1}\Sigma = P^{-1/2} T P^{-1/2}` with :math:`T = I - B_{ab}^{-1}`, so that
+
+    .. math::
+
+        \log Q_{ab,ij} = c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i + \tfrac12 \nu_j^\top
+            A_{ba} \nu_j + \nu_i^\top G_{ab} \nu_j, \qquad
+        c_{ab} = 2 \log\alpha_a + 2 \log\alpha_b - \tfrac12 \log|B_{ab}|,
+
+    with :math:`C_a = \Lambda_a^{-1} P^{-1/2}`, :math:`G_{ab} = C_a T C_b` and
+    :math:`A_{ab} = C_a T C_a - \Lambda_a^{-1}` (all diagonal scalings of T). Numerics:
+
+    - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, and
+      every quadratic form :math:`\nu_i^\top F \nu_i` one batched matmul;
+    - :math:`\log Q` is a bilinear form of rank D + 2 in the rows
+      :math:`[G_{ab}^\top \nu_i, c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i, 1]` and
+      :math:`[\nu_j, 1, \tfrac12 \nu_j^\top A_{ba} \nu_j]`: no (M, M, D) tensor, everything summed
+      in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
+      \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
+      weights in cache-sized row blocks, never storing Q;
+    - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`), and one gather
+      spreads them over the symmetric (E, E) result.
 
     Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,),
-    ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M).
+    ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M) -> mean (E,), cov (E, E), io (D, E).
     """
-    out_mean, io, nu = _se_first_moments(support, beta, log_ls, log_signal, mean, cov)
+    num_outputs, dim = log_ls.shape
+    first, second, pair_of = pair_indices(num_outputs)
+    nu = support - mean  # (M, D)
+    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of S_a = Lambda_a^-1/2
+    inv_ls2 = inv_ls.square()  # (E, D) diagonal of Lambda_a^-1
+    prec_first, prec_second = _pairs(inv_ls2, first), _pairs(inv_ls2, second)
+    sqrt_prec = (prec_first + prec_second).sqrt()  # (P, D) diagonal of P^1/2
+    scales = torch.cat([inv_ls, sqrt_prec])  # (E + P, D)
+    eye = torch.eye(dim, dtype=cov.dtype)
+    b_mat = eye + scales[:, :, None] * cov * scales[:, None, :]  # (E + P, D, D)
+    chol = cholesky_jitter(b_mat, "I + s S s")
+    log_det = log_det_cholesky(chol)  # (E + P,)
+    b_inv = torch.cholesky_inverse(chol)  # (E + P, D, D), well conditioned (eigenvalues <= 1)
+    f_mat = inv_ls[:, :, None] * b_inv[:num_outputs] * inv_ls[:, None, :]  # (E, D, D)
+    t_mat = eye - b_inv[num_outputs:]  # (P, D, D)
+    c_first = (prec_first / sqrt_prec)[:, :, None]  # (P, D, 1) diagonal of C_a
+    c_second = (prec_second / sqrt_prec)[:, None, :]  # (P, 1, D) diagonal of C_b
+    g_mat = c_first * t_mat * c_second
+    a_first = c_first * t_mat * c_first.transpose(-1, -2) - torch.diag_embed(prec_first)
+    a_second = c_second.transpose(-1, -2) * t_mat * c_second - torch.diag_embed(prec_second)
+    # Every quadratic form nu_i^T X nu_i of the step (X = F_a, A_ab, A_ba) in one matmul.
+    forms = torch.cat([f_mat, a_first, a_second])  # (E + 2P, D, D)
+    quad = ((nu @ forms) * nu).sum(-1)  # (E + 2P, M)
+    num_pairs = first.shape[0]
+    quad_f, quad_first, quad_second = quad.split([num_outputs, num_pairs, num_pairs])
+    # Mean and io.
+    log_scale = 2.0 * log_signal  # (E,) log alpha^2
+    weighted = beta * torch.exp(log_scale[:, None] - 0.5 * (quad_f + log_det[:num_outputs, None]))
+    out_mean = weighted.sum(-1)  # (E,)
+    io = (f_mat @ (weighted @ nu)[:, :, None])[..., 0].T  # (D, E)
+    # Second moments.
+    constant = (
+        _pairs(log_scale, first) + _pairs(log_scale, second) - 0.5 * log_det[num_outputs:]
+    )  # (P,) c_ab
+    ones = torch.ones(num_pairs, nu.shape[0], 1, dtype=cov.dtype)
+    row_log = constant[:, None, None] + 0.5 * quad_first[..., None]  # (P, M, 1)
+    left = torch.cat([nu @ g_mat, row_log, ones], dim=-1)  # (P, M, D + 2)
+    right = torch.cat([nu.expand(num_pairs, -1, -1), ones, 0.5 * quad_second[..., None]], dim=-1)
     weights = pair_weights(beta) if weights is None else weights
-    second = _se_second_moments(nu, log_ls, log_signal, cov, weights)
-    out_cov = second - out_mean[:, None] * out_mean[None, :]
+    values = weighted_exp_bilinear(left, right, weights)  # (P,)
+    second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
+    # Exactly symmetric already (a gather of pair values minus an outer product).
+    out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
     if gp_variance:
-        out_cov = out_cov + torch.diag(torch.exp(2.0 * log_signal))
-    return MomentMatch(out_mean, symmetrise(out_cov), io)
+        out_cov = out_cov + torch.diag(torch.exp(log_scale))
+    return MomentMatch(out_mean, out_cov, io)
 
 
 def gp_moments(post: GPPosterior, mean: Tensor, cov: Tensor) -> MomentMatch:

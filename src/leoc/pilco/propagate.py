@@ -28,6 +28,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor, nn
 
+from leoc.linalg import symmetrise
 from leoc.pilco.cost import expected_saturating_cost
 from leoc.pilco.gp import GPPosterior
 from leoc.pilco.moments import (
@@ -38,7 +39,6 @@ from leoc.pilco.moments import (
     quadrature_moments,
     rbf_moments,
     sin_squash_moments,
-    symmetrise,
 )
 from leoc.policies import HybridPolicy, LinearController, RBFNetwork, saturate
 
