@@ -9,7 +9,7 @@ a fresh subprocess (so peak memories do not mix) and measures:
 - one value-and-gradient of the horizon cost: median and range over ``--repeats`` runs, after
   a warm-up run;
 - one full PILCO iteration at the training defaults: GP fit, then policy optimisation (L-BFGS,
-  ``policy_iterations`` of :class:`~leoc.pilco.train.PilcoConfig`), with the number of cost
+  ``policy_iterations`` of :class:`~leoc.pilco.config.PilcoConfig`), with the number of cost
   evaluations L-BFGS made and the time per evaluation;
 - the peak resident memory of the whole process (GP fits included).
 
@@ -36,11 +36,14 @@ import time
 import numpy as np
 import torch
 
-import leoc.pilco.train as pilco_train
+import leoc.pilco.objective as pilco_objective
+from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPSettings, fit_gp
-from leoc.pilco.rollout import random_action_fn, run_rollout
-from leoc.pilco.train import PilcoConfig, build_policy, optimise_policy, predict_policy
+from leoc.pilco.objective import optimise_policy, predict_policy
+from leoc.pilco.policy import build_policy
+from leoc.pilco.rollout import run_rollout
 from leoc.systems import make_system
+from leoc.systems.rollout import RandomController
 
 THREADS = 2
 NUM_BASIS = 10
@@ -64,7 +67,7 @@ def cartpole_data(points: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     inputs, targets = [], []
     while sum(len(x) for x in inputs) < points:
         rollout = run_rollout(
-            system, random_action_fn(system, rng), system.sample_start(rng, "swing_up"), 200, 3
+            system, RandomController(system, rng, 3), system.sample_start(rng, "swing_up"), 200, 3
         )
         inputs.append(rollout.inputs)
         targets.append(rollout.targets)
@@ -88,8 +91,8 @@ def peak_rss_mib() -> float:
 
 
 class CountingPredict:
-    """Wraps :func:`~leoc.pilco.train.predict_policy` to count the cost evaluations that
-    :func:`~leoc.pilco.train.optimise_policy` makes (its closure looks the name up at call
+    """Wraps :func:`~leoc.pilco.objective.predict_policy` to count the cost evaluations that
+    :func:`~leoc.pilco.objective.optimise_policy` makes (its closure looks the name up at call
     time)."""
 
     def __init__(self) -> None:
@@ -124,7 +127,7 @@ def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | N
     times = times[1:]
     # One full PILCO iteration: GP fit, then the policy optimisation of the training loop.
     counter = CountingPredict()
-    pilco_train.predict_policy = counter
+    pilco_objective.predict_policy = counter
     try:
         start = time.perf_counter()
         model = fit_gp(inputs, targets, config.gp, np.random.default_rng(0))
@@ -133,7 +136,7 @@ def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | N
         cost = optimise_policy(policy, model, system, config)
         optimise_seconds = time.perf_counter() - start
     finally:
-        pilco_train.predict_policy = predict_policy
+        pilco_objective.predict_policy = predict_policy
     return {
         "points": points,
         "model": "FITC" if model.sparse else "exact GP",
