@@ -114,7 +114,11 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
 
 
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize(
+    "signum",
+    # SIGTERM takes the same path after its handler; it runs with the slow tests
+    [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)],
+)
 def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, uninterrupted, signum):
     command = _smoke_command(tmp_path)
     process = subprocess.Popen(
@@ -146,14 +150,23 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
     assert _numbers(tmp_path) == uninterrupted
 
 
-def _finished_folder(tmp_path: Path) -> Path:
-    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
-    return tmp_path
+@pytest.fixture(scope="module")
+def finished_template(tmp_path_factory) -> Path:
+    """One finished linear-only reproduce folder; each test works on its own copy."""
+    out = tmp_path_factory.mktemp("finished")
+    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    return out
+
+
+def _finished_folder(template: Path, tmp_path: Path) -> Path:
+    import shutil
+
+    return Path(shutil.copytree(template, tmp_path / "out"))
 
 
 @pytest.mark.parametrize("damage", ["truncate", "garble", "delete"])
-def test_a_damaged_evaluation_is_set_aside_and_redone(tmp_path, damage, capsys):
-    out = _finished_folder(tmp_path)
+def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_path, damage, capsys):
+    out = _finished_folder(finished_template, tmp_path)
     done = next(out.glob(f"runs/*/*/*/{EVALUATION_FILE}"))
     original = json.loads(done.read_text())
     if damage == "truncate":
@@ -180,8 +193,8 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(tmp_path, damage, capsys):
     assert again == original
 
 
-def test_a_damaged_meta_file_is_set_aside(tmp_path):
-    out = _finished_folder(tmp_path)
+def test_a_damaged_meta_file_is_set_aside(finished_template, tmp_path):
+    out = _finished_folder(finished_template, tmp_path)
     (out / META_FILE).write_text("{")
     messages: list[str] = []
     reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
