@@ -6,7 +6,6 @@ operating point and a learned policy H elsewhere (Zhang & Capel, L4DC 2021).
 
 __version__ = "0.1.0"
 
-# gymnasium convention: importing the package registers its environments (leoc/...-v0).
-from leoc.systems.envs import register_envs as _register_envs  # noqa: E402
-
-_register_envs()
+# gymnasium convention: importing the package registers its environments (leoc/...-v0); the
+# systems package registers every built-in system (and its env) on import.
+import leoc.systems  # noqa: E402, F401

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-SYSTEM_CHOICES = ("pendulum", "cartpole", "mountaincar")
 # Exit statuses of an interrupted command: 128 + the signal number, as a shell reports it.
 EXIT_SIGINT = 128 + signal.SIGINT
 EXIT_SIGTERM = 128 + signal.SIGTERM
@@ -39,12 +38,7 @@ def cmd_lqr(args: argparse.Namespace) -> int:
         return 0
     print(f"LQR design for {args.system} ({args.method}), dt = {system.dt} s")
     print(f"state: {', '.join(system.state_names)}")
-    observed = [
-        system.state_names[c.state_index]
-        if c.kind == "state"
-        else f"{c.kind}({system.state_names[c.state_index]})"
-        for c in system.obs_layout
-    ]
+    observed = system.observation.labels(system.state_names)
     print(f"observation: {', '.join(observed)}")
     _print_matrix("A_d", design.A_d)
     _print_matrix("B_d", design.B_d)
@@ -367,7 +361,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def system_choices() -> tuple[str, ...]:
+    """The registered system names (the CLI's one place that resolves names)."""
+    from leoc.systems import system_names
+
+    return system_names()
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from leoc.systems import SYSTEM_NAMES as paper_systems
+
+    systems = system_choices()
     parser = OneLineParser(
         prog="leoc",
         description="LEOC hybrid controllers: LQR near the operating point, a learned policy "
@@ -376,7 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     lqr = commands.add_parser("lqr", help="design the LQR of a system and print it")
-    lqr.add_argument("system", choices=SYSTEM_CHOICES)
+    lqr.add_argument("system", choices=systems)
     lqr.add_argument(
         "--method",
         choices=("discrete", "continuous"),
@@ -392,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate = commands.add_parser(
         "simulate", help="impulse or step response of a controller from the operating point"
     )
-    simulate.add_argument("system", choices=SYSTEM_CHOICES)
+    simulate.add_argument("system", choices=systems)
     simulate.add_argument(
         "--controller",
         default="linear",
@@ -430,7 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Najafi et al. 2016; dense grid and Lipschitz margin for 2-D states), and simulate "
         "seeded starts in a box for the LQR and each --controller.",
     )
-    roa.add_argument("system", choices=SYSTEM_CHOICES)
+    roa.add_argument("system", choices=systems)
     roa.add_argument(
         "--controller", nargs="+", help="run folders written by 'leoc train' (basins of each)"
     )
@@ -464,7 +468,7 @@ def build_parser() -> argparse.ArgumentParser:
     roa.set_defaults(func=cmd_roa)
 
     train = commands.add_parser("train", help="train a baseline or hybrid controller")
-    train.add_argument("system", choices=SYSTEM_CHOICES)
+    train.add_argument("system", choices=systems)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True)
     train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
     train.add_argument("--seed", type=non_negative_int, default=0)
@@ -516,9 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument(
         "--seeds", type=positive_int, help="number of seeds (default per profile)"
     )
-    reproduce.add_argument(
-        "--systems", nargs="+", choices=SYSTEM_CHOICES, default=list(SYSTEM_CHOICES)
-    )
+    reproduce.add_argument("--systems", nargs="+", choices=systems, default=list(paper_systems))
     reproduce.add_argument(
         "--controllers",
         nargs="+",

@@ -189,7 +189,9 @@ def check_stabilisable(a_matrix: np.ndarray, b_matrix: np.ndarray, discrete: boo
 def observation_gain(system: System, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Map a state gain ``K`` to ``G(o) = W o + b`` on the observation.
 
-    A plain state entry s gets ``W[:, col] = -K[:, s]``. An angle s seen as
+    ``W = -K J(a)^T`` with ``J`` the observation map's Jacobian (see
+    :meth:`~leoc.systems.observation.ObservationMap.linear_gain`): a plain state entry s gets
+    ``W[:, col] = -K[:, s]``. An angle s seen as
     ``(cos theta, sin theta)`` gets ``W_sin = -K_s cos a_s`` and ``W_cos = K_s sin a_s``, the
     choice that makes ``dG/dtheta = -K_s`` at ``theta = a_s`` (at a_s = 0: the gain acts on
     sin theta). Finally ``b = u_eq - W o(a)`` so that ``G(o(a)) = u_eq``.
@@ -204,17 +206,7 @@ def observation_gain(system: System, K: np.ndarray) -> tuple[np.ndarray, np.ndar
         raise ValueError(
             f"K: expected shape ({system.action_dim}, {system.state_dim}), found {K.shape}"
         )
-    W = np.zeros((system.action_dim, system.obs_dim))
-    operating = system.operating_state
-    for column, component in enumerate(system.obs_layout):
-        gain = K[:, component.state_index]
-        angle = operating[component.state_index]
-        if component.kind == "state":
-            W[:, column] = -gain
-        elif component.kind == "sin":
-            W[:, column] = -gain * np.cos(angle)
-        else:
-            W[:, column] = gain * np.sin(angle)
+    W = system.observation.linear_gain(K, system.operating_state)
     W = W + 0.0  # turn the -0.0 of zero gains into 0.0 for display
     b = system.u_eq - W @ system.operating_obs
     return W, b

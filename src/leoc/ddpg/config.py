@@ -125,10 +125,10 @@ class DDPGConfig:
     eval_episodes: int = 5
 
     def __post_init__(self) -> None:
-        from leoc.systems import SYSTEM_NAMES
+        from leoc.systems import system_names
 
-        if self.system not in SYSTEM_NAMES:
-            raise ValueError(f"system: expected one of {SYSTEM_NAMES}, found {self.system!r}")
+        if self.system not in system_names():
+            raise ValueError(f"system: expected one of {system_names()}, found {self.system!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo: expected one of {ALGOS}, found {self.algo!r}")
         positive_ints = (

@@ -418,7 +418,7 @@ def roa_relevance_kwargs(
             f"(rho = 0, linear decrease {certificate.linear_decrease}); use relevance='paper'"
         )
     return {
-        "roa_obs_layout": [[kind, int(index)] for kind, index in system.obs_layout],
+        "roa_obs_layout": system.observation.to_list(),
         "roa_operating_state": np.asarray(system.operating_state, dtype=np.float64).tolist(),
         "roa_lyapunov_matrix": np.asarray(design.P, dtype=np.float64).tolist(),
         "roa_rho_in": float(rho_in_fraction * certificate.rho),

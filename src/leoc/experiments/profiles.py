@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, NamedTuple
 
-from leoc.systems import SYSTEM_NAMES
+from leoc.systems import SYSTEM_NAMES, system_names
 
 CONTROLLERS = (
     "linear",
@@ -50,6 +50,8 @@ class Profile:
         PILCO iterations after the random rollouts (None entries: the PILCO default).
     ddpg_steps : dict system -> int
         DDPG environment steps (None entries: the DDPG default, the paper's 10k / 15k).
+    default_pilco_iterations, default_ddpg_steps : int or None
+        The budgets of a system missing from the dicts (a user's registered system).
     pilco_overrides, ddpg_overrides : dict
         Further keyword settings passed to the trainers.
     """
@@ -58,9 +60,19 @@ class Profile:
     seeds: tuple[int, ...]
     pilco_iterations: dict[str, int | None]
     ddpg_steps: dict[str, int | None]
+    default_pilco_iterations: int | None = None
+    default_ddpg_steps: int | None = None
     pilco_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     ddpg_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     description: str = ""
+
+    def iterations_for(self, system: str) -> int | None:
+        """PILCO iterations of ``system`` (None: the PILCO default)."""
+        return self.pilco_iterations.get(system, self.default_pilco_iterations)
+
+    def steps_for(self, system: str) -> int | None:
+        """DDPG steps of ``system`` (None: the DDPG default)."""
+        return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
 
 PROFILES: dict[str, Profile] = {
@@ -80,6 +92,8 @@ PROFILES: dict[str, Profile] = {
         seeds=(0,),
         pilco_iterations={name: 1 for name in SYSTEM_NAMES},
         ddpg_steps={name: 400 for name in SYSTEM_NAMES},
+        default_pilco_iterations=1,
+        default_ddpg_steps=400,
         pilco_overrides={
             "horizon": 10,
             "num_basis": 5,
@@ -152,10 +166,13 @@ def run_specs(
     systems: tuple[str, ...] = SYSTEM_NAMES,
     controllers: tuple[str, ...] = DEFAULT_CONTROLLERS,
 ) -> list[RunSpec]:
-    """Every run of a profile, the longest first (cart-pole, PILCO) to balance the workers."""
+    """Every run of a profile, the longest first (cart-pole, PILCO) to balance the workers.
+
+    ``systems``: registered names (default: the paper's three)."""
+    known = system_names()
     for name in systems:
-        if name not in SYSTEM_NAMES:
-            raise ValueError(f"systems: unknown {name!r}; expected some of {SYSTEM_NAMES}")
+        if name not in known:
+            raise ValueError(f"systems: unknown {name!r}; expected some of {known}")
     for name in controllers:
         if name not in CONTROLLERS:
             raise ValueError(f"controllers: unknown {name!r}; expected some of {CONTROLLERS}")

@@ -42,7 +42,7 @@ from leoc.experiments.stats import (
     seed_summary,
 )
 from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
-from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.systems import make_system, system_names
 from leoc.training import MODEL_SELECTION_TEXT
 
 CURVE_GRID_POINTS = 50
@@ -78,7 +78,7 @@ def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evalu
         if meta is not None and not _selected(spec, meta):
             continue
         grouped[spec["system"]][spec["controller"]].append(data)
-    return {system: dict(grouped[system]) for system in SYSTEM_NAMES if system in grouped}
+    return {system: dict(grouped[system]) for system in system_names() if system in grouped}
 
 
 def _selected(spec: dict[str, Any], meta: dict[str, Any]) -> bool:
@@ -902,7 +902,7 @@ def render_markdown(
     lines += response_table(responses, "step")
     regions = "; ".join(
         f"{s}: ± {list(make_system(s).operating_region)} ({', '.join(make_system(s).state_names)})"
-        for s in SYSTEM_NAMES
+        for s in system_names()
         if s in evaluations
     )
     lines += [

@@ -17,7 +17,8 @@ class PilcoConfig:
     Attributes
     ----------
     system : str
-        ``pendulum``, ``cartpole`` or ``mountaincar``.
+        A registered system name (``pendulum``, ``cartpole``, ``mountaincar``, ``acrobot``, or
+        a user's).
     hybrid : bool
         Train the LEOC hybrid (RBF + LQR) instead of the RBF baseline.
     seed : int
@@ -84,9 +85,14 @@ class PilcoConfig:
 
     @classmethod
     def for_system(cls, name: str, **overrides: Any) -> PilcoConfig:
-        """Per-system defaults, then ``overrides`` (GP fields may be given as ``gp_<field>``)."""
-        if name not in SYSTEM_DEFAULTS:
-            raise ValueError(f"system: expected one of {tuple(SYSTEM_DEFAULTS)}, found {name!r}")
+        """Per-system defaults, then ``overrides`` (GP fields may be given as ``gp_<field>``).
+
+        A registered system without paper defaults (a user's) starts from the class defaults.
+        """
+        from leoc.systems import system_names
+
+        if name not in SYSTEM_DEFAULTS and name not in system_names():
+            raise ValueError(f"system: expected one of {system_names()}, found {name!r}")
         gp_fields = {f.name for f in dataclasses.fields(GPSettings)}
         gp_over = {k[3:]: v for k, v in overrides.items() if k.startswith("gp_")}
         unknown = set(gp_over) - gp_fields
@@ -98,7 +104,7 @@ class PilcoConfig:
         if isinstance(gp, dict):
             gp = GPSettings(**gp)
         gp = dataclasses.replace(gp or GPSettings(), **gp_over)
-        return cls(system=name, gp=gp, **{**SYSTEM_DEFAULTS[name], **own})
+        return cls(system=name, gp=gp, **{**SYSTEM_DEFAULTS.get(name, {}), **own})
 
     def __post_init__(self) -> None:
         for name in (

@@ -21,7 +21,8 @@ MIN_POLICY_LENGTHSCALE = 0.1
 
 
 def obs_layout(system: System) -> list[tuple[str, int]]:
-    return [(c.kind, c.state_index) for c in system.obs_layout]
+    """The observation layout as plain ``(kind, state_index)`` pairs (PILCO's moment code)."""
+    return system.observation.pairs()
 
 
 def build_policy(
@@ -75,10 +76,7 @@ def build_policy(
 def _spread_angle_centres(system: System, centres: np.ndarray, generator: torch.Generator) -> None:
     """Overwrite, in place, the cos/sin columns of ``centres`` (N, O) with those of uniformly
     random angles, one angle per basis function and angle state."""
-    for angle_index in system.angle_indices:
+    for angle in system.observation.angle_columns():
         angles = 2.0 * math.pi * torch.rand(len(centres), generator=generator, dtype=DTYPE)
-        for column, component in enumerate(system.obs_layout):
-            if component.state_index == angle_index and component.kind == "cos":
-                centres[:, column] = torch.cos(angles).numpy()
-            elif component.state_index == angle_index and component.kind == "sin":
-                centres[:, column] = torch.sin(angles).numpy()
+        centres[:, angle.cos_column] = torch.cos(angles).numpy()
+        centres[:, angle.sin_column] = torch.sin(angles).numpy()

@@ -89,6 +89,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from leoc.systems.observation import as_observation_map
+
 from ._checks import as_float_tensor, check_finite, check_last_dim, check_shape
 
 __all__ = [
@@ -107,7 +109,6 @@ DEFAULT_ROA_WIDTH = 1.0
 # Smootherstep S(t) = 10 t^3 - 15 t^4 + 6 t^5 (Perlin 2002): S(0) = 0, S(1) = 1, S' = S'' = 0 at
 # both ends.
 _SMOOTHERSTEP = (10.0, -15.0, 6.0)
-_OBS_KINDS = ("state", "cos", "sin")
 SYMMETRY_RTOL = 1e-9  # |P - P^T| allowed, relative to max |P_ij|
 
 
@@ -179,29 +180,18 @@ def _layout_plan(
     obs_layout: Sequence[Any], state_dim: int
 ) -> tuple[tuple[str, int, int, int], ...]:
     """One entry ``(kind, state_index, column, sin_column)`` per state entry, in state order:
-    ``kind`` is "state" (observed as is in ``column``) or "angle" (cos in ``column``, sin in
-    ``sin_column``)."""
-    columns: dict[int, dict[str, int]] = {}
-    for column, component in enumerate(obs_layout):
-        kind, index = str(component[0]), int(component[1])
-        if kind not in _OBS_KINDS or not 0 <= index < state_dim:
-            raise ValueError(
-                f"obs_layout[{column}]: expected (kind, state_index) with kind in {_OBS_KINDS} "
-                f"and 0 <= state_index < {state_dim}, found {tuple(component)!r}"
-            )
-        columns.setdefault(index, {})[kind] = column
+    ``kind`` is "plain" (observed as is in ``column``) or "angle" (cos in ``column``, sin in
+    ``sin_column``), as the observation map reports them."""
+    obs_map = as_observation_map(obs_layout, state_dim)
+    plain = obs_map.state_columns()
+    angles = {angle.state_index: angle for angle in obs_map.angle_columns()}
     plan = []
     for index in range(state_dim):
-        seen = columns.get(index, {})
-        if "state" in seen:
-            plan.append(("state", index, seen["state"], -1))
-        elif "cos" in seen and "sin" in seen:
-            plan.append(("angle", index, seen["cos"], seen["sin"]))
+        if index in plain:
+            plan.append(("plain", index, plain[index], -1))
         else:
-            raise ValueError(
-                f"obs_layout: state entry {index} must be observed as itself or as both its "
-                f"cos and sin, found {sorted(seen) or 'nothing'}"
-            )
+            angle = angles[index]
+            plan.append(("angle", index, angle.cos_column, angle.sin_column))
     return tuple(plan)
 
 
@@ -217,8 +207,8 @@ class ObservationDeviation(nn.Module):
     Parameters
     ----------
     obs_layout : sequence of (kind, state_index)
-        How each observation entry is built (``System.obs_layout``), kind in
-        {"state", "cos", "sin"}.
+        How each observation entry is built (``System.obs_layout``, or an
+        :class:`~leoc.systems.observation.ObservationMap`).
     operating_state : array-like, shape (S,)
         The operating point :math:`a` in state coordinates.
     dtype : torch.dtype
@@ -234,8 +224,9 @@ class ObservationDeviation(nn.Module):
         if state.ndim != 1:
             raise ValueError(f"operating_state must have shape (S,), found {tuple(state.shape)}")
         check_finite(state, "operating_state")
-        self.layout = [(str(kind), int(index)) for kind, index in obs_layout]
-        self.plan = _layout_plan(self.layout, state.shape[0])
+        self.observation = as_observation_map(obs_layout, state.shape[0])
+        self.layout = self.observation.pairs()
+        self.plan = _layout_plan(self.observation, state.shape[0])
         self.register_buffer("operating_state", state)
 
     @property
@@ -255,7 +246,7 @@ class ObservationDeviation(nn.Module):
         check_last_dim(obs, self.obs_dim, self.operating_state.dtype, "obs")
         entries = []
         for kind, index, column, sin_column in self.plan:
-            if kind == "state":
+            if kind == "plain":
                 entries.append(obs[..., column] - self.operating_state[index])
             else:
                 angle = torch.atan2(obs[..., sin_column], obs[..., column])

@@ -1,4 +1,8 @@
-"""The three benchmark systems: physics, operating points, starts and gymnasium envs."""
+"""Systems: physics, observation maps, operating points, starts, gymnasium envs, registry.
+
+The built-in systems (the paper's three and the acrobot) are registered here; a user's system
+is added with :func:`register_system` (see ``docs/custom_system.md``).
+"""
 
 from __future__ import annotations
 
@@ -6,61 +10,52 @@ from leoc.systems.base import (
     DEFAULT_EPISODE_STEPS,
     DTYPE,
     START_KINDS,
-    ObsComponent,
     PhysicalParams,
     System,
     wrap_angle,
 )
 from leoc.systems.cartpole import CartPole, CartPoleParams, cartpole_reward, cartpole_step
-from leoc.systems.envs import ENV_CLASSES, ENV_IDS, LeocEnv, register_envs
+from leoc.systems.envs import BUILTIN_ENVS, LeocEnv
 from leoc.systems.mountaincar import (
     MountainCar,
     MountainCarParams,
     mountaincar_reward,
     mountaincar_step,
 )
+from leoc.systems.observation import ObsComponent, ObservationMap, angle_entries, state_entry
 from leoc.systems.pendulum import Pendulum, PendulumParams, pendulum_reward, pendulum_step
+from leoc.systems.registry import (
+    env_id,
+    make_env,
+    make_system,
+    register_system,
+    system_names,
+    unregister_system,
+)
 
-SYSTEMS: dict[str, type[System]] = {
+# The paper's three benchmark systems (what `leoc reproduce` runs by default).
+PAPER_SYSTEMS: dict[str, type[System]] = {
     "pendulum": Pendulum,
     "cartpole": CartPole,
     "mountaincar": MountainCar,
 }
-SYSTEM_NAMES = tuple(SYSTEMS)
+SYSTEM_NAMES = tuple(PAPER_SYSTEMS)
 
-
-def make_system(name: str, params: PhysicalParams | None = None, **scales: float) -> System:
-    """Build a system by registry name, optionally with parameters scaled (``mass=2.0``).
-
-    Raises
-    ------
-    ValueError
-        If ``name`` is not one of :data:`SYSTEM_NAMES`.
-    """
-    if name not in SYSTEMS:
-        raise ValueError(f"system: unknown name {name!r}; expected one of {', '.join(SYSTEMS)}")
-    system = SYSTEMS[name](params)
-    return system.with_params(**scales) if scales else system
-
-
-def make_env(name: str, params: PhysicalParams | None = None, **kwargs: object) -> LeocEnv:
-    """``gymnasium.make`` of the registered env of system ``name`` (with its TimeLimit)."""
-    import gymnasium as gym
-
-    if name not in ENV_IDS:
-        raise ValueError(f"system: unknown name {name!r}; expected one of {', '.join(ENV_IDS)}")
-    return gym.make(ENV_IDS[name], params=params, **kwargs)
-
-
-register_envs()
+for _name, _factory in PAPER_SYSTEMS.items():
+    _env_id, _env_class = BUILTIN_ENVS[_name]
+    register_system(
+        _name,
+        _factory,
+        _env_id,
+        entry_point=f"{_env_class.__module__}:{_env_class.__name__}",
+        replace=True,
+    )
 
 __all__ = [
     "DEFAULT_EPISODE_STEPS",
     "DTYPE",
-    "ENV_CLASSES",
-    "ENV_IDS",
+    "PAPER_SYSTEMS",
     "START_KINDS",
-    "SYSTEMS",
     "SYSTEM_NAMES",
     "CartPole",
     "CartPoleParams",
@@ -68,18 +63,24 @@ __all__ = [
     "MountainCar",
     "MountainCarParams",
     "ObsComponent",
+    "ObservationMap",
     "Pendulum",
     "PendulumParams",
     "PhysicalParams",
     "System",
+    "angle_entries",
     "cartpole_reward",
     "cartpole_step",
+    "env_id",
     "make_env",
     "make_system",
     "mountaincar_reward",
     "mountaincar_step",
     "pendulum_reward",
     "pendulum_step",
-    "register_envs",
+    "register_system",
+    "state_entry",
+    "system_names",
+    "unregister_system",
     "wrap_angle",
 ]

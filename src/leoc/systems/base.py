@@ -1,13 +1,56 @@
-"""Common machinery of the three benchmark systems.
+"""The ``System`` protocol: what a plant must provide to work with every part of leoc.
 
 Every system is described by
 
 * a frozen parameter dataclass (physical constants with units, derived quantities as
-  properties, :meth:`PhysicalParams.scaled` to build perturbed copies);
+  properties, :meth:`PhysicalParams.scaled` to build perturbed copies for robustness sweeps);
 * a pure, batched, differentiable step function in torch (float64), the single source of truth
   used by the gymnasium environment, the linearisation, PILCO and the robustness sweeps;
-* a :class:`System` object that bundles the step function with the observation map, reward,
+* a :class:`System` subclass that bundles the step function with the observation map, reward,
   termination test, operating point and start distribution.
+
+Writing a system (``docs/custom_system.md`` has a worked example). A subclass must provide:
+
+==========================  =================================================================
+``name``                    registry name (lower-case identifier)
+``params_type``             its :class:`PhysicalParams` dataclass; it must have a field ``dt``
+                            (time step, s) or the subclass overrides :attr:`System.dt`
+``state_names``             names of the S state entries
+``obs_layout``              the observation (see :mod:`leoc.systems.observation`): every
+                            state entry as itself (``state_entry(i)``) or, for an angle,
+                            through cos and sin (``*angle_entries(i)``)
+``action_limit``            property: the actuator limit ``|u| <= action_limit`` (> 0)
+``step_fn(state, action)``  batched step ``(B, S), (B, A) -> (B, S)``, torch float64,
+                            differentiable, clipping the action to the limit inside
+``reward_fn(state, action)``  reward ``(B,)`` of the step (before it)
+``swing_up_centre``,        the swing-up start: uniform in centre +/- spread (S each)
+``start_spread``
+``operating_region``        half-widths (S) of the box robustness episodes start from
+``default_q``,              diagonals of the default LQR weights (S and A entries)
+``default_r``
+``main_label``,             the response's main coordinate (``main_index``, default 0) and
+``main_in_degrees``         whether it is an angle reported in degrees
+``settling_band``,          settling band of the metrics, hold band and minimum hold
+``hold_band``,              duration (steps) of the "reached and held" test, in the units of
+``hold_min_steps``          the main coordinate
+==========================  =================================================================
+
+and may override, with these defaults:
+
+==========================  =================================================================
+``operating_state``         the origin (S zeros)
+``u_eq``                    zeros (A); ``(operating_state, u_eq)`` must be an equilibrium of
+                            ``step_fn``, which :meth:`System.validate` checks
+``angle_indices``           the angles of the observation map
+``out_of_bounds(state)``    never; ``out_of_bounds_reward`` (0) replaces the reward then
+``cost_factor()``           PILCO's cost on the main coordinate's observation entries
+``continuous_model()``      none (only the optional continuous-time LQR design needs it)
+``episode_steps``           200
+==========================  =================================================================
+
+:meth:`System.validate` (run by :func:`~leoc.systems.registry.register_system`) checks shapes,
+signs, the observation layout and the equilibrium, and raises a ``ValueError`` that names the
+system, the attribute, what was expected and what was found.
 
 Shapes: ``B`` batch, ``S`` state dimension, ``O`` observation dimension, ``A`` action dimension.
 """
@@ -17,14 +60,39 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar, Literal, NamedTuple
+from functools import cached_property
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from leoc.systems.observation import ObsComponent, ObservationMap
+
 DTYPE = torch.float64
 DEFAULT_EPISODE_STEPS = 200
+# validate(): largest |f(a, u_eq) - a| (state units, angles wrapped) accepted as an equilibrium.
+# Float64 round-off of one step is ~1e-16 times the state's size; 1e-9 leaves room for it and
+# rejects any physical error.
+EQUILIBRIUM_TOL = 1e-9
+# validate(): states probed by the shape and finiteness checks of step_fn and reward_fn.
+VALIDATION_BATCH = 3
+REQUIRED_ATTRIBUTES = (
+    "name",
+    "params_type",
+    "state_names",
+    "obs_layout",
+    "swing_up_centre",
+    "start_spread",
+    "operating_region",
+    "default_q",
+    "default_r",
+    "main_label",
+    "main_in_degrees",
+    "settling_band",
+    "hold_band",
+    "hold_min_steps",
+)
 START_KINDS = ("swing_up", "operating_point")
 StartKind = Literal["swing_up", "operating_point"]
 
@@ -32,6 +100,14 @@ StartKind = Literal["swing_up", "operating_point"]
 def wrap_angle(angle: Tensor) -> Tensor:
     """Wrap an angle to ``[-pi, pi)``, exactly as gymnasium's ``angle_normalize``."""
     return torch.remainder(angle + math.pi, 2.0 * math.pi) - math.pi
+
+
+def _check_positive(label: str, attribute: str, value: Any) -> None:
+    """Raise naming ``attribute`` of system ``label`` unless ``value`` is a positive number."""
+    if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(
+            f"{label}: {attribute}: expected a positive finite number, found {value!r}"
+        )
 
 
 def check_repeat(repeat: Any) -> int:
@@ -111,13 +187,6 @@ class PhysicalParams:
         return dataclasses.asdict(self)
 
 
-class ObsComponent(NamedTuple):
-    """How one observation entry is made from the state: ``kind`` in {"state", "cos", "sin"}."""
-
-    kind: str
-    state_index: int
-
-
 class System:
     """A control benchmark: dynamics, observation, reward, operating point and starts.
 
@@ -155,8 +224,7 @@ class System:
     name: ClassVar[str]
     state_names: ClassVar[tuple[str, ...]]
     obs_layout: ClassVar[tuple[ObsComponent, ...]]
-    angle_indices: ClassVar[tuple[int, ...]]
-    main_index: ClassVar[int]
+    main_index: ClassVar[int] = 0
     main_label: ClassVar[str]
     main_in_degrees: ClassVar[bool]
     settling_band: ClassVar[float]
@@ -186,6 +254,11 @@ class System:
         return f"{type(self).__name__}({self.params!r})"
 
     # ------------------------------------------------------------------ dimensions and constants
+    @property
+    def angle_indices(self) -> tuple[int, ...]:
+        """State entries that are angles: those the observation map sees through cos/sin."""
+        return self.observation.angle_indices
+
     @property
     def state_dim(self) -> int:
         return len(self.state_names)
@@ -269,35 +342,18 @@ class System:
         action_t = as_state_tensor(action, self.action_dim, "action")
         return self.step_fn(state_t, action_t)
 
+    @cached_property
+    def observation(self) -> ObservationMap:
+        """The map of :attr:`obs_layout` (observe, invert, bounds, moments, Jacobian)."""
+        return ObservationMap(self.obs_layout, self.state_dim)
+
     def observe(self, state: Tensor) -> Tensor:
         """Observation ``(B, O)`` of a batch of states ``(B, S)`` (1-D input gets B = 1)."""
-        state = as_state_tensor(state, self.state_dim, "state")
-        columns = []
-        for component in self.obs_layout:
-            value = state[..., component.state_index]
-            if component.kind == "cos":
-                value = torch.cos(value)
-            elif component.kind == "sin":
-                value = torch.sin(value)
-            columns.append(value)
-        return torch.stack(columns, dim=-1)
+        return self.observation.observe(as_state_tensor(state, self.state_dim, "state"))
 
     def state_from_obs(self, obs: Tensor) -> Tensor:
         """Invert :meth:`observe` (angles by atan2 of their sin and cos)."""
-        obs = as_state_tensor(obs, self.obs_dim, "obs")
-        state = torch.zeros(obs.shape[:-1] + (self.state_dim,), dtype=DTYPE)
-        sines: dict[int, Tensor] = {}
-        cosines: dict[int, Tensor] = {}
-        for column, component in enumerate(self.obs_layout):
-            if component.kind == "state":
-                state[..., component.state_index] = obs[..., column]
-            elif component.kind == "sin":
-                sines[component.state_index] = obs[..., column]
-            else:
-                cosines[component.state_index] = obs[..., column]
-        for index, sine in sines.items():
-            state[..., index] = torch.atan2(sine, cosines[index])
-        return state
+        return self.observation.invert(as_state_tensor(obs, self.obs_dim, "obs"))
 
     def main_coordinate(self, states: Any) -> np.ndarray:
         """Deviation of the main coordinate from the operating point, in report units.
@@ -385,6 +441,107 @@ class System:
     def with_params(self, **factors: float) -> System:
         """A copy of this system with scaled parameters (see :meth:`PhysicalParams.scaled`)."""
         return type(self)(self.params.scaled(**factors))
+
+    # ------------------------------------------------------------------ validation
+    def validate(self) -> None:
+        """Check that this system honours the protocol (module docstring).
+
+        Raises
+        ------
+        ValueError
+            Naming the system and the attribute, with what was expected and what was found:
+            a missing attribute, wrong shapes, a non-positive ``dt`` or action limit, an
+            inconsistent observation layout, a ``step_fn``/``reward_fn`` that returns the wrong
+            shape or non-finite values, or an operating point that is not an equilibrium:
+            ``max |f(a, u_eq) - a| > EQUILIBRIUM_TOL`` (angles wrapped).
+        """
+        label = f"system {getattr(self, 'name', type(self).__name__)!r}"
+        for attribute in REQUIRED_ATTRIBUTES:
+            if not hasattr(self, attribute):
+                raise ValueError(f"{label}: missing class attribute {attribute!r}")
+        try:
+            observation = self.observation
+        except ValueError as error:
+            raise ValueError(f"{label}: obs_layout: {error}") from error
+        size, actions = self.state_dim, self.action_dim
+        _check_positive(label, "dt", self.dt)
+        _check_positive(label, "action_limit", self.action_limit)
+        _check_positive(label, "hold_band", self.hold_band)
+        _check_positive(label, "settling_band", self.settling_band)
+        if not 1 <= int(self.hold_min_steps) <= self.episode_steps:
+            raise ValueError(
+                f"{label}: hold_min_steps: expected 1 .. episode_steps = {self.episode_steps}, "
+                f"found {self.hold_min_steps!r}"
+            )
+        if not 0 <= self.main_index < size:
+            raise ValueError(
+                f"{label}: main_index: expected 0 .. {size - 1}, found {self.main_index}"
+            )
+        vectors = {
+            "operating_state": (self.operating_state, size),
+            "u_eq": (self.u_eq, actions),
+            "swing_up_centre": (self.swing_up_centre, size),
+            "start_spread": (self.start_spread, size),
+            "operating_region": (self.operating_region, size),
+            "default_q": (self.default_q, size),
+            "default_r": (self.default_r, actions),
+        }
+        for attribute, (value, length) in vectors.items():
+            array = np.asarray(value, dtype=float)
+            if array.shape != (length,) or not np.all(np.isfinite(array)):
+                raise ValueError(
+                    f"{label}: {attribute}: expected {length} finite numbers, found {value!r}"
+                )
+        for attribute in ("start_spread", "operating_region", "default_q"):
+            if np.any(np.asarray(getattr(self, attribute)) < 0):
+                raise ValueError(f"{label}: {attribute}: expected entries >= 0")
+        if np.any(np.asarray(self.default_r) <= 0):
+            raise ValueError(f"{label}: default_r: expected entries > 0, found {self.default_r}")
+        if np.any(np.abs(self.u_eq) > self.action_limit):
+            raise ValueError(
+                f"{label}: u_eq: expected |u_eq| <= action_limit = {self.action_limit}, "
+                f"found {self.u_eq.tolist()}"
+            )
+        self._validate_functions(label, observation.obs_dim)
+
+    def _validate_functions(self, label: str, obs_dim: int) -> None:
+        """Shapes, finiteness and the equilibrium of ``step_fn``, ``reward_fn``, the cost."""
+        size = self.state_dim
+        operating = torch.as_tensor(self.operating_state, dtype=DTYPE)
+        states = operating.expand(VALIDATION_BATCH, size).clone()
+        actions = torch.as_tensor(self.u_eq, dtype=DTYPE).expand(VALIDATION_BATCH, -1).clone()
+        with torch.no_grad():
+            following = self.step_fn(states, actions)
+            reward = self.reward_fn(states, actions)
+            left = self.out_of_bounds(states)
+        if tuple(following.shape) != (VALIDATION_BATCH, size) or following.dtype != DTYPE:
+            raise ValueError(
+                f"{label}: step_fn: expected a float64 tensor of shape (B, {size}) for B = "
+                f"{VALIDATION_BATCH}, found {following.dtype} {tuple(following.shape)}"
+            )
+        if tuple(reward.shape) != (VALIDATION_BATCH,) or not bool(torch.isfinite(reward).all()):
+            raise ValueError(
+                f"{label}: reward_fn: expected {VALIDATION_BATCH} finite rewards (shape (B,)), "
+                f"found shape {tuple(reward.shape)}"
+            )
+        if bool(left.any()):
+            raise ValueError(f"{label}: out_of_bounds: the operating point is out of bounds")
+        change = following[0] - operating
+        for index in self.angle_indices:
+            change[index] = wrap_angle(change[index])
+        residual = float(change.abs().max())
+        if not residual <= EQUILIBRIUM_TOL:
+            raise ValueError(
+                f"{label}: the operating point {self.operating_state.tolist()} is not an "
+                f"equilibrium of step_fn under u_eq = {self.u_eq.tolist()}: "
+                f"max |f(a, u_eq) - a| = {residual:.3g} > tolerance {EQUILIBRIUM_TOL:g}"
+            )
+        factor = np.asarray(self.cost_factor(), dtype=float)
+        if factor.ndim != 2 or factor.shape[1] != obs_dim or factor.shape[0] < 1:
+            raise ValueError(
+                f"{label}: cost_factor: expected an array of shape (K, {obs_dim}), found "
+                f"{factor.shape}"
+            )
 
     def describe(self) -> Mapping[str, Any]:
         """A JSON-friendly description (for reports)."""

@@ -24,7 +24,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.systems.base import ObsComponent, PhysicalParams, System, wrap_angle
+from leoc.systems.base import PhysicalParams, System, wrap_angle
+from leoc.systems.observation import angle_entries, state_entry
 
 REWARD_SCALE = 0.1
 THETA_WEIGHT = 5.0
@@ -125,13 +126,11 @@ class CartPole(System):
     params_type = CartPoleParams
     state_names = ("x", "x_dot", "theta", "theta_dot")
     obs_layout = (
-        ObsComponent("state", 0),
-        ObsComponent("state", 1),
-        ObsComponent("cos", 2),
-        ObsComponent("sin", 2),
-        ObsComponent("state", 3),
+        state_entry(0),
+        state_entry(1),
+        *angle_entries(2),
+        state_entry(3),
     )
-    angle_indices = (2,)
     main_index = 2
     main_label = "theta [deg]"
     main_in_degrees = True

@@ -20,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from leoc.systems.base import DEFAULT_EPISODE_STEPS, DTYPE, START_KINDS, PhysicalParams, System
+from leoc.systems.base import DTYPE, START_KINDS, PhysicalParams, System
 from leoc.systems.cartpole import CartPole
 from leoc.systems.mountaincar import MountainCar
 from leoc.systems.pendulum import Pendulum
@@ -37,22 +37,39 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         Physical constants (defaults of the system when omitted).
     start : {"swing_up", "operating_point"}
         Default start used when ``reset`` gets no ``start`` option.
+    system : System or str, optional
+        The system (a registered name is resolved through the registry; this is how
+        ``gymnasium.make`` builds the env of a user's system). Default: ``system_type(params)``
+        of the subclass.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
     system_type: ClassVar[type[System]]
 
-    def __init__(self, params: PhysicalParams | None = None, start: str = "swing_up") -> None:
+    def __init__(
+        self,
+        params: PhysicalParams | None = None,
+        start: str = "swing_up",
+        system: System | str | None = None,
+    ) -> None:
         if start not in START_KINDS:
             raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
-        self.system = self.system_type(params)
+        if isinstance(system, str):
+            from leoc.systems.registry import make_system  # the edge: a name from gym.make
+
+            system = make_system(system, params)
+        elif system is None:
+            if not hasattr(self, "system_type"):
+                raise ValueError("system: expected a System or a registered name, found None")
+            system = self.system_type(params)
+        elif params is not None:
+            raise ValueError("params: only with a system name, found a System object as well")
+        self.system = system
         self.default_start = start
         limit = np.float32(self.system.action_limit)
-        self.action_space = gym.spaces.Box(-limit, limit, shape=(1,), dtype=np.float32)
-        high = np.full(self.system.obs_dim, np.inf)
-        for column, component in enumerate(self.system.obs_layout):
-            if component.kind != "state":
-                high[column] = 1.0
+        shape = (self.system.action_dim,)
+        self.action_space = gym.spaces.Box(-limit, limit, shape=shape, dtype=np.float32)
+        high = self.system.observation.bounds()
         self.observation_space = gym.spaces.Box(-high, high, dtype=np.float64)
         self.state: np.ndarray | None = None
 
@@ -88,8 +105,10 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.state is None:
             raise RuntimeError("step() called before reset()")
         action_arr = np.asarray(action, dtype=float).reshape(-1)
-        if action_arr.shape != (1,) or not np.isfinite(action_arr[0]):
-            raise ValueError(f"action: expected one finite number, found {action!r}")
+        if action_arr.shape != self.action_space.shape or not np.all(np.isfinite(action_arr)):
+            raise ValueError(
+                f"action: expected {self.system.action_dim} finite numbers, found {action!r}"
+            )
         state_t = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
         action_t = torch.as_tensor(action_arr, dtype=DTYPE).unsqueeze(0)
         with torch.no_grad():
@@ -167,25 +186,9 @@ class MountainCarHilltopEnv(LeocEnv):
     system_type = MountainCar
 
 
-ENV_IDS = {
-    "pendulum": "leoc/PendulumSwingUp-v0",
-    "cartpole": "leoc/CartPoleSwingUp-v0",
-    "mountaincar": "leoc/MountainCarHilltop-v0",
+# The built-in systems' gymnasium ids and env classes (registered by leoc.systems).
+BUILTIN_ENVS: dict[str, tuple[str, type[LeocEnv]]] = {
+    "pendulum": ("leoc/PendulumSwingUp-v0", PendulumSwingUpEnv),
+    "cartpole": ("leoc/CartPoleSwingUp-v0", CartPoleSwingUpEnv),
+    "mountaincar": ("leoc/MountainCarHilltop-v0", MountainCarHilltopEnv),
 }
-ENV_CLASSES: dict[str, type[LeocEnv]] = {
-    "pendulum": PendulumSwingUpEnv,
-    "cartpole": CartPoleSwingUpEnv,
-    "mountaincar": MountainCarHilltopEnv,
-}
-
-
-def register_envs() -> None:
-    """Register the three environments with gymnasium (idempotent)."""
-    for name, env_id in ENV_IDS.items():
-        if env_id not in gym.registry:
-            cls = ENV_CLASSES[name]
-            gym.register(
-                id=env_id,
-                entry_point=f"{cls.__module__}:{cls.__name__}",
-                max_episode_steps=DEFAULT_EPISODE_STEPS,
-            )

@@ -21,7 +21,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.systems.base import ObsComponent, PhysicalParams, System
+from leoc.systems.base import PhysicalParams, System
+from leoc.systems.observation import state_entry
 
 REWARD_SCALE = 0.1
 POSITION_WEIGHT = 5.0
@@ -100,8 +101,7 @@ class MountainCar(System):
     name = "mountaincar"
     params_type = MountainCarParams
     state_names = ("x", "x_dot")
-    obs_layout = (ObsComponent("state", 0), ObsComponent("state", 1))
-    angle_indices = ()
+    obs_layout = (state_entry(0), state_entry(1))
     main_index = 0
     main_label = "x [m]"
     main_in_degrees = False

@@ -21,7 +21,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.systems.base import ObsComponent, PhysicalParams, System, wrap_angle
+from leoc.systems.base import PhysicalParams, System, wrap_angle
+from leoc.systems.observation import angle_entries, state_entry
 
 THETA_WEIGHT = 1.0
 THETA_DOT_WEIGHT = 0.1
@@ -105,8 +106,7 @@ class Pendulum(System):
     name = "pendulum"
     params_type = PendulumParams
     state_names = ("theta", "theta_dot")
-    obs_layout = (ObsComponent("cos", 0), ObsComponent("sin", 0), ObsComponent("state", 1))
-    angle_indices = (0,)
+    obs_layout = (*angle_entries(0), state_entry(1))
     main_index = 0
     main_label = "theta [deg]"
     main_in_degrees = True
