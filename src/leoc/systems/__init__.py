@@ -51,6 +51,11 @@ for _name, _factory in PAPER_SYSTEMS.items():
         replace=True,
     )
 
+# The acrobot, built only through the public protocol: its registry entry is all it needs here.
+from leoc.systems.acrobot import Acrobot  # noqa: E402
+
+register_system("acrobot", Acrobot, replace=True)
+
 __all__ = [
     "DEFAULT_EPISODE_STEPS",
     "DTYPE",
