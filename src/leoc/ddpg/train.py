@@ -66,10 +66,9 @@ def _atomic_save_model(model: Any, path: Path) -> None:
 
 
 def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
-    """The SB3 model (:class:`LeocDDPG` or :class:`LeocTD3`) of ``config`` on ``env``."""
-    from leoc.systems import make_system
-
-    system = make_system(config.system)
+    """The SB3 model (:class:`LeocDDPG` or :class:`LeocTD3`) of ``config`` on ``env`` (a
+    :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is the one designed for)."""
+    system = env.unwrapped.system
     action_dim = int(np.prod(env.action_space.shape))
     policy_kwargs: dict[str, Any] = {
         "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)}
@@ -180,8 +179,8 @@ def train_ddpg(
         json.dumps({**config_dict, "versions": _versions()}, indent=2),
     )
 
-    system_obj = make_system(system)
-    env = make_env(system)
+    system_obj = make_system(system)  # the edge: the config's name, resolved once
+    env = make_env(system_obj)
     model = build_model(config, seed, env)
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger
     model.set_logger(Logger(folder=None, output_formats=[]))
