@@ -125,3 +125,52 @@ def test_hold_test_and_starts(kind: str) -> None:
     assert start.shape == (4,)
     states = np.zeros((60, 4))
     assert system.hold_step(states) == 0
+
+
+PILCO_TINY = dict(
+    horizon=4,
+    policy_iterations=2,
+    num_basis=4,
+    episode_steps=24,
+    initial_rollouts=1,
+    gp_train_iterations=3,
+    eval_episodes=1,
+)
+
+
+def test_pilco_hybrid_trains_on_the_acrobot(tmp_path) -> None:
+    from leoc.pilco.train import train_pilco
+
+    result = train_pilco(
+        "acrobot", hybrid=True, run_dir=tmp_path, iterations=1, progress=False, **PILCO_TINY
+    )
+    assert [row["iteration"] for row in result.curve] == [0, 1]
+    # the hybrid equals the LQR at the operating point: it holds an upright start
+    states = np.zeros((1, 4))
+    with torch.no_grad():
+        action = result.policy(make_system("acrobot").observe(torch.as_tensor(states)))
+    assert abs(float(action[0, 0])) < 1e-9
+
+
+def test_cli_trains_a_td3_hybrid_on_the_acrobot(tmp_path) -> None:
+    from leoc.cli import main
+
+    out = tmp_path / "td3"
+    assert (
+        main(
+            [
+                "train",
+                "acrobot",
+                "--algo",
+                "td3",
+                "--hybrid",
+                "--steps",
+                "200",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert (out / "curve.csv").is_file() and (out / "model.zip").is_file()

@@ -27,7 +27,6 @@ KIT 2010, sec. 2.3 and appendix A.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -39,6 +38,8 @@ from torch import Tensor
 
 from leoc.linalg import cholesky_jitter, log_det_cholesky, symmetrise, weighted_exp_bilinear
 from leoc.pilco.gp import GPPosterior, pair_indices, pair_weights
+from leoc.systems.observation import as_observation_map
+from leoc.systems.observation import sine_product_cov as _sine_product_cov
 
 HALF_PI = 0.5 * math.pi
 
@@ -68,28 +69,6 @@ def linear_moments(mean: Tensor, cov: Tensor, weight: Tensor, bias: Tensor) -> M
     return MomentMatch(weight @ mean + bias, symmetrise(weight @ cov @ weight.T), weight.T)
 
 
-def _sine_product_cov(e_sin: Tensor, e_cos: Tensor, cov: Tensor) -> Tensor:
-    r"""Covariance of :math:`\sin a_i` and :math:`\sin a_j` for jointly Gaussian ``a``.
-
-    With :math:`C = \operatorname{Cov}[a]`, :math:`E[\sin a_i] = e^{-C_{ii}/2} \sin \mu_i` and
-    :math:`E[\cos a_i] = e^{-C_{ii}/2} \cos \mu_i` (``e_sin``, ``e_cos``), the product rule
-    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))` gives
-
-    .. math::
-
-        \operatorname{Cov}[\sin a_i, \sin a_j] = E[\cos a_i] E[\cos a_j] \sinh C_{ij}
-            + E[\sin a_i] E[\sin a_j] (\cosh C_{ij} - 1).
-
-    :math:`\cosh C - 1` is evaluated as :math:`2 \sinh^2(C / 2)`: no cancellation when C is
-    small (a collapsed covariance near the operating point), unlike the difference of the two
-    cosine terms. Exactly symmetric for a symmetric ``cov``. Shapes: (K,), (K,), (K, K).
-    """
-    cosh_minus_one = 2.0 * torch.sinh(0.5 * cov).square()
-    return (e_cos[:, None] * e_cos[None, :]) * torch.sinh(cov) + (
-        e_sin[:, None] * e_sin[None, :]
-    ) * cosh_minus_one
-
-
 def sin_squash_moments(mean: Tensor, cov: Tensor, limit: Tensor | float) -> MomentMatch:
     r"""Moments of :math:`y = u_{max} \sin(u / u_{max})` for :math:`u \sim \mathcal N(m, S)`.
 
@@ -109,67 +88,17 @@ def sin_squash_moments(mean: Tensor, cov: Tensor, limit: Tensor | float) -> Mome
     return MomentMatch(limit_t * e_sin, cov_out, torch.diag(e_cos))
 
 
-OBSERVATION_KINDS = ("state", "sin", "cos")
-
-
-class _LayoutConstants(NamedTuple):
-    """Constant tensors of an observation layout (O entries over S state entries)."""
-
-    index: Tensor  # (O,) state entry of each observation entry
-    trig: Tensor  # (O,) bool, sin or cos entry
-    both_trig: Tensor  # (O, O) bool
-    phase: Tensor  # (O,) pi/2 for cos (cos x = sin(x + pi/2)), else 0
-    selector: Tensor  # (S, O) one-hot: selector[i, k] = 1 if entry k reads state i
-
-
-@functools.cache
-def _layout_constants(
-    layout: tuple[tuple[str, int], ...], state_dim: int, dtype: torch.dtype
-) -> _LayoutConstants:
-    """Built once per layout (cached; the tensors are never written to)."""
-    kinds = [kind for kind, _ in layout]
-    unknown = sorted(set(kinds) - set(OBSERVATION_KINDS))
-    if unknown:
-        raise ValueError(f"layout: kinds must be among {OBSERVATION_KINDS}, found {unknown}")
-    index = torch.tensor([i for _, i in layout])
-    trig = torch.tensor([kind != "state" for kind in kinds])
-    phase = torch.tensor([HALF_PI if kind == "cos" else 0.0 for kind in kinds], dtype=dtype)
-    selector = torch.nn.functional.one_hot(index, state_dim).to(dtype).T
-    return _LayoutConstants(index, trig, trig[:, None] & trig[None, :], phase, selector)
-
-
 def observation_moments(
     mean: Tensor, cov: Tensor, layout: Sequence[tuple[str, int]]
 ) -> MomentMatch:
-    r"""Moments of the observation map: entries ``("state", i)`` copy :math:`x_i`, ``("sin", i)``
-    and ``("cos", i)`` are :math:`\sin x_i` and :math:`\cos x_i` (sin/cos augmentation of angles).
-
-    Every trigonometric entry is written :math:`\sin(x_i + \varphi)` (``cos`` has
-    :math:`\varphi = \pi/2`). Then, exactly,
-
-    .. math::
-
-        E[\sin(x_i + \varphi)] = e^{-\Sigma_{ii}/2} \sin(\mu_i + \varphi), \qquad
-        \operatorname{Cov}[x, \sin(x_i + \varphi)] = \Sigma_{:i}\, e^{-\Sigma_{ii}/2}
-            \cos(\mu_i + \varphi),
-
-    the second by Stein's lemma (which also gives the covariance of a trigonometric and a plain
-    entry), and the covariance of two trigonometric entries by :func:`_sine_product_cov`.
+    """Exact moments of the observation map of ``layout`` (sin/cos augmentation of angles):
+    :meth:`leoc.systems.observation.ObservationMap.moments`, which owns the formula (and the
+    cached layout constants).
 
     Shapes: ``mean`` (S,), ``cov`` (S, S) (symmetric) -> mean (O,), cov (O, O), io (S, O).
     """
-    const = _layout_constants(tuple(map(tuple, layout)), mean.shape[0], mean.dtype)
-    mu = mean[const.index] + const.phase
-    sub_cov = cov[const.index[:, None], const.index[None, :]]  # (O, O) of the state entries
-    damp = torch.exp(-0.5 * sub_cov.diagonal())
-    e_sin, e_cos = damp * torch.sin(mu), damp * torch.cos(mu)
-    out_mean = torch.where(const.trig, e_sin, mu)  # plain entries have phase 0
-    slope = torch.where(const.trig, e_cos, 1.0)  # E[d o_k / d x_i]
-    # Any pair with at least one plain state entry: Stein's lemma gives Sigma_ij E[o_i'] E[o_j'].
-    stein_cov = sub_cov * (slope[:, None] * slope[None, :])
-    trig_cov = _sine_product_cov(e_sin, e_cos, sub_cov)
-    out_cov = torch.where(const.both_trig, trig_cov, stein_cov)
-    return MomentMatch(out_mean, out_cov, const.selector * slope[None, :])
+    obs_map = as_observation_map(layout, mean.shape[0], complete=False)
+    return MomentMatch(*obs_map.moments(mean, cov))
 
 
 def _pairs(values: Tensor, index: Tensor) -> Tensor:

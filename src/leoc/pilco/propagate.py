@@ -41,6 +41,7 @@ from leoc.pilco.moments import (
     sin_squash_moments,
 )
 from leoc.policies import HybridPolicy, LinearController, RBFNetwork, saturate
+from leoc.systems.observation import as_observation_map
 
 HYBRID_METHODS = ("quadrature", "constant_relevance")
 DEFAULT_QUADRATURE_ORDER = 5
@@ -104,14 +105,9 @@ class Prediction(NamedTuple):
 
 
 def observe_torch(state: Tensor, layout: Sequence[tuple[str, int]]) -> Tensor:
-    """Observation (..., O) of states (..., S) (differentiable; angles through cos/sin)."""
-    columns = []
-    for kind, index in layout:
-        value = state[..., index]
-        columns.append(
-            torch.cos(value) if kind == "cos" else torch.sin(value) if kind == "sin" else value
-        )
-    return torch.stack(columns, dim=-1)
+    """Observation (..., O) of states (..., S) (differentiable; angles through cos/sin):
+    :meth:`leoc.systems.observation.ObservationMap.observe`."""
+    return as_observation_map(layout, state.shape[-1], complete=False).observe(state)
 
 
 def inner_moments(module: nn.Module, mean: Tensor, cov: Tensor) -> MomentMatch:

@@ -217,7 +217,7 @@ def train_pilco(
     Parameters
     ----------
     system : str
-        ``pendulum``, ``cartpole`` or ``mountaincar``.
+        A registered system name (``leoc.systems.system_names()``).
     hybrid : bool
         The hybrid RBF + LQR policy instead of the RBF baseline.
     seed : int

@@ -17,6 +17,7 @@ Shapes: ``B`` batch (any leading dimensions), ``S`` state dimension, ``O`` obser
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
 from typing import Any, NamedTuple
@@ -67,9 +68,37 @@ def angle_entries(index: int) -> tuple[ObsComponent, ObsComponent]:
     return ObsComponent(COS, index), ObsComponent(SIN, index)
 
 
-def _symmetrise(matrix: Tensor) -> Tensor:
-    """(A + A^T) / 2: removes the round-off asymmetry of products of covariances."""
-    return 0.5 * (matrix + matrix.transpose(-1, -2))
+class _MomentConstants(NamedTuple):
+    """Constant tensors of a layout's moments (O entries over S state entries)."""
+
+    index: Tensor  # (O,) state entry of each observation entry
+    trig: Tensor  # (O,) bool, sin or cos entry
+    both_trig: Tensor  # (O, O) bool
+    phase: Tensor  # (O,) pi/2 for cos (cos x = sin(x + pi/2)), else 0
+    selector: Tensor  # (S, O) one-hot: selector[i, k] = 1 if entry k reads state i
+
+
+def sine_product_cov(e_sin: Tensor, e_cos: Tensor, cov: Tensor) -> Tensor:
+    r"""Covariance of :math:`\sin a_i` and :math:`\sin a_j` for jointly Gaussian ``a``.
+
+    With :math:`C = \operatorname{Cov}[a]`, :math:`E[\sin a_i] = e^{-C_{ii}/2} \sin \mu_i` and
+    :math:`E[\cos a_i] = e^{-C_{ii}/2} \cos \mu_i` (``e_sin``, ``e_cos``), the product rule
+    :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))` gives
+
+    .. math::
+
+        \operatorname{Cov}[\sin a_i, \sin a_j] = E[\cos a_i] E[\cos a_j] \sinh C_{ij}
+            + E[\sin a_i] E[\sin a_j] (\cosh C_{ij} - 1).
+
+    :math:`\cosh C - 1` is evaluated as :math:`2 \sinh^2(C / 2)`: no cancellation when C is
+    small (a collapsed covariance near the operating point), unlike the difference of the two
+    cosine terms. Exactly symmetric for a symmetric ``cov``. Shapes: (K,), (K,), (K, K).
+    Shared with PILCO's sin-squash moments (:mod:`leoc.pilco.moments`).
+    """
+    cosh_minus_one = 2.0 * torch.sinh(0.5 * cov).square()
+    return (e_cos[:, None] * e_cos[None, :]) * torch.sinh(cov) + (
+        e_sin[:, None] * e_sin[None, :]
+    ) * cosh_minus_one
 
 
 class ObservationMap:
@@ -81,8 +110,11 @@ class ObservationMap:
         One entry per observation column (``ObsComponent`` or plain pairs, e.g. read back from
         JSON).
     state_dim : int, optional
-        S. Defaults to ``1 + max(state_index)``. Every state entry must be observed, either as
-        itself or through both its cos and sin (so that :meth:`invert` exists).
+        S. Defaults to ``1 + max(state_index)``.
+    complete : bool
+        Require every state entry to be observed, either as itself or through both its cos and
+        sin (so that :meth:`invert` exists; what a ``System`` needs). ``False`` allows partial
+        layouts (PILCO's moments of a few features).
 
     Raises
     ------
@@ -91,7 +123,9 @@ class ObservationMap:
         itself nor through both cos and sin, or an angle observed also as itself.
     """
 
-    def __init__(self, layout: Iterable[Sequence[Any]], state_dim: int | None = None) -> None:
+    def __init__(
+        self, layout: Iterable[Sequence[Any]], state_dim: int | None = None, complete: bool = True
+    ) -> None:
         components = []
         for column, entry in enumerate(layout):
             if len(entry) != 2:
@@ -114,12 +148,15 @@ class ObservationMap:
         size = 1 + max(c.state_index for c in components) if state_dim is None else state_dim
         self.layout: tuple[ObsComponent, ...] = tuple(components)
         self.state_dim = int(size)
-        self._check_complete()
+        self.complete = self._check_complete(strict=complete)
         self._index = torch.tensor([c.state_index for c in self.layout])
         self._trig = torch.tensor([c.kind != STATE for c in self.layout])
         self._phase = [HALF_PI if c.kind == COS else 0.0 for c in self.layout]
+        self._moment_constants: dict[torch.dtype, _MomentConstants] = {}
 
-    def _check_complete(self) -> None:
+    def _check_complete(self, strict: bool) -> bool:
+        """Check indices and duplicates; return whether every state entry is observed (raise
+        if not and ``strict``)."""
         seen: dict[int, set[str]] = {}
         for column, component in enumerate(self.layout):
             if not 0 <= component.state_index < self.state_dim:
@@ -134,10 +171,13 @@ class ObservationMap:
         for index in range(self.state_dim):
             kinds = seen.get(index, set())
             if kinds not in ({STATE}, {COS, SIN}):
+                if not strict:
+                    return False
                 raise ValueError(
                     f"layout: state entry {index} must be observed as itself or as both its cos "
                     f"and sin, found {sorted(kinds) or 'nothing'}"
                 )
+        return True
 
     def __repr__(self) -> str:
         return f"ObservationMap({list(map(tuple, self.layout))!r}, state_dim={self.state_dim})"
@@ -222,6 +262,8 @@ class ObservationMap:
             raise ValueError(
                 f"obs: expected trailing dimension {self.obs_dim}, found {tuple(obs.shape)}"
             )
+        if not self.complete:
+            raise ValueError(f"invert: {self!r} does not observe every state entry")
         entries: list[Tensor | None] = [None] * self.state_dim
         for index, column in self.state_columns().items():
             entries[index] = obs[..., column]
@@ -260,6 +302,17 @@ class ObservationMap:
         return -np.asarray(K, dtype=float) @ self.jacobian(operating_state).T
 
     # ------------------------------------------------------------------ Gaussian moments
+    def _constants(self, dtype: torch.dtype) -> _MomentConstants:
+        """Constant tensors of the moments, built once per dtype (never written to)."""
+        if dtype not in self._moment_constants:
+            trig = self._trig
+            phase = torch.tensor(self._phase, dtype=dtype)
+            selector = torch.nn.functional.one_hot(self._index, self.state_dim).to(dtype).T
+            self._moment_constants[dtype] = _MomentConstants(
+                self._index, trig, trig[:, None] & trig[None, :], phase, selector
+            )
+        return self._moment_constants[dtype]
+
     def moments(self, mean: Tensor, cov: Tensor) -> ObservationMoments:
         r"""Exact moments of ``h(x)`` for :math:`x \sim \mathcal N(\mu, \Sigma)`.
 
@@ -272,40 +325,41 @@ class ObservationMap:
             \operatorname{Cov}[x, \sin(x_i + \varphi)] = \Sigma_{:i}\, e^{-\Sigma_{ii}/2}
                 \cos(\mu_i + \varphi),
 
-        the second by Stein's lemma, and products of two sines by
-        :math:`\sin a \sin b = \tfrac12 (\cos(a - b) - \cos(a + b))`.
+        the second by Stein's lemma (which also gives the covariance of a trigonometric and a
+        plain entry), and the covariance of two trigonometric entries by
+        :func:`sine_product_cov`.
 
-        Shapes: ``mean`` (S,), ``cov`` (S, S) -> mean (O,), cov (O, O), io (S, O).
+        Shapes: ``mean`` (S,), ``cov`` (S, S) (symmetric) -> mean (O,), cov (O, O), io (S, O).
         """
-        index, trig = self._index, self._trig
-        phase = torch.tensor(self._phase, dtype=mean.dtype)
-        mu = mean[index] + phase
-        sub_cov = cov[index][:, index]  # (O, O) covariance of the underlying state entries
-        var = sub_cov.diagonal()
-        damp = torch.exp(-0.5 * var)
-        out_mean = torch.where(trig, damp * torch.sin(mu), mean[index])
-        slope = torch.where(trig, damp * torch.cos(mu), torch.ones_like(mu))  # E[d o_k / d x_i]
-        var_diff = var[:, None] + var[None, :] - 2.0 * sub_cov
-        var_sum = var[:, None] + var[None, :] + 2.0 * sub_cov
-        trig_cov = (
-            0.5
-            * (
-                torch.exp(-0.5 * var_diff) * torch.cos(mu[:, None] - mu[None, :])
-                - torch.exp(-0.5 * var_sum) * torch.cos(mu[:, None] + mu[None, :])
-            )
-            - out_mean[:, None] * out_mean[None, :]
-        )
-        # Any pair with at least one plain state entry: Stein's lemma gives
-        # Sigma_ij E[o_i'] E[o_j'].
-        stein_cov = sub_cov * slope[:, None] * slope[None, :]
-        both_trig = trig[:, None] & trig[None, :]
-        out_cov = torch.where(both_trig, trig_cov, stein_cov)
-        selector = torch.nn.functional.one_hot(index, mean.shape[0]).to(mean.dtype).T  # (S, O)
-        return ObservationMoments(out_mean, _symmetrise(out_cov), selector * slope[None, :])
+        if mean.shape[-1] != self.state_dim:
+            raise ValueError(f"mean: expected {self.state_dim} entries, found {tuple(mean.shape)}")
+        const = self._constants(mean.dtype)
+        mu = mean[const.index] + const.phase
+        sub_cov = cov[const.index[:, None], const.index[None, :]]  # (O, O) of the state entries
+        damp = torch.exp(-0.5 * sub_cov.diagonal())
+        e_sin, e_cos = damp * torch.sin(mu), damp * torch.cos(mu)
+        out_mean = torch.where(const.trig, e_sin, mu)  # plain entries have phase 0
+        slope = torch.where(const.trig, e_cos, 1.0)  # E[d o_k / d x_i]
+        # Any pair with at least one plain entry: Stein's lemma gives Sigma_ij E[o_i'] E[o_j'].
+        stein_cov = sub_cov * (slope[:, None] * slope[None, :])
+        trig_cov = sine_product_cov(e_sin, e_cos, sub_cov)
+        out_cov = torch.where(const.both_trig, trig_cov, stein_cov)
+        return ObservationMoments(out_mean, out_cov, const.selector * slope[None, :])
 
 
-def as_observation_map(layout: Any, state_dim: int | None = None) -> ObservationMap:
-    """``layout`` as an :class:`ObservationMap` (an existing map is returned as is)."""
+def as_observation_map(
+    layout: Any, state_dim: int | None = None, complete: bool = True
+) -> ObservationMap:
+    """``layout`` as an :class:`ObservationMap` (an existing map is returned as is; plain
+    layouts are built once per ``(layout, state_dim, complete)`` and cached, for hot loops)."""
     if isinstance(layout, ObservationMap):
         return layout
-    return ObservationMap(layout, state_dim)
+    key = tuple((str(kind), int(index)) for kind, index in layout)
+    return _cached_map(key, state_dim, complete)
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_map(
+    layout: tuple[tuple[str, int], ...], state_dim: int | None, complete: bool
+) -> ObservationMap:
+    return ObservationMap(layout, state_dim, complete)
