@@ -78,9 +78,7 @@ def main() -> None:
         )
         controllers[f"td3_{kind}"] = load_ddpg_controller(run_dir)
         with open(run_dir / "curve.csv") as handle:
-            curves[kind] = [
-                {k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)
-            ]
+            curves[kind] = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(handle)]
         for row in curves[kind]:
             print(
                 f"td3 {kind}: step {int(row['steps'])}, return {row['mean_return']:.1f}, "
