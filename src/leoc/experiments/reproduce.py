@@ -101,7 +101,7 @@ def train_controller(
             seed=spec.seed,
             relevance=spec.relevance,
             run_dir=train_dir,
-            iterations=profile.iterations_for(spec.system),
+            iterations=profile.pilco_iterations.get(spec.system),
             progress=True,
             **profile.pilco_overrides,
         )
@@ -115,7 +115,7 @@ def train_controller(
             seed=spec.seed,
             relevance=spec.relevance,
             run_dir=train_dir,
-            total_steps=profile.steps_for(spec.system),
+            total_steps=profile.ddpg_steps.get(spec.system),
             progress=False,
             **profile.ddpg_overrides,
         )
