@@ -1,8 +1,10 @@
 """Gymnasium environments built on the pure step functions of :mod:`leoc.systems`.
 
-All three environments share :class:`LeocEnv`: 200-step episodes (a ``TimeLimit`` added by
-``gymnasium.make``), float64 observations, a continuous action clipped to the actuator limit,
-and ``reset(options=...)`` with
+Every system's environment is a :class:`LeocEnv` (the paper's three have documented subclasses;
+a registered system gets the generic class, ``LeocEnv(system=name)``): ``episode_steps``-step
+episodes (a ``TimeLimit`` added by ``gymnasium.make``), float64 observations bounded by the
+observation map, a continuous action clipped to the actuator limit, and ``reset(options=...)``
+with
 
 * ``{"start": "swing_up"}`` (the default): the swing-up start distribution;
 * ``{"start": "operating_point", "offset": [...]}``: the operating point plus an optional state
