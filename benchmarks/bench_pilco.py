@@ -238,6 +238,9 @@ def main() -> None:
     results = {}
     for name in args.cases:
         results[name] = run_in_subprocess(name, args)
+        # Each case's row as soon as it is measured (a long run keeps what it has).
+        print(table({name: results[name]})[-1], f"(load {os.getloadavg()[0]:.2f})", flush=True)
+    print()
     print("\n".join(table(results)))
     print(f"\nTargets (load average at end {os.getloadavg()[0]:.2f}):")
     print("\n".join(targets(results)))
