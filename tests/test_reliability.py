@@ -210,3 +210,28 @@ def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
     assert meta["seeds"] == [0] and meta["systems"] == ["pendulum"]
     report = (tmp_path / "report.md").read_text()
     assert "Runs aggregated in this report: pendulum/linear: seeds [0]." in report
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
+def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
+    tmp_path, uninterrupted
+):
+    import random
+
+    command = _smoke_command(tmp_path)
+    chooser = random.Random(0)  # the kill times are seeded too
+    for attempt in range(3):
+        process = subprocess.Popen(
+            command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+        )
+        time.sleep(chooser.uniform(5.0, 40.0))
+        process.kill()  # the main process only: no clean-up runs in it
+        process.wait()
+        time.sleep(1.0)
+        assert _alive_in_group(process.pid) == [], attempt  # workers die with their driver
+        for path in tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"):
+            json.loads(path.read_text())  # whatever finished is whole
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    assert rerun.returncode == 0, rerun.stderr
+    assert _numbers(tmp_path) == uninterrupted

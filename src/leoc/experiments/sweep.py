@@ -239,12 +239,29 @@ def _leave(code: int) -> None:
     os._exit(code)
 
 
+PR_SET_PDEATHSIG = 1  # prctl option (Linux): a signal sent to this process when its parent dies
+
+
+def _die_with_the_driver() -> None:
+    """On Linux, have the kernel SIGKILL this worker when the driver dies, however it dies
+    (even SIGKILL, which runs no clean-up): an orphaned worker would otherwise finish its run
+    and write into a folder that a rerun is already using. Elsewhere a no-op."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+
+
 def _local_worker(runner: Runner, out_dir: Path, connection: Any) -> None:
     """Body of a local worker process: receive specs, run each, send back its outcome.
 
     ``None`` (or the driver gone) ends it. Runs share the process one after the other, so the
     imports (torch, leoc: seconds per process) are paid once per worker, as in a process pool.
     """
+    _die_with_the_driver()
     try:
         while True:
             try:
