@@ -119,11 +119,9 @@ class AcrobotParams(PhysicalParams):
     max_speed_2: float = 9.0 * math.pi
 
 
-def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> Tensor:
-    """Time derivative ``(B, 4)`` of ``[theta1, theta2, theta1_dot, theta2_dot]`` (module
-    docstring), for an elbow torque ``(B,)``."""
-    p = params
-    theta1, theta2, theta1_dot, theta2_dot = state.unbind(-1)
+def _inertia(theta2: Tensor, p: AcrobotParams) -> tuple[float, Tensor, Tensor, float]:
+    """The mass-matrix entries ``(m2 l1 lc2, d1, d2, d3)`` of the book dynamics (module
+    docstring): ``M = [[d1, d2], [d2, d3]]``, shared by the dynamics and the energy."""
     coupling = p.link_mass_2 * p.link_length_1 * p.link_com_2  # m2 l1 lc2
     d1 = (
         p.link_mass_1 * p.link_com_1**2
@@ -133,6 +131,16 @@ def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> 
         + p.link_moi_2
     )
     d2 = p.link_mass_2 * p.link_com_2**2 + coupling * torch.cos(theta2) + p.link_moi_2
+    d3 = p.link_mass_2 * p.link_com_2**2 + p.link_moi_2
+    return coupling, d1, d2, d3
+
+
+def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> Tensor:
+    """Time derivative ``(B, 4)`` of ``[theta1, theta2, theta1_dot, theta2_dot]`` (module
+    docstring), for an elbow torque ``(B,)``."""
+    p = params
+    theta1, theta2, theta1_dot, theta2_dot = state.unbind(-1)
+    coupling, d1, d2, d3 = _inertia(theta2, p)
     phi2 = -p.link_mass_2 * p.link_com_2 * p.gravity * torch.sin(theta1 + theta2)
     phi1 = (
         -coupling * theta2_dot**2 * torch.sin(theta2)
@@ -144,7 +152,7 @@ def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> 
     )
     theta2_ddot = (
         torque + d2 / d1 * phi1 - coupling * theta1_dot**2 * torch.sin(theta2) - phi2
-    ) / (p.link_mass_2 * p.link_com_2**2 + p.link_moi_2 - d2**2 / d1)
+    ) / (d3 - d2**2 / d1)
     theta1_ddot = -(d2 * theta2_ddot + phi1) / d1
     return torch.stack([theta1_dot, theta2_dot, theta1_ddot, theta2_ddot], dim=-1)
 
@@ -170,16 +178,7 @@ def acrobot_energy(state: Tensor, params: AcrobotParams) -> Tensor:
     """Total energy ``(B,)`` in J (module docstring), zero-velocity potential 0 at horizontal."""
     p = params
     theta1, theta2, theta1_dot, theta2_dot = state.unbind(-1)
-    coupling = p.link_mass_2 * p.link_length_1 * p.link_com_2
-    d1 = (
-        p.link_mass_1 * p.link_com_1**2
-        + p.link_mass_2 * (p.link_length_1**2 + p.link_com_2**2)
-        + 2.0 * coupling * torch.cos(theta2)
-        + p.link_moi_1
-        + p.link_moi_2
-    )
-    d2 = p.link_mass_2 * p.link_com_2**2 + coupling * torch.cos(theta2) + p.link_moi_2
-    d3 = p.link_mass_2 * p.link_com_2**2 + p.link_moi_2
+    _, d1, d2, d3 = _inertia(theta2, p)
     kinetic = 0.5 * (d1 * theta1_dot**2 + 2.0 * d2 * theta1_dot * theta2_dot + d3 * theta2_dot**2)
     potential = p.gravity * (
         (p.link_mass_1 * p.link_com_1 + p.link_mass_2 * p.link_length_1) * torch.cos(theta1)
