@@ -15,7 +15,7 @@ from leoc.systems.base import (
     wrap_angle,
 )
 from leoc.systems.cartpole import CartPole, CartPoleParams, cartpole_reward, cartpole_step
-from leoc.systems.envs import BUILTIN_ENVS, LeocEnv
+from leoc.systems.envs import BUILTIN_ENVS, LeocEnv, make_env
 from leoc.systems.mountaincar import (
     MountainCar,
     MountainCarParams,
@@ -26,7 +26,6 @@ from leoc.systems.observation import ObsComponent, ObservationMap, angle_entries
 from leoc.systems.pendulum import Pendulum, PendulumParams, pendulum_reward, pendulum_step
 from leoc.systems.registry import (
     env_id,
-    make_env,
     make_system,
     register_system,
     system_names,

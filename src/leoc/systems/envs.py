@@ -26,6 +26,7 @@ from leoc.systems.base import DTYPE, START_KINDS, PhysicalParams, System
 from leoc.systems.cartpole import CartPole
 from leoc.systems.mountaincar import MountainCar
 from leoc.systems.pendulum import Pendulum
+from leoc.systems.registry import env_id, make_system
 
 RESET_OPTION_KEYS = ("start", "offset", "state")
 
@@ -57,8 +58,6 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         if start not in START_KINDS:
             raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
         if isinstance(system, str):
-            from leoc.systems.registry import make_system  # the edge: a name from gym.make
-
             system = make_system(system, params)
         elif system is None:
             if not hasattr(self, "system_type"):
@@ -194,3 +193,19 @@ BUILTIN_ENVS: dict[str, tuple[str, type[LeocEnv]]] = {
     "cartpole": ("leoc/CartPoleSwingUp-v0", CartPoleSwingUpEnv),
     "mountaincar": ("leoc/MountainCarHilltop-v0", MountainCarHilltopEnv),
 }
+
+
+def make_env(system: str | System, params: PhysicalParams | None = None, **kwargs: Any) -> Any:
+    """A gymnasium environment (with the episode's ``TimeLimit``) of a system or system name.
+
+    A name goes through ``gymnasium.make`` of its registered id; a ``System`` object is
+    wrapped directly (so a scaled or unregistered system needs no registration).
+    """
+    if isinstance(system, System):
+        from gymnasium.wrappers import TimeLimit
+
+        if params is not None:
+            raise ValueError("params: only with a system name, found a System object as well")
+        env = LeocEnv(system=system, **kwargs)
+        return TimeLimit(env, max_episode_steps=system.episode_steps)
+    return gym.make(env_id(system), params=params, **kwargs)

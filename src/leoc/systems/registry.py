@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 from leoc.systems.base import DEFAULT_EPISODE_STEPS, PhysicalParams, System
 
@@ -152,32 +152,11 @@ def make_system(
     return system.with_params(**scales) if scales else system
 
 
-def make_env(system: str | System, params: PhysicalParams | None = None, **kwargs: Any) -> Any:
-    """A gymnasium environment (with the episode's ``TimeLimit``) of a system or system name.
-
-    A name goes through ``gymnasium.make`` of its registered id; a ``System`` object is
-    wrapped directly (so a scaled or unregistered system needs no registration).
-    """
-    import gymnasium as gym
-
-    if isinstance(system, System):
-        from gymnasium.wrappers import TimeLimit
-
-        from leoc.systems.envs import LeocEnv
-
-        if params is not None:
-            raise ValueError("params: only with a system name, found a System object as well")
-        env = LeocEnv(system=system, **kwargs)
-        return TimeLimit(env, max_episode_steps=system.episode_steps)
-    return gym.make(env_id(system), params=params, **kwargs)
-
-
 __all__ = [
     "DEFAULT_EPISODE_STEPS",
     "Registration",
     "default_env_id",
     "env_id",
-    "make_env",
     "make_system",
     "register_system",
     "system_names",
