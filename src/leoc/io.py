@@ -117,3 +117,22 @@ def set_aside(path: str | Path) -> Path:
         target = path.with_name(f"{path.name}.damaged-{stamp}-{count}")
     os.replace(path, target)
     return target
+
+
+def read_json_object(path: str | Path, echo: Any, what: str) -> dict[str, Any] | None:
+    """The JSON object in ``path``; None when the file is absent or damaged. A file that does
+    not parse as a JSON object (truncated, garbled) is set aside (:func:`set_aside`) and
+    ``echo`` gets one line naming it, so a damaged file never blocks a rerun."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict):
+            raise ValueError(f"expected a JSON object, found {type(data).__name__}")
+    except (ValueError, UnicodeDecodeError) as error:
+        aside = set_aside(path)
+        reason = f"{type(error).__name__}: {error}".splitlines()[0]
+        echo(f"damaged {what} {path} ({reason}): set aside as {aside.name}")
+        return None
+    return data

@@ -40,7 +40,7 @@ from leoc.experiments.profiles import (
     run_specs,
 )
 from leoc.experiments.sweep import check_backend, sweep
-from leoc.io import set_aside, write_json_atomic
+from leoc.io import read_json_object, write_json_atomic
 from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
@@ -219,17 +219,7 @@ def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any
 def read_meta(path: Path, echo: Callable[[str], None] = print) -> dict[str, Any]:
     """The folder's ``meta.json`` ({} when absent); a damaged one is set aside with a message
     (it only describes the last invocation, which this one rewrites)."""
-    if not path.is_file():
-        return {}
-    try:
-        meta = json.loads(path.read_text())
-        if not isinstance(meta, dict):
-            raise ValueError(f"expected a JSON object, found {type(meta).__name__}")
-    except (ValueError, UnicodeDecodeError) as error:
-        aside = set_aside(path)
-        echo(f"damaged {path} ({error}); set aside as {aside.name}")
-        return {}
-    return meta
+    return read_json_object(path, echo, "metadata") or {}
 
 
 @dataclasses.dataclass(frozen=True)

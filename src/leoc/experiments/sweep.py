@@ -27,7 +27,6 @@ to the run's log and the sweep goes on with the other runs.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import sys
@@ -40,7 +39,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.io import set_aside, write_bytes_atomic, write_json_atomic, write_text_atomic
+from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
 
 BACKENDS = ("local", "ray")
 DONE_FILE = "evaluation.json"
@@ -201,20 +200,9 @@ def check_backend(backend: str, address: str | None = None) -> None:
 
 
 def _finished(done: Path, echo: Callable[[str], None]) -> bool:
-    """Whether ``done`` holds a run's result. A result file that does not parse as a JSON
-    object (truncated, garbled) is set aside with a message naming it, and the run counts as
-    not done, so a damaged file never blocks a sweep."""
-    if not done.is_file():
-        return False
-    try:
-        data = json.loads(done.read_text())
-        if not isinstance(data, dict):
-            raise ValueError(f"expected a JSON object, found {type(data).__name__}")
-    except (ValueError, UnicodeDecodeError) as error:
-        aside = set_aside(done)
-        echo(f"damaged result {done} ({_describe(error)}): set aside as {aside.name}; run again")
-        return False
-    return True
+    """Whether ``done`` holds a run's result; a damaged one is set aside with a message naming
+    it and the run counts as not done (:func:`leoc.io.read_json_object`)."""
+    return read_json_object(done, echo, "result") is not None
 
 
 def _describe(error: BaseException) -> str:
