@@ -36,7 +36,6 @@ import time
 import numpy as np
 import torch
 
-import leoc.pilco.objective as pilco_objective
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPSettings, fit_gp
 from leoc.pilco.objective import optimise_policy, predict_policy
@@ -90,19 +89,6 @@ def peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KIB_PER_MIB  # Linux: KiB
 
 
-class CountingPredict:
-    """Wraps :func:`~leoc.pilco.objective.predict_policy` to count the cost evaluations that
-    :func:`~leoc.pilco.objective.optimise_policy` makes (its closure looks the name up at call
-    time)."""
-
-    def __init__(self) -> None:
-        self.calls = 0
-
-    def __call__(self, *args, **kwargs):
-        self.calls += 1
-        return predict_policy(*args, **kwargs)
-
-
 def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | None) -> dict:
     """One case in this process; returns its figures."""
     system = make_system("cartpole")
@@ -126,17 +112,12 @@ def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | N
         times.append(time.perf_counter() - start)
     times = times[1:]
     # One full PILCO iteration: GP fit, then the policy optimisation of the training loop.
-    counter = CountingPredict()
-    pilco_objective.predict_policy = counter
-    try:
-        start = time.perf_counter()
-        model = fit_gp(inputs, targets, config.gp, np.random.default_rng(0))
-        iteration_fit = time.perf_counter() - start
-        start = time.perf_counter()
-        cost = optimise_policy(policy, model, system, config)
-        optimise_seconds = time.perf_counter() - start
-    finally:
-        pilco_objective.predict_policy = predict_policy
+    start = time.perf_counter()
+    model = fit_gp(inputs, targets, config.gp, np.random.default_rng(0))
+    iteration_fit = time.perf_counter() - start
+    start = time.perf_counter()
+    optimisation = optimise_policy(policy, model, system, config)
+    optimise_seconds = time.perf_counter() - start
     return {
         "points": points,
         "model": "FITC" if model.sparse else "exact GP",
@@ -148,9 +129,10 @@ def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | N
         "repeats": repeats,
         "iteration_fit_s": iteration_fit,
         "optimise_s": optimise_seconds,
-        "policy_iterations": config.policy_iterations,
-        "evaluations": counter.calls,
-        "optimised_cost": cost,
+        "policy_iterations": optimisation.iterations,
+        "evaluations": optimisation.evaluations,
+        "restarts": optimisation.restarts,
+        "optimised_cost": optimisation.cost,
         "rss_after_fit_mib": rss_after_fit,
         "peak_rss_mib": peak_rss_mib(),
     }
@@ -168,7 +150,8 @@ def run_in_subprocess(name: str, args: argparse.Namespace) -> dict:
 def table(results: dict[str, dict]) -> list[str]:
     lines = [
         "| case | model (M) | value+grad median s (range) | TF ref s | speed-up | GP fit s "
-        "| full iteration s (fit + optimise) | L-BFGS it / evals | s per eval | peak RSS MiB |",
+        "| full iteration s (fit + optimise) | L-BFGS it / evals (restarts) | s per eval "
+        "| peak RSS MiB |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, r in results.items():
@@ -182,7 +165,7 @@ def table(results: dict[str, dict]) -> list[str]:
             f"{'-' if ref is None else f'{ref:.2f}'} | "
             f"{'-' if ref is None else f'{ref / median:.1f}x'} | {r['gp_fit_s']:.2f} | "
             f"{full:.1f} ({r['iteration_fit_s']:.1f} + {r['optimise_s']:.1f}) | "
-            f"{r['policy_iterations']} / {r['evaluations']} | {per_eval:.3f} | "
+            f"{r['policy_iterations']} / {r['evaluations']} ({r['restarts']}) | {per_eval:.3f} | "
             f"{r['peak_rss_mib']:.0f} |"
         )
     return lines

@@ -68,21 +68,53 @@ def predict_policy(
     )
 
 
+class PolicyOptimisation(NamedTuple):
+    """Outcome of :func:`optimise_policy`.
+
+    Attributes
+    ----------
+    cost : float
+        The lowest predicted horizon cost seen (the policy is left at its parameters).
+    iterations : int
+        L-BFGS iterations made, over all rounds (at most ``policy_iterations``).
+    evaluations : int
+        Evaluations of the cost and its gradient, line searches included.
+    restarts : int
+        Rounds started again from the best parameters with a fresh curvature history.
+    """
+
+    cost: float
+    iterations: int
+    evaluations: int
+    restarts: int
+
+
+# A restart that lowers the best cost by less than this fraction of it ends the optimisation.
+RESTART_MIN_IMPROVEMENT = 1e-6
+
+
 def optimise_policy(
     policy: nn.Module, model: GPPosterior, system: System, config: PilcoConfig
-) -> float:
+) -> PolicyOptimisation:
     """Minimise the predicted horizon cost by L-BFGS (strong Wolfe line search).
+
+    The budget is ``config.policy_iterations`` L-BFGS iterations. torch's L-BFGS stops early on
+    "lack of progress" (a line search that could not move, typically after an evaluation that
+    failed or at a kink of the saturation), long before the budget; so, as the original PILCO's
+    ``minimize`` spends its whole budget of line searches, a round that stops early is followed
+    by another from the best parameters with a fresh curvature history, until the budget is
+    spent or a round lowers the best cost by less than ``RESTART_MIN_IMPROVEMENT`` of it.
 
     A failed evaluation (non-finite cost or a Cholesky failure) counts as +inf, which the line
     search backs away from; the best parameters seen are restored at the end.
     """
     params = [p for p in policy.parameters() if p.requires_grad]
-    optimiser = torch.optim.LBFGS(
-        params, max_iter=config.policy_iterations, line_search_fn="strong_wolfe"
-    )
     best = {"loss": math.inf, "state": None}
+    evaluations = 0
 
     def closure() -> torch.Tensor:
+        nonlocal evaluations
+        evaluations += 1
         optimiser.zero_grad()
         try:
             loss = predict_policy(policy, model, system, config).total_cost
@@ -98,7 +130,17 @@ def optimise_policy(
             best["state"] = {k: v.detach().clone() for k, v in policy.state_dict().items()}
         return loss
 
-    optimiser.step(closure)
-    if best["state"] is not None:
-        policy.load_state_dict(best["state"])
-    return best["loss"]
+    iterations, rounds = 0, 0
+    while iterations < config.policy_iterations:
+        before = best["loss"]
+        optimiser = torch.optim.LBFGS(
+            params, max_iter=config.policy_iterations - iterations, line_search_fn="strong_wolfe"
+        )
+        optimiser.step(closure)
+        rounds += 1
+        iterations += max(1, optimiser.state[params[0]].get("n_iter", 0))
+        if best["state"] is not None:
+            policy.load_state_dict(best["state"])
+        if not before - best["loss"] > RESTART_MIN_IMPROVEMENT * abs(best["loss"]):
+            break
+    return PolicyOptimisation(best["loss"], iterations, evaluations, rounds - 1)

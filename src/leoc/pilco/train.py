@@ -38,7 +38,7 @@ from leoc.pilco.checkpoint import (
 )
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPPosterior, fit_gp
-from leoc.pilco.objective import optimise_policy
+from leoc.pilco.objective import PolicyOptimisation, optimise_policy
 from leoc.pilco.policy import build_policy
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
@@ -67,7 +67,7 @@ def _log_row(
     system: System,
     evaluation_of: Any,
     rollouts: list[Rollout],
-    predicted: float | None,
+    optimisation: PolicyOptimisation | None,
     data_size: int,
     wall: float,
     sparse: bool,
@@ -78,7 +78,10 @@ def _log_row(
         iteration=iteration,
         rollout_return=float(np.mean([r.total_return for r in rollouts])),
         rollout_hold_step=hold_start(system, rollouts[-1]),
-        predicted_cost=predicted,
+        predicted_cost=None if optimisation is None else optimisation.cost,
+        lbfgs_iterations=None if optimisation is None else optimisation.iterations,
+        lbfgs_evaluations=None if optimisation is None else optimisation.evaluations,
+        lbfgs_restarts=None if optimisation is None else optimisation.restarts,
         data_size=data_size,
         wall_seconds=wall,
         gp_sparse=sparse,
@@ -156,7 +159,7 @@ def _iterate(
     """One PILCO iteration: fit GP, optimise policy, run it, add its data, evaluate it."""
     start_time = time.perf_counter()
     model = fit_gp(state.inputs, state.targets, config.gp, rng, init=state.hyper)
-    predicted = optimise_policy(policy, model, system, config)
+    optimisation = optimise_policy(policy, model, system, config)
     rollout = run_rollout(
         system,
         HeldPolicy(policy, config.action_repeat),
@@ -174,7 +177,7 @@ def _iterate(
         system,
         evaluation,
         [rollout],
-        predicted,
+        optimisation,
         len(inputs),
         time.perf_counter() - start_time,
         model.sparse,
