@@ -42,6 +42,16 @@ class WrongShapePendulum(Pendulum):
     default_q = (1.0,)
 
 
+class RunawayPendulum(Pendulum):
+    """A user's mistake: an allowed region whose exit pays (a bonus for leaving it)."""
+
+    name = "runaway"
+    out_of_bounds_reward = 10.0
+
+    def out_of_bounds(self, state):
+        return state[..., 1].abs() > 7.0
+
+
 class HeavyPendulum(Pendulum):
     """A valid user system: the pendulum with a 2 kg rod and its own gymnasium id."""
 
@@ -72,6 +82,11 @@ def test_a_wrong_operating_point_is_rejected_with_the_residual() -> None:
     [
         (NegativeStepPendulum, "system 'negative_dt': dt: expected a positive finite number"),
         (WrongShapePendulum, r"system 'wrong_shape': default_q: expected 2 finite numbers"),
+        (
+            RunawayPendulum,
+            r"system 'runaway': out_of_bounds_reward: expected at most the reward at the "
+            r"operating point \(0\) so that leaving never pays, found 10.0",
+        ),
     ],
 )
 def test_inconsistent_systems_are_rejected(factory: type, message: str) -> None:

@@ -163,7 +163,71 @@ def test_batched_simulation_equals_one_rollout_per_start() -> None:
         np.testing.assert_allclose(episode.states, single.states, rtol=0, atol=1e-12)
         np.testing.assert_allclose(episode.rewards, single.rewards, rtol=0, atol=1e-12)
         assert episode.terminated == single.terminated
-    # a terminated start is frozen: no reward after its end, the out-of-bounds reward at it
+    # a terminated start is frozen: no reward after its end; at it, the out-of-bounds reward
+    # for that step and each of the 60 - length steps it would still have run
     length = int(batch.lengths[1])
-    assert batch.rewards[1, length - 1] == system.out_of_bounds_reward
+    assert batch.rewards[1, length - 1] == pytest.approx(
+        system.out_of_bounds_reward * (61 - length)
+    )
     assert np.all(batch.rewards[1, length:] == 0.0)
+
+
+@pytest.mark.parametrize("name", ["cartpole", "mountaincar"])
+def test_no_reward_inside_the_track_is_worse_than_the_out_of_bounds_reward(name) -> None:
+    """The per-step out-of-bounds reward is at most every reward on the track (a dense grid of
+    positions and angles, speeds 0 for the mountain car whose reward grows with speed, every
+    force), and equals the worst one, so leaving never pays and the penalty is no harsher."""
+    system = make_system(name)
+    forces = torch.linspace(-system.action_limit, system.action_limit, 11, dtype=torch.float64)
+    if name == "cartpole":
+        limit = system.params.x_limit
+        grid = torch.cartesian_prod(
+            torch.linspace(-limit, limit, 41, dtype=torch.float64),
+            torch.linspace(-3.0, 3.0, 5, dtype=torch.float64),
+            torch.linspace(-np.pi, np.pi, 73, dtype=torch.float64),
+            torch.linspace(-3.0, 3.0, 5, dtype=torch.float64),
+        )
+    else:
+        from leoc.systems.mountaincar import TRACK_HIGH, TRACK_LOW
+
+        positions = torch.linspace(TRACK_LOW, TRACK_HIGH, 201, dtype=torch.float64)
+        grid = torch.stack([positions, torch.zeros_like(positions)], dim=-1)
+    assert not bool(system.out_of_bounds(grid).any())
+    rewards = torch.stack([system.reward_fn(grid, f.expand(len(grid), 1)) for f in forces])
+    assert float(rewards.min()) >= system.out_of_bounds_reward
+    assert float(rewards.min()) == pytest.approx(system.out_of_bounds_reward, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["cartpole", "mountaincar"])
+def test_leaving_the_track_early_never_beats_doing_nothing(name) -> None:
+    """From the swing-up start, a full push that leaves the track returns less than no force
+    for the whole episode (hanging down / standing in the valley), in simulate and in the
+    gymnasium environment alike; the one-off -100 of before returned more."""
+    from leoc.systems import make_env
+
+    system = make_system(name)
+    start = np.asarray(system.swing_up_centre)
+    push = 1.0 if name == "cartpole" else -1.0  # the mountain car's short way out is leftwards
+
+    def pushing(obs):
+        return np.full((len(obs), 1), push * system.action_limit)
+
+    def idle(obs):
+        return np.zeros((len(obs), 1))
+
+    steps = system.episode_steps
+    leaving = rollout(system, pushing, start, steps=steps)
+    staying = rollout(system, idle, start, steps=steps)
+    assert leaving.terminated and not staying.terminated
+    assert leaving.steps < steps // 2
+    assert leaving.total_reward < staying.total_reward
+    assert -100.0 + leaving.rewards[:-1].sum() > staying.total_reward  # the old penalty paid
+    env = make_env(name)
+    env.reset(seed=0, options={"state": start})
+    returns, done = 0.0, False
+    while not done:
+        _, reward, terminated, truncated, _ = env.step(np.array([push * system.action_limit]))
+        returns += reward
+        done = terminated or truncated
+    assert terminated
+    assert returns == pytest.approx(leaving.total_reward, rel=1e-9)

@@ -152,18 +152,25 @@ def test_bad_reset_options_are_rejected() -> None:
         env.reset(options={"start": "upside_down"})
 
 
-def test_cartpole_leaving_the_track_ends_the_episode_with_minus_100() -> None:
+def test_cartpole_leaving_the_track_is_charged_the_worst_reward_for_every_step_left() -> None:
     env = make_env("cartpole")
     env.reset(options={"state": [2.39, 1.0, 0.0, 0.0]})
     _, reward, terminated, _, _ = env.step(np.array([2.5], dtype=np.float32))
-    assert terminated and reward == -100.0
+    # the pole hanging down at the track's end with full force: -0.1 (5 pi^2 + 2.4^2 + 0.005 2.5^2)
+    worst = -0.1 * (5.0 * math.pi**2 + 2.4**2 + 0.005 * 2.5**2)
+    assert terminated and reward == pytest.approx(200 * worst, rel=1e-12)
 
 
-def test_mountaincar_leaving_the_track_ends_the_episode_with_minus_100() -> None:
+def test_mountaincar_leaving_the_track_is_charged_the_worst_reward_for_every_step_left() -> None:
     env = make_env("mountaincar")
-    env.reset(options={"state": [2.2 - math.pi / 2 - 1e-3, 1.0]})
+    env.reset(options={"state": [0.0, 0.0]})
+    for _ in range(9):  # nine steps at the hilltop, then a jump off the track's right end
+        env.step(np.array([0.0], dtype=np.float32))
+    env.unwrapped.state = np.array([2.2 - math.pi / 2 - 1e-3, 1.0])
     _, reward, terminated, _, _ = env.step(np.array([3.0], dtype=np.float32))
-    assert terminated and reward == -100.0
+    # standing at the far (left) end, x = -3.6 - pi / 2, with full force, for 191 steps
+    worst = -0.1 * (5.0 * (3.6 + math.pi / 2) ** 2 + 0.005 * 3.0**2)
+    assert terminated and reward == pytest.approx(191 * worst, rel=1e-12)
 
 
 def test_pendulum_mass_scaling_follows_the_equations() -> None:

@@ -32,6 +32,8 @@ from leoc.systems import PhysicalParams, System, register_system, state_entry, s
 POSITION_WEIGHT = 1.0
 SPEED_WEIGHT = 0.1
 FORCE_WEIGHT = 0.001
+# Reward per step left when an episode leaves the rail (System.termination_reward): below every
+# reward on the rail, so that driving off early never pays.
 OUT_OF_BOUNDS_REWARD = -100.0
 
 

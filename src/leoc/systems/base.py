@@ -42,7 +42,9 @@ and may override, with these defaults:
 ``u_eq``                    zeros (A); ``(operating_state, u_eq)`` must be an equilibrium of
                             ``step_fn``, which :meth:`System.validate` checks
 ``angle_indices``           the angles of the observation map
-``out_of_bounds(state)``    never; ``out_of_bounds_reward`` (0) replaces the reward then
+``out_of_bounds(state)``    never; the step that leaves the allowed region earns
+                            ``out_of_bounds_reward`` (0) for itself and for every step the
+                            episode would still have run (:meth:`System.termination_reward`)
 ``cost_factor()``           PILCO's cost on the main coordinate's observation entries
 ``continuous_model()``      none (only the optional continuous-time LQR design needs it)
 ``episode_steps``           200
@@ -309,6 +311,19 @@ class System:
         """Boolean ``(B,)``: the state has left the allowed region (ends the episode)."""
         return torch.zeros(state.shape[:-1], dtype=torch.bool)
 
+    def termination_reward(self, steps_left: Any) -> Any:
+        """Reward of the step that leaves the allowed region, ``steps_left`` (int or tensor) being
+        the steps the episode would still have run after it: ``out_of_bounds_reward`` for that
+        step and for each of them.
+
+        With ``out_of_bounds_reward`` no greater than the worst reward inside the region, an
+        episode that leaves early never earns more than one that stays in the worst state to
+        the end. A fixed one-off penalty does not have that property: the cart-pole's former
+        -100 beat hanging down for 200 steps (about -987) by far, so DDPG learnt to drive off
+        the track.
+        """
+        return self.out_of_bounds_reward * (1 + steps_left)
+
     def continuous_model(self) -> tuple[np.ndarray, np.ndarray]:
         """Analytic continuous-time linearisation ``(A, B)`` about the operating point."""
         raise NotImplementedError
@@ -541,6 +556,25 @@ class System:
             raise ValueError(
                 f"{label}: cost_factor: expected an array of shape (K, {obs_dim}), found "
                 f"{factor.shape}"
+            )
+        self._validate_termination(label, float(reward.min()) + 0.0)  # + 0.0: no "-0"
+
+    def _validate_termination(self, label: str, reward_at_operating_point: float) -> None:
+        """A system that can leave its allowed region charges no more per step left than the
+        reward at the operating point (so that leaving never pays)."""
+        if type(self).out_of_bounds is System.out_of_bounds:
+            return
+        penalty = self.out_of_bounds_reward
+        if isinstance(penalty, bool) or not isinstance(penalty, (int, float)):
+            raise ValueError(
+                f"{label}: out_of_bounds_reward: expected a number (the reward per step left of "
+                f"an episode that leaves the allowed region), found {penalty!r}"
+            )
+        if not penalty <= reward_at_operating_point:
+            raise ValueError(
+                f"{label}: out_of_bounds_reward: expected at most the reward at the operating "
+                f"point ({reward_at_operating_point:.6g}) so that leaving never pays, "
+                f"found {penalty!r}"
             )
 
     def describe(self) -> Mapping[str, Any]:

@@ -31,7 +31,6 @@ REWARD_SCALE = 0.1
 THETA_WEIGHT = 5.0
 POSITION_WEIGHT = 1.0
 FORCE_WEIGHT = 0.005
-OUT_OF_BOUNDS_REWARD = -100.0
 FOUR_THIRDS = 4.0 / 3.0
 START_SPREAD = (0.1, 0.1, math.radians(10.0), 0.1)
 # Hold test: 50 steps (1 s) inside the hold band at the end of the episode.
@@ -142,9 +141,19 @@ class CartPole(System):
     start_spread = START_SPREAD
     default_q = (2.0, 0.3, 2.0, 0.3)
     default_r = (1.0,)
-    out_of_bounds_reward = OUT_OF_BOUNDS_REWARD
-
     params: CartPoleParams
+
+    @property
+    def out_of_bounds_reward(self) -> float:  # type: ignore[override]
+        """The worst reward on the track, per step left (:meth:`System.termination_reward`):
+        the pole hanging down (theta = pi) at the track's end with the largest force (the
+        reward does not depend on the speeds); about -5.51 with the default parameters."""
+        p = self.params
+        return -REWARD_SCALE * (
+            THETA_WEIGHT * math.pi**2
+            + POSITION_WEIGHT * p.x_limit**2
+            + FORCE_WEIGHT * p.max_force**2
+        )
 
     @property
     def action_limit(self) -> float:

@@ -73,6 +73,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         high = self.system.observation.bounds()
         self.observation_space = gym.spaces.Box(-high, high, dtype=np.float64)
         self.state: np.ndarray | None = None
+        self._steps = 0  # steps taken in this episode
 
     def _obs(self) -> np.ndarray:
         assert self.state is not None
@@ -83,6 +84,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
+        self._steps = 0
         options = dict(options or {})
         unknown = set(options) - set(RESET_OPTION_KEYS)
         if unknown:
@@ -110,6 +112,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ValueError(
                 f"action: expected {self.system.action_dim} finite numbers, found {action!r}"
             )
+        self._steps += 1
         state_t = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
         action_t = torch.as_tensor(action_arr, dtype=DTYPE).unsqueeze(0)
         with torch.no_grad():
@@ -117,7 +120,8 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
             next_state = self.system.step_fn(state_t, action_t)
             terminated = bool(self.system.out_of_bounds(next_state)[0])
         if terminated:
-            reward = float(self.system.out_of_bounds_reward)
+            left_after = max(0, self.system.episode_steps - self._steps)
+            reward = float(self.system.termination_reward(left_after))
         self.state = next_state[0].numpy()
         return self._obs(), reward, terminated, False, {"state": self.state.copy()}
 

@@ -12,8 +12,9 @@ a controller keeps the period it was trained at wherever it is evaluated. Distur
 actuator clip.
 
 Termination. A start whose state leaves the allowed region (``System.out_of_bounds``) gets the
-system's ``out_of_bounds_reward`` for that step and is frozen from then on (no further reward,
-its state repeated), exactly as a gymnasium episode that ends there.
+system's ``termination_reward`` for that step (its ``out_of_bounds_reward`` for that step and
+each of the steps the episode would still have run) and is frozen from then on (no further
+reward, its state repeated), exactly as a gymnasium episode that ends there.
 
 Shapes: ``B`` starts, ``T`` simulator steps, ``S`` state, ``O`` observation, ``A`` action.
 """
@@ -197,7 +198,10 @@ def simulate(
             reward = system.reward_fn(state, action)
             stepped = system.step_fn(state, action)
             leaving = alive & system.out_of_bounds(stepped)
-            reward = torch.where(leaving, torch.as_tensor(system.out_of_bounds_reward), reward)
+            left_after = steps - index - 1
+            reward = torch.where(
+                leaving, torch.as_tensor(system.termination_reward(left_after), dtype=DTYPE), reward
+            )
             rewards.append(torch.where(alive, reward, torch.zeros_like(reward)))
             actions.append(torch.where(alive[:, None], action, torch.zeros_like(action)))
             relevance.append(held_relevance)
