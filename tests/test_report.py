@@ -7,6 +7,8 @@ import pytest
 
 from leoc.evaluation.metrics import response_metrics
 from leoc.experiments.report import (
+    code_line,
+    code_versions,
     improvement_rows,
     response_flags,
     response_summary,
@@ -107,3 +109,25 @@ def test_seed_statistics_with_three_seeds_have_intervals_and_with_one_do_not():
 def test_probability_that_the_hybrid_beats_its_baseline():
     (row,) = improvement_rows(_evaluations(1.0, seeds=3))
     assert row["framework"] == "ddpg" and row["probability"] == 1.0  # every hybrid run is better
+
+
+def test_runs_from_several_code_versions_are_said_plainly():
+    evaluations = _evaluations(1.0)
+    one = code_versions(evaluations)
+    assert one == {
+        "unknown": [
+            "pendulum/linear/seed0",
+            *[f"pendulum/ddpg_baseline/seed{s}" for s in range(3)],
+            *[f"pendulum/ddpg_hybrid/seed{s}" for s in range(3)],
+        ]
+    }
+    for index, run in enumerate(evaluations["pendulum"]["ddpg_hybrid"]):
+        run["versions"] = {"leoc_commit": "abc" if index else "def+dirty"}
+    for run in [*evaluations["pendulum"]["linear"], *evaluations["pendulum"]["ddpg_baseline"]]:
+        run["versions"] = {"leoc_commit": "abc"}
+    mixed = code_versions(evaluations)
+    assert {c: len(r) for c, r in mixed.items()} == {"abc": 6, "def+dirty": 1}
+    assert mixed["def+dirty"] == ["pendulum/ddpg_hybrid/seed0"]
+    assert code_line(mixed).startswith("**Code: the runs come from 2 different leoc versions**")
+    evaluations["pendulum"]["ddpg_hybrid"][0]["versions"] = {"leoc_commit": "abc"}
+    assert code_line(code_versions(evaluations)) == "Code: all 7 runs from leoc commit `abc`."

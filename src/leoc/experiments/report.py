@@ -322,6 +322,32 @@ def roa_flags(rows: list[dict[str, Any]]) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------ checks
+def code_versions(evaluations: Evaluations) -> dict[str, list[str]]:
+    """Run keys (``system/controller/seedN``) per leoc commit that produced them (``unknown``:
+    a run written outside a git checkout or before runs recorded their versions)."""
+    found: dict[str, list[str]] = defaultdict(list)
+    for system, by_c in evaluations.items():
+        for controller, runs in by_c.items():
+            for run in runs:
+                commit = (run.get("versions") or {}).get("leoc_commit", "unknown")
+                found[commit].append(f"{system}/{controller}/seed{run['spec']['seed']}")
+    return dict(sorted(found.items()))
+
+
+def code_line(versions_found: dict[str, list[str]]) -> str:
+    """One sentence on the code version(s) behind the runs; a mix is said plainly."""
+    if not versions_found:
+        return "Code: no runs."
+    if len(versions_found) == 1:
+        ((commit, runs),) = versions_found.items()
+        return f"Code: all {len(runs)} runs from leoc commit `{commit}`."
+    parts = "; ".join(f"`{c}`: {len(r)} runs" for c, r in versions_found.items())
+    return (
+        f"**Code: the runs come from {len(versions_found)} different leoc versions** ({parts}); "
+        "their numbers are not from one version of the code."
+    )
+
+
 def _differs(value: float, reference: float, peak: float) -> bool:
     if math.isnan(value) or math.isnan(reference):
         return math.isnan(value) != math.isnan(reference)
@@ -752,6 +778,7 @@ def write_report(out_dir: str | Path) -> Path:
             "learning_curves": curves,
             "flags": flags,
             "summed_run_wall_seconds": run_seconds,
+            "code_versions": code_versions(evaluations),
         },
     )
     write_csv_atomic(out / "responses.csv", responses)
@@ -833,6 +860,8 @@ def render_markdown(
         else "Wall time: not finished.",
         "",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta.get("versions", {}).items()),
+        "",
+        code_line(code_versions(evaluations)),
         "",
         f"Model selection: {MODEL_SELECTION_TEXT}. Every controller is evaluated at the control "
         "period it was trained at (the 'period' column: simulator steps per decision; PILCO "

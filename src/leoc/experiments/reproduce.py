@@ -14,6 +14,7 @@ import dataclasses
 import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -60,7 +61,37 @@ def versions() -> dict[str, str]:
     for module in ("scipy", "control", "stable_baselines3"):
         with contextlib.suppress(ImportError):
             found[module] = __import__(module).__version__
+    commit = code_commit()
+    if commit is not None:
+        found["leoc_commit"] = commit
     return found
+
+
+def code_commit() -> str | None:
+    """The git commit of the leoc source that runs (``+dirty`` when tracked files differ from
+    it), or None outside a git checkout: runs of one study that span several invocations can
+    then be checked to come from one code version."""
+    import leoc
+
+    source = Path(leoc.__file__).resolve().parent
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(source), "rev-parse", "--short=12", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no", "."],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return f"{head}+dirty" if changed else head
 
 
 # ---------------------------------------------------------------------------------- training
@@ -211,6 +242,7 @@ def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any
         curve=curve,
         train_wall_seconds=trained,
         wall_seconds=time.perf_counter() - started,
+        versions=versions(),
     )
     write_json_atomic(done, evaluation)
     return evaluation
