@@ -192,6 +192,14 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_publish(args: argparse.Namespace) -> int:
+    from leoc.experiments.publish import publish
+
+    path = publish(args.run_dir, args.dest)
+    print(f"numbers copied and report written: {path}")
+    return 0
+
+
 ROA_SLICES = {"pendulum": (0, 1), "cartpole": (2, 3), "mountaincar": (0, 1)}
 """2-D slice of each system's basin plot: theta vs theta_dot, or x vs x_dot."""
 ROA_PLOT_MARGIN = 1.25
@@ -536,6 +544,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     plot.add_argument("run_dir", type=Path)
     plot.set_defaults(func=cmd_plot)
+
+    publish = commands.add_parser(
+        "publish",
+        help="copy a reproduce folder's numbers (not its weights) to DEST and write the report "
+        "there (for results kept in a repository)",
+    )
+    publish.add_argument("run_dir", type=Path)
+    publish.add_argument("dest", type=Path)
+    publish.set_defaults(func=cmd_publish)
     return parser
 
 
