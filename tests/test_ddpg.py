@@ -385,19 +385,23 @@ def test_baseline_physical_policy_matches_sb3_predict():
 
 
 @pytest.mark.slow
-def test_hybrid_ddpg_learns_to_hold_pendulum(tmp_path):
-    result = train_ddpg(
-        "pendulum",
-        "ddpg",
-        hybrid=True,
-        seed=0,
-        run_dir=tmp_path,
-        total_steps=3000,
-        eval_interval=500,
-        progress=False,
-    )
-    assert result.reached_steps is not None
-    assert result.best_return > -600.0  # swing-up in a few seconds, then balanced
+def test_hybrid_ddpg_learns_to_hold_pendulum_on_most_seeds(tmp_path):
+    """Three seeds: at least two reach and hold the operating point with a return above -600
+    (swing-up in a few seconds, then balanced); one seed's outcome is not the test."""
+    learnt = []
+    for seed in range(3):
+        result = train_ddpg(
+            "pendulum",
+            "ddpg",
+            hybrid=True,
+            seed=seed,
+            run_dir=tmp_path / f"seed{seed}",
+            total_steps=3000,
+            eval_interval=500,
+            progress=False,
+        )
+        learnt.append(result.reached_steps is not None and result.best_return > -600.0)
+    assert sum(learnt) >= 2, learnt
 
 
 # ----------------------------------------------------------------------------- relevance="roa"
