@@ -33,6 +33,8 @@ from leoc.pilco.cost import expected_saturating_cost
 from leoc.pilco.gp import GPPosterior
 from leoc.pilco.moments import (
     MomentMatch,
+    SESumConstants,
+    gp_constants,
     gp_moments,
     linear_moments,
     observation_moments,
@@ -219,8 +221,11 @@ def propagate_step(
     layout: Sequence[tuple[str, int]],
     hybrid_method: str = "quadrature",
     order: int = DEFAULT_QUADRATURE_ORDER,
+    model_constants: SESumConstants | None = None,
 ) -> tuple[Tensor, Tensor]:
     """One step of the module docstring; ``obs`` are the observation moments of the state.
+    ``model_constants``: :func:`~leoc.pilco.moments.gp_constants` of ``model`` (computed here
+    if not given; :func:`predict` computes them once for the horizon).
 
     Shapes: ``state_mean`` (S,), ``state_cov`` (S, S) -> next mean (S,), next cov (S, S).
     """
@@ -233,7 +238,7 @@ def propagate_step(
         ],
         dim=0,
     )
-    delta = gp_moments(model, in_mean, symmetrise(in_cov))
+    delta = gp_moments(model, in_mean, symmetrise(in_cov), model_constants)
     cross_x_in = torch.cat([state_cov @ obs.io, act.cross_state], dim=1)  # Cov[x, (o, u)]
     cross_x_delta = cross_x_in @ delta.io  # Cov[x, Delta] (S, S)
     next_cov = state_cov + delta.cov + cross_x_delta + cross_x_delta.T
@@ -258,8 +263,11 @@ def predict(
     means, covs, costs = [start_mean], [start_cov], []
     mean, cov = start_mean, start_cov
     obs = observation_moments(mean, cov, layout)
+    constants = gp_constants(model)
     for _ in range(horizon):
-        mean, cov = propagate_step(mean, cov, obs, policy, model, layout, hybrid_method, order)
+        mean, cov = propagate_step(
+            mean, cov, obs, policy, model, layout, hybrid_method, order, constants
+        )
         obs = observation_moments(mean, cov, layout)
         costs.append(expected_saturating_cost(obs.mean, obs.cov, cost_target, cost_factor))
         means.append(mean)
