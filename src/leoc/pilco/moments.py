@@ -236,9 +236,9 @@ def se_sum_moments(
     - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, every
       form matrix comes from one gather of the :math:`B^{-1}` (:func:`se_sum_constants`), and
       every product :math:`\nu_i^\top X` with them is one batched matmul;
-    - :math:`\log Q` is a bilinear form of rank D + 2 in the rows
-      :math:`[G_{ab}^\top \nu_i, c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i, 1]` and
-      :math:`[\nu_j, 1, \tfrac12 \nu_j^\top A_{ba} \nu_j]`: no (M, M, D) tensor, everything summed
+    - :math:`\log Q` is the bilinear form :math:`(G_{ab}^\top \nu_i)^\top \nu_j` plus the row
+      offsets :math:`c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i` and the column offsets
+      :math:`\tfrac12 \nu_j^\top A_{ba} \nu_j`: no (M, M, D) tensor, everything summed
       in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
       \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
       weights in cache-sized row blocks, never storing Q;
@@ -270,12 +270,14 @@ def se_sum_moments(
     io = (weighted[:, None, :] @ f_rows)[:, 0, :].T  # (D, E)
     # Second moments.
     constant = const.pair_log_scale - 0.5 * log_det_pair  # (P,) c_ab
-    ones = torch.ones(num_pairs, nu.shape[0], 1, dtype=cov.dtype)
-    row_log = (constant[:, None] + half_first)[..., None]  # (P, M, 1)
-    left = torch.cat([nu_forms[:num_pairs], row_log, ones], dim=-1)  # (P, M, D + 2)
-    right = torch.cat([nu.expand(num_pairs, -1, -1), ones, half_second[..., None]], dim=-1)
     weights = pair_weights(beta) if weights is None else weights
-    values = weighted_exp_bilinear(left, right, weights)  # (P,)
+    values = weighted_exp_bilinear(
+        nu_forms[:num_pairs],
+        nu.expand(num_pairs, -1, -1),
+        weights,
+        constant[:, None] + half_first,
+        half_second,
+    )  # (P,)
     _, _, pair_of = pair_indices(num_outputs)
     second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
     # Exactly symmetric already (a gather of pair values minus an outer product).
@@ -313,14 +315,43 @@ def gp_constants(post: GPPosterior) -> SESumConstants:
     return se_sum_constants(post.log_lengthscales, post.log_signal)
 
 
-def rbf_moments(network: torch.nn.Module, mean: Tensor, cov: Tensor) -> MomentMatch:
+class RBFConstants(NamedTuple):
+    """What :func:`rbf_moments` needs of a network whatever the input distribution: the
+    :func:`se_sum_constants` of its length-scales and its pair weights ``w_a w_b^T``
+    (differentiable; computed once per prediction, they are shared by all its steps)."""
+
+    kernel: SESumConstants
+    weights: Tensor  # (P, N, N)
+
+
+def rbf_constants(network: torch.nn.Module) -> RBFConstants:
+    """:class:`RBFConstants` of an :class:`~leoc.policies.RBFNetwork` (unit signal variance)."""
+    log_signal = torch.zeros(network.weights.shape[0], dtype=network.weights.dtype)
+    return RBFConstants(
+        se_sum_constants(network.log_lengthscales, log_signal), pair_weights(network.weights)
+    )
+
+
+def rbf_moments(
+    network: torch.nn.Module, mean: Tensor, cov: Tensor, constants: RBFConstants | None = None
+) -> MomentMatch:
     """Exact moments of an :class:`~leoc.policies.RBFNetwork` (unit signal variance).
+
+    ``constants``: :func:`rbf_constants` of ``network``, to reuse over many inputs (computed
+    here if not given).
 
     Shapes: ``mean`` (D,), ``cov`` (D, D) -> mean (F,), cov (F, F), io (D, F).
     """
-    log_signal = torch.zeros(network.weights.shape[0], dtype=mean.dtype)
+    constants = rbf_constants(network) if constants is None else constants
     return se_sum_moments(
-        network.centres, network.weights, network.log_lengthscales, log_signal, mean, cov
+        network.centres,
+        network.weights,
+        network.log_lengthscales,
+        torch.zeros(network.weights.shape[0], dtype=mean.dtype),
+        mean,
+        cov,
+        constants.weights,
+        constants=constants.kernel,
     )
 
 
