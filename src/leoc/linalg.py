@@ -210,14 +210,24 @@ def weighted_exp_bilinear(
     r""":math:`v_b = \sum_{ij} W_{bij} \exp((L_b R_b^\top)_{ij} + a_{bi} + c_{bj})`,
     differentiable (offsets a = ``row_offset``, c = ``col_offset``; None means zero).
 
-    Goes through :class:`WeightedExpBilinear` only when a gradient can be asked for; otherwise
-    (``torch.no_grad`` or constant inputs) evaluates the value alone, in row blocks.
+    Goes through :class:`WeightedExpBilinear` only when a gradient can be asked for and W is
+    larger than one row block; a smaller problem (the RBF policy's) is left to autograd, whose
+    graph of a few ops costs less than the Function's Python overhead and stores at most one
+    block of exponentials. Without gradients (``torch.no_grad`` or constant inputs) the value
+    alone is evaluated, in row blocks.
 
     Shapes: ``left`` (B, M, K), ``right`` (B, N, K), ``weights`` (B, M, N), ``row_offset``
     (B, M), ``col_offset`` (B, N) -> (B,).
     """
     inputs = (left, right, weights, row_offset, col_offset)
     if torch.is_grad_enabled() and any(t is not None and t.requires_grad for t in inputs):
-        return WeightedExpBilinear.apply(*inputs)
+        if weights.numel() > BLOCK_ENTRIES:
+            return WeightedExpBilinear.apply(*inputs)
+        exponent = left @ right.transpose(-1, -2)
+        if row_offset is not None:
+            exponent = exponent + row_offset[..., None]
+        if col_offset is not None:
+            exponent = exponent + col_offset[..., None, :]
+        return (weights * exponent.exp()).sum((-1, -2))
     left_ext, right_ext = _extend(left, right, row_offset, col_offset)
     return _blockwise(left_ext, right_ext, weights, gradients=False).value
