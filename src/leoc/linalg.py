@@ -119,7 +119,9 @@ def _extend(
     return left_ext, right_ext
 
 
-def _blockwise(left_ext: Tensor, right_ext: Tensor, weights: Tensor, gradients: bool):
+def _blockwise(
+    left_ext: Tensor, right_ext: Tensor, weights: Tensor, gradients: bool
+) -> _BlockwiseResult:
     """Value of :class:`WeightedExpBilinear` from the extended factors of :func:`_extend` and,
     if ``gradients``, ``G [R, 1]`` and ``G^T [1, L]``, one row block of G at a time."""
     batch, rows, rank = left_ext.shape
@@ -160,8 +162,8 @@ class WeightedExpBilinear(torch.autograd.Function):
     stored, only the two (B, M or N, K + 1) gradients (a horizon of 40 steps with B = 10,
     M = 400 would otherwise keep 0.5 GB of G for the backward pass, or evaluate the
     exponentials twice). The value is the sum of :math:`G_b 1`. The backward pass only scales
-    the gradients by the incoming gradient. If ``weights`` needs a gradient (the RBF policy,
-    whose M is small), the exponentials are recomputed in the backward pass instead of stored.
+    the gradients by the incoming gradient. If ``weights`` needs a gradient (an RBF policy, whose
+    M is small), the exponentials are recomputed in the backward pass instead of stored.
     First order only. The offsets a and c may be None (zero).
 
     Shapes: ``left`` (B, M, K), ``right`` (B, N, K), ``weights`` (B, M, N), ``row_offset``
