@@ -27,6 +27,7 @@ KIT 2010, sec. 2.3 and appendix A.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -107,6 +108,83 @@ def _pairs(values: Tensor, index: Tensor) -> Tensor:
     return values if values.shape[0] == 1 else values[index]
 
 
+class SESumConstants(NamedTuple):
+    r"""The parts of :func:`se_sum_moments` that depend only on the kernel hyperparameters,
+    not on the input distribution (see :func:`se_sum_constants`).
+
+    A GP's hyperparameters stay fixed while the policy is optimised, so
+    :func:`~leoc.pilco.propagate.predict` computes them once for the whole horizon.
+    """
+
+    b_scale: Tensor  # (E + P, D, D) s s^T, s the diagonal of S_a (outputs) or P_ab^1/2 (pairs)
+    form_source: Tensor  # (E + 3P,) which B^-1 each quadratic form scales
+    form_scale: Tensor  # (E + 3P, D, D) forms = form_offset + form_scale * B^-1[form_source]
+    form_offset: Tensor  # (E + 3P, D, D)
+    log_scale: Tensor  # (E,) log alpha_a^2
+    pair_log_scale: Tensor  # (P,) log alpha_a^2 + log alpha_b^2
+
+
+@functools.cache
+def _form_layout(num_outputs: int) -> tuple[Tensor, Tensor]:
+    """Source B^-1 (index into the E + P factorisations) and sign of each quadratic form of
+    :func:`se_sum_constants`, in the order G_ab (P), F_a (E), A_ab / 2 (P), A_ba / 2 (P).
+    Cached per E (constant tensors, never written to)."""
+    num_pairs = num_outputs * (num_outputs + 1) // 2
+    pairs = torch.arange(num_outputs, num_outputs + num_pairs)
+    source = torch.cat([pairs, torch.arange(num_outputs), pairs, pairs])
+    sign = torch.cat(
+        [
+            torch.full((num_pairs,), -1.0),
+            torch.ones(num_outputs),
+            torch.full((2 * num_pairs,), -0.5),
+        ]
+    ).to(torch.float64)
+    return source, sign
+
+
+def se_sum_constants(log_ls: Tensor, log_signal: Tensor) -> SESumConstants:
+    r"""Hyperparameter-only parts of :func:`se_sum_moments` (differentiable).
+
+    Every matrix of a quadratic form there is a diagonal scaling of some
+    :math:`B^{-1}` plus a diagonal: :math:`F_a = S_a B_a^{-1} S_a`, and with
+    :math:`T = I - B_{ab}^{-1}`, :math:`G_{ab} = C_a T C_b = C_a C_b - C_a B_{ab}^{-1} C_b` and
+    :math:`\tfrac12 A_{ab} = \tfrac12 (C_a^2 - \Lambda_a^{-1}) - \tfrac12 C_a B_{ab}^{-1} C_a`.
+    So all of them come from one gather of :math:`B^{-1}`, one product with ``form_scale`` and
+    one sum with ``form_offset``, whatever E.
+
+    Shapes: ``log_ls`` (E, D), ``log_signal`` (E,).
+    """
+    num_outputs = log_ls.shape[0]
+    first, second, _ = pair_indices(num_outputs)
+    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of S_a = Lambda_a^-1/2
+    prec = inv_ls.square()  # (E, D) diagonal of Lambda_a^-1
+    prec_first, prec_second = _pairs(prec, first), _pairs(prec, second)
+    sqrt_prec = (prec_first + prec_second).sqrt()  # (P, D) diagonal of P^1/2
+    c_first = prec_first / sqrt_prec  # (P, D) diagonal of C_a
+    c_second = prec_second / sqrt_prec  # (P, D) diagonal of C_b
+    scales = torch.cat([inv_ls, sqrt_prec])  # (E + P, D)
+    source, sign = _form_layout(num_outputs)
+    left = torch.cat([c_first, inv_ls, c_first, c_second])  # (E + 3P, D)
+    right = torch.cat([c_second, inv_ls, c_first, c_second])
+    offset = torch.cat(
+        [
+            c_first * c_second,
+            torch.zeros_like(inv_ls),
+            0.5 * (c_first.square() - prec_first),
+            0.5 * (c_second.square() - prec_second),
+        ]
+    )
+    log_scale = 2.0 * log_signal
+    return SESumConstants(
+        scales[:, :, None] * scales[:, None, :],
+        source,
+        sign.to(log_ls.dtype)[:, None, None] * left[:, :, None] * right[:, None, :],
+        torch.diag_embed(offset),
+        log_scale,
+        _pairs(log_scale, first) + _pairs(log_scale, second),
+    )
+
+
 def se_sum_moments(
     support: Tensor,
     beta: Tensor,
@@ -116,6 +194,7 @@ def se_sum_moments(
     cov: Tensor,
     weights: Tensor | None = None,
     gp_variance: bool = False,
+    constants: SESumConstants | None = None,
 ) -> MomentMatch:
     r"""Exact moments of :math:`y_a(x) = \sum_i \beta_{ai} k_a(x, z_i)` (+ GP variance).
 
@@ -123,7 +202,8 @@ def se_sum_moments(
     posterior variance :math:`\alpha_a^2 - \operatorname{tr}(\Xi_a Q_{aa})` (Deisenroth 2010,
     eq. 2.55; the trace comes in through ``weights``); otherwise y is a deterministic RBF
     network. ``weights`` defaults to :func:`~leoc.pilco.gp.pair_weights` of ``beta`` (no GP
-    term).
+    term). ``constants``: :func:`se_sum_constants` of ``log_ls`` and ``log_signal``, computed
+    here if not given (pass them to reuse them over many inputs).
 
     **Mean and io.** With :math:`\nu_i = z_i - \mu`, :math:`S_a = \Lambda_a^{-1/2}` and the SPD
     :math:`B_a = I + S_a \Sigma S_a` (eigenvalues >= 1, unlike :math:`\Sigma + \Lambda_a`), and
@@ -153,11 +233,12 @@ def se_sum_moments(
     with :math:`C_a = \Lambda_a^{-1} P^{-1/2}`, :math:`G_{ab} = C_a T C_b` and
     :math:`A_{ab} = C_a T C_a - \Lambda_a^{-1}` (all diagonal scalings of T). Numerics:
 
-    - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, and
-      every quadratic form :math:`\nu_i^\top F \nu_i` one batched matmul;
-    - :math:`\log Q` is a bilinear form of rank D + 2 in the rows
-      :math:`[G_{ab}^\top \nu_i, c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i, 1]` and
-      :math:`[\nu_j, 1, \tfrac12 \nu_j^\top A_{ba} \nu_j]`: no (M, M, D) tensor, everything summed
+    - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, every
+      form matrix comes from one gather of the :math:`B^{-1}` (:func:`se_sum_constants`), and
+      every product :math:`\nu_i^\top X` with them is one batched matmul;
+    - :math:`\log Q` is the bilinear form :math:`(G_{ab}^\top \nu_i)^\top \nu_j` plus the row
+      offsets :math:`c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i` and the column offsets
+      :math:`\tfrac12 \nu_j^\top A_{ba} \nu_j`: no (M, M, D) tensor, everything summed
       in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
       \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
       weights in cache-sized row blocks, never storing Q;
@@ -168,55 +249,51 @@ def se_sum_moments(
     ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M) -> mean (E,), cov (E, E), io (D, E).
     """
     num_outputs, dim = log_ls.shape
-    first, second, pair_of = pair_indices(num_outputs)
+    num_pairs = num_outputs * (num_outputs + 1) // 2
+    const = se_sum_constants(log_ls, log_signal) if constants is None else constants
     nu = support - mean  # (M, D)
-    inv_ls = torch.exp(-log_ls)  # (E, D) diagonal of S_a = Lambda_a^-1/2
-    inv_ls2 = inv_ls.square()  # (E, D) diagonal of Lambda_a^-1
-    prec_first, prec_second = _pairs(inv_ls2, first), _pairs(inv_ls2, second)
-    sqrt_prec = (prec_first + prec_second).sqrt()  # (P, D) diagonal of P^1/2
-    scales = torch.cat([inv_ls, sqrt_prec])  # (E + P, D)
-    eye = torch.eye(dim, dtype=cov.dtype)
-    b_mat = eye + scales[:, :, None] * cov * scales[:, None, :]  # (E + P, D, D)
+    b_mat = torch.addcmul(torch.eye(dim, dtype=cov.dtype), const.b_scale, cov)  # (E + P, D, D)
     chol = cholesky_jitter(b_mat, "I + s S s")
     log_det = log_det_cholesky(chol)  # (E + P,)
     b_inv = torch.cholesky_inverse(chol)  # (E + P, D, D), well conditioned (eigenvalues <= 1)
-    f_mat = inv_ls[:, :, None] * b_inv[:num_outputs] * inv_ls[:, None, :]  # (E, D, D)
-    t_mat = eye - b_inv[num_outputs:]  # (P, D, D)
-    c_first = (prec_first / sqrt_prec)[:, :, None]  # (P, D, 1) diagonal of C_a
-    c_second = (prec_second / sqrt_prec)[:, None, :]  # (P, 1, D) diagonal of C_b
-    g_mat = c_first * t_mat * c_second
-    a_first = c_first * t_mat * c_first.transpose(-1, -2) - torch.diag_embed(prec_first)
-    a_second = c_second.transpose(-1, -2) * t_mat * c_second - torch.diag_embed(prec_second)
-    # Every quadratic form nu_i^T X nu_i of the step (X = F_a, A_ab, A_ba) in one matmul.
-    forms = torch.cat([f_mat, a_first, a_second])  # (E + 2P, D, D)
-    quad = ((nu @ forms) * nu).sum(-1)  # (E + 2P, M)
-    num_pairs = first.shape[0]
-    quad_f, quad_first, quad_second = quad.split([num_outputs, num_pairs, num_pairs])
-    # Mean and io.
-    log_scale = 2.0 * log_signal  # (E,) log alpha^2
-    weighted = beta * torch.exp(log_scale[:, None] - 0.5 * (quad_f + log_det[:num_outputs, None]))
+    forms = torch.addcmul(const.form_offset, const.form_scale, b_inv[const.form_source])
+    # nu_i^T X for every form X of the step (G_ab, F_a, A_ab / 2, A_ba / 2) in one matmul.
+    nu_forms = nu @ forms  # (P + E + 2P, M, D)
+    quad = (nu_forms[num_pairs:] * nu).sum(-1)  # (E + 2P, M)
+    quad_f, half_first, half_second = quad.split([num_outputs, num_pairs, num_pairs])
+    # Mean and io (F_a is symmetric: F_a nu_i is row i of nu F_a).
+    log_det_out, log_det_pair = log_det.split([num_outputs, num_pairs])
+    log_norm = const.log_scale - 0.5 * log_det_out  # (E,) log(alpha^2 |B_a|^-1/2)
+    weighted = beta * torch.exp(log_norm[:, None] - 0.5 * quad_f)  # (E, M)
     out_mean = weighted.sum(-1)  # (E,)
-    io = (f_mat @ (weighted @ nu)[:, :, None])[..., 0].T  # (D, E)
+    f_rows = nu_forms[num_pairs : num_pairs + num_outputs]  # (E, M, D)
+    io = (weighted[:, None, :] @ f_rows)[:, 0, :].T  # (D, E)
     # Second moments.
-    constant = (
-        _pairs(log_scale, first) + _pairs(log_scale, second) - 0.5 * log_det[num_outputs:]
-    )  # (P,) c_ab
-    ones = torch.ones(num_pairs, nu.shape[0], 1, dtype=cov.dtype)
-    row_log = constant[:, None, None] + 0.5 * quad_first[..., None]  # (P, M, 1)
-    left = torch.cat([nu @ g_mat, row_log, ones], dim=-1)  # (P, M, D + 2)
-    right = torch.cat([nu.expand(num_pairs, -1, -1), ones, 0.5 * quad_second[..., None]], dim=-1)
+    constant = const.pair_log_scale - 0.5 * log_det_pair  # (P,) c_ab
     weights = pair_weights(beta) if weights is None else weights
-    values = weighted_exp_bilinear(left, right, weights)  # (P,)
+    values = weighted_exp_bilinear(
+        nu_forms[:num_pairs],
+        nu.expand(num_pairs, -1, -1),
+        weights,
+        constant[:, None] + half_first,
+        half_second,
+    )  # (P,)
+    _, _, pair_of = pair_indices(num_outputs)
     second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
     # Exactly symmetric already (a gather of pair values minus an outer product).
     out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
     if gp_variance:
-        out_cov = out_cov + torch.diag(torch.exp(log_scale))
+        out_cov = out_cov + torch.diag(torch.exp(const.log_scale))
     return MomentMatch(out_mean, out_cov, io)
 
 
-def gp_moments(post: GPPosterior, mean: Tensor, cov: Tensor) -> MomentMatch:
+def gp_moments(
+    post: GPPosterior, mean: Tensor, cov: Tensor, constants: SESumConstants | None = None
+) -> MomentMatch:
     """Exact moments of the GP prediction at a Gaussian input (latent f, without noise).
+
+    ``constants``: :func:`gp_constants` of ``post``, to reuse over many inputs (computed here
+    if not given).
 
     Shapes: ``mean`` (D,), ``cov`` (D, D) -> mean (E,), cov (E, E), io (D, E).
     """
@@ -229,17 +306,52 @@ def gp_moments(post: GPPosterior, mean: Tensor, cov: Tensor) -> MomentMatch:
         cov,
         post.pair_weights,
         gp_variance=True,
+        constants=constants,
     )
 
 
-def rbf_moments(network: torch.nn.Module, mean: Tensor, cov: Tensor) -> MomentMatch:
+def gp_constants(post: GPPosterior) -> SESumConstants:
+    """:func:`se_sum_constants` of a GP's hyperparameters, for :func:`gp_moments`."""
+    return se_sum_constants(post.log_lengthscales, post.log_signal)
+
+
+class RBFConstants(NamedTuple):
+    """What :func:`rbf_moments` needs of a network whatever the input distribution: the
+    :func:`se_sum_constants` of its length-scales and its pair weights ``w_a w_b^T``
+    (differentiable; computed once per prediction, they are shared by all its steps)."""
+
+    kernel: SESumConstants
+    weights: Tensor  # (P, N, N)
+
+
+def rbf_constants(network: torch.nn.Module) -> RBFConstants:
+    """:class:`RBFConstants` of an :class:`~leoc.policies.RBFNetwork` (unit signal variance)."""
+    log_signal = torch.zeros(network.weights.shape[0], dtype=network.weights.dtype)
+    return RBFConstants(
+        se_sum_constants(network.log_lengthscales, log_signal), pair_weights(network.weights)
+    )
+
+
+def rbf_moments(
+    network: torch.nn.Module, mean: Tensor, cov: Tensor, constants: RBFConstants | None = None
+) -> MomentMatch:
     """Exact moments of an :class:`~leoc.policies.RBFNetwork` (unit signal variance).
+
+    ``constants``: :func:`rbf_constants` of ``network``, to reuse over many inputs (computed
+    here if not given).
 
     Shapes: ``mean`` (D,), ``cov`` (D, D) -> mean (F,), cov (F, F), io (D, F).
     """
-    log_signal = torch.zeros(network.weights.shape[0], dtype=mean.dtype)
+    constants = rbf_constants(network) if constants is None else constants
     return se_sum_moments(
-        network.centres, network.weights, network.log_lengthscales, log_signal, mean, cov
+        network.centres,
+        network.weights,
+        network.log_lengthscales,
+        torch.zeros(network.weights.shape[0], dtype=mean.dtype),
+        mean,
+        cov,
+        constants.weights,
+        constants=constants.kernel,
     )
 
 

@@ -33,10 +33,14 @@ from leoc.pilco.cost import expected_saturating_cost
 from leoc.pilco.gp import GPPosterior
 from leoc.pilco.moments import (
     MomentMatch,
+    RBFConstants,
+    SESumConstants,
+    gp_constants,
     gp_moments,
     linear_moments,
     observation_moments,
     quadrature_moments,
+    rbf_constants,
     rbf_moments,
     sin_squash_moments,
 )
@@ -110,10 +114,13 @@ def observe_torch(state: Tensor, layout: Sequence[tuple[str, int]]) -> Tensor:
     return as_observation_map(layout, state.shape[-1], complete=False).observe(state)
 
 
-def inner_moments(module: nn.Module, mean: Tensor, cov: Tensor) -> MomentMatch:
-    """Exact moments of an unsaturated RBF network or linear controller."""
+def inner_moments(
+    module: nn.Module, mean: Tensor, cov: Tensor, constants: RBFConstants | None = None
+) -> MomentMatch:
+    """Exact moments of an unsaturated RBF network or linear controller (``constants``: an RBF
+    network's :func:`~leoc.pilco.moments.rbf_constants`, computed here if not given)."""
     if isinstance(module, RBFNetwork):
-        return rbf_moments(module, mean, cov)
+        return rbf_moments(module, mean, cov, constants)
     if isinstance(module, LinearController):
         return linear_moments(mean, cov, module.W, module.b)
     raise TypeError(
@@ -182,6 +189,14 @@ def hybrid_quadrature_moments(
     )
 
 
+def policy_moment_constants(policy: nn.Module) -> RBFConstants | None:
+    """:func:`~leoc.pilco.moments.rbf_constants` of the RBF network whose exact moments
+    :func:`action_moments` takes (a :class:`SaturatedPolicy` of one, or one alone); None for
+    other policies (whose moments need none, or compute their own)."""
+    inner = policy.inner if isinstance(policy, SaturatedPolicy) else policy
+    return rbf_constants(inner) if isinstance(inner, RBFNetwork) else None
+
+
 def action_moments(
     policy: nn.Module,
     state_mean: Tensor,
@@ -190,9 +205,12 @@ def action_moments(
     layout: Sequence[tuple[str, int]],
     hybrid_method: str = "quadrature",
     order: int = DEFAULT_QUADRATURE_ORDER,
+    policy_constants: RBFConstants | None = None,
 ) -> ActionMoments:
     """Moments of the action for :class:`SaturatedPolicy` (exact) or :class:`HybridPolicy`
-    (``hybrid_method``: ``"quadrature"`` or the ``"constant_relevance"`` heuristic)."""
+    (``hybrid_method``: ``"quadrature"`` or the ``"constant_relevance"`` heuristic).
+    ``policy_constants``: :func:`policy_moment_constants` of ``policy`` (computed here if not
+    given)."""
     cross_xo = state_cov @ obs.io  # Cov[x, o] (S, O)
     if isinstance(policy, HybridPolicy):
         if hybrid_method == "quadrature":
@@ -203,9 +221,9 @@ def action_moments(
             f"hybrid_method: expected one of {HYBRID_METHODS}, found {hybrid_method!r}"
         )
     if isinstance(policy, SaturatedPolicy):
-        pre = inner_moments(policy.inner, obs.mean, obs.cov)
+        pre = inner_moments(policy.inner, obs.mean, obs.cov, policy_constants)
         return _chain(obs, cross_xo, pre, _squash(pre, policy.action_limit, policy.saturation))
-    pre = inner_moments(policy, obs.mean, obs.cov)
+    pre = inner_moments(policy, obs.mean, obs.cov, policy_constants)
     eye = torch.eye(pre.mean.shape[0], dtype=pre.mean.dtype)
     return _chain(obs, cross_xo, pre, MomentMatch(pre.mean, pre.cov, eye))
 
@@ -219,12 +237,19 @@ def propagate_step(
     layout: Sequence[tuple[str, int]],
     hybrid_method: str = "quadrature",
     order: int = DEFAULT_QUADRATURE_ORDER,
+    model_constants: SESumConstants | None = None,
+    policy_constants: RBFConstants | None = None,
 ) -> tuple[Tensor, Tensor]:
     """One step of the module docstring; ``obs`` are the observation moments of the state.
+    ``model_constants``: :func:`~leoc.pilco.moments.gp_constants` of ``model``;
+    ``policy_constants``: :func:`policy_moment_constants` of ``policy`` (both computed here if
+    not given; :func:`predict` computes them once for the horizon).
 
     Shapes: ``state_mean`` (S,), ``state_cov`` (S, S) -> next mean (S,), next cov (S, S).
     """
-    act = action_moments(policy, state_mean, state_cov, obs, layout, hybrid_method, order)
+    act = action_moments(
+        policy, state_mean, state_cov, obs, layout, hybrid_method, order, policy_constants
+    )
     in_mean = torch.cat([obs.mean, act.mean])
     in_cov = torch.cat(
         [
@@ -233,7 +258,7 @@ def propagate_step(
         ],
         dim=0,
     )
-    delta = gp_moments(model, in_mean, symmetrise(in_cov))
+    delta = gp_moments(model, in_mean, symmetrise(in_cov), model_constants)
     cross_x_in = torch.cat([state_cov @ obs.io, act.cross_state], dim=1)  # Cov[x, (o, u)]
     cross_x_delta = cross_x_in @ delta.io  # Cov[x, Delta] (S, S)
     next_cov = state_cov + delta.cov + cross_x_delta + cross_x_delta.T
@@ -258,8 +283,12 @@ def predict(
     means, covs, costs = [start_mean], [start_cov], []
     mean, cov = start_mean, start_cov
     obs = observation_moments(mean, cov, layout)
+    # Parts of the moments that stay fixed over the horizon, computed once.
+    model_constants, rbf = gp_constants(model), policy_moment_constants(policy)
     for _ in range(horizon):
-        mean, cov = propagate_step(mean, cov, obs, policy, model, layout, hybrid_method, order)
+        mean, cov = propagate_step(
+            mean, cov, obs, policy, model, layout, hybrid_method, order, model_constants, rbf
+        )
         obs = observation_moments(mean, cov, layout)
         costs.append(expected_saturating_cost(obs.mean, obs.cov, cost_target, cost_factor))
         means.append(mean)
