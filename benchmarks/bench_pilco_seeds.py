@@ -75,7 +75,8 @@ def main() -> None:
         lbfgs = " ".join(f"{i}/{e}/{k}" for i, e, k in o.lbfgs)
         returns = " ".join(f"{r:.0f}" for r in o.returns)
         print(
-            f"| {o.seed} | {o.success} | {o.first_held_iteration} | {returns} | {lbfgs} | "
+            f"| {o.seed} | {o.success} | {o.first_held_iteration} "
+            f"({o.first_held_interaction_seconds}) | {returns} | {lbfgs} | "
             f"{o.wall_seconds:.0f} |"
         )
     print(f"success rate: {sum(o.success for o in outcomes)}/{len(outcomes)}")

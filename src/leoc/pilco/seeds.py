@@ -30,6 +30,8 @@ class SeedOutcome(NamedTuple):
         The last ``held_to_stop`` evaluations held the operating point in every episode.
     first_held_iteration : int or None
         The first iteration whose evaluation held in every episode.
+    first_held_interaction_seconds : float or None
+        Interaction time on the real system up to and including that iteration.
     returns : list of float
         Mean evaluation return after each iteration (iteration 0: the random rollouts).
     lbfgs : list of (iterations, evaluations, restarts)
@@ -41,6 +43,7 @@ class SeedOutcome(NamedTuple):
     seed: int
     success: bool
     first_held_iteration: int | None
+    first_held_interaction_seconds: float | None
     returns: list[float]
     lbfgs: list[tuple[int, int, int]]
     wall_seconds: float
@@ -66,12 +69,12 @@ def _train_one(
     )
     curve = result.curve
     last = curve[1:][-held_to_stop:]
+    first = next((row for row in curve if row["held_fraction"] >= 1.0), None)
     return SeedOutcome(
         seed=seed,
         success=len(last) == held_to_stop and all(row["held_fraction"] >= 1.0 for row in last),
-        first_held_iteration=next(
-            (row["iteration"] for row in curve if row["held_fraction"] >= 1.0), None
-        ),
+        first_held_iteration=None if first is None else first["iteration"],
+        first_held_interaction_seconds=None if first is None else first["interaction_seconds"],
         returns=[float(row["mean_return"]) for row in curve],
         lbfgs=[
             (row["lbfgs_iterations"], row["lbfgs_evaluations"], row["lbfgs_restarts"])
