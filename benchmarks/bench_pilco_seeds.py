@@ -67,8 +67,8 @@ def main() -> None:
         **overrides,
     )
     print(
-        "| seed | success | first held iteration | eval returns | L-BFGS it/evals/restarts "
-        "| wall s |"
+        "| seed | success | first held iteration (interaction s) | eval returns "
+        "| L-BFGS it/evals/restarts | wall s |"
     )
     print("|---|---|---|---|---|---|")
     for o in outcomes:
