@@ -8,6 +8,7 @@ assert a success rate with it and ``benchmarks/bench_pilco_seeds.py`` prints it.
 
 from __future__ import annotations
 
+import multiprocessing
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -103,7 +104,9 @@ def train_seeds(
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
     if held_to_stop < 1:
         raise ValueError(f"held_to_stop: expected a positive integer, found {held_to_stop}")
-    with ProcessPoolExecutor(min(jobs, len(seeds))) as pool:
+    # spawned, not forked: a fork of a process whose OpenMP threads already ran can hang
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(min(jobs, len(seeds)), mp_context=context) as pool:
         futures = [
             pool.submit(_train_one, system, hybrid, seed, str(out_dir), held_to_stop, overrides)
             for seed in seeds
