@@ -61,6 +61,14 @@ def test_every_bad_argument_is_one_line_on_stderr(argv, expected, capsys):
     assert "Traceback" not in captured.err
 
 
+def _as_a_terminal_job() -> None:
+    """Start the command with SIGINT at its default, as a terminal's foreground job has it. A
+    job started in the background by a non-interactive shell (``pytest &``, a CI script run with
+    ``nohup ... &``) inherits SIGINT *ignored*, so Python installs no KeyboardInterrupt handler,
+    Ctrl-C cannot reach it, and the test would only measure the runs finishing on their own."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _smoke_command(out: Path) -> list[str]:
     return [
         sys.executable,
@@ -122,7 +130,12 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
 def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, uninterrupted, signum):
     command = _smoke_command(tmp_path)
     process = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        text=True,
+        preexec_fn=_as_a_terminal_job,
     )
     deadline = time.monotonic() + RUN_TIMEOUT_S
     # wait until the workers run (their logs appear), then interrupt as a terminal would:
