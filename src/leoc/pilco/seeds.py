@@ -54,7 +54,7 @@ class SeedOutcome(NamedTuple):
 def _train_one(
     system: str, hybrid: bool, seed: int, out: str, held_to_stop: int, overrides: dict[str, Any]
 ) -> SeedOutcome:
-    from leoc.pilco.train import train_pilco
+    from leoc.pilco.train import held_long_enough, train_pilco
 
     torch.set_num_threads(1)
     started = time.perf_counter()
@@ -69,11 +69,10 @@ def _train_one(
         **overrides,
     )
     curve = result.curve
-    last = curve[1:][-held_to_stop:]
     first = next((row for row in curve if row["held_fraction"] >= 1.0), None)
     return SeedOutcome(
         seed=seed,
-        success=len(last) == held_to_stop and all(row["held_fraction"] >= 1.0 for row in last),
+        success=held_long_enough(curve[1:], held_to_stop),
         first_held_iteration=None if first is None else first["iteration"],
         first_held_interaction_seconds=None if first is None else first["interaction_seconds"],
         returns=[float(row["mean_return"]) for row in curve],

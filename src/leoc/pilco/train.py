@@ -194,8 +194,9 @@ def _iterate(
     return new_state, model
 
 
-def _held_long_enough(log: list[dict[str, Any]], config: PilcoConfig) -> bool:
-    count = config.stop_after_held
+def held_long_enough(log: list[dict[str, Any]], count: int) -> bool:
+    """Whether the last ``count`` (> 0) iterations' evaluations held the operating point in
+    every episode: the early stop of ``stop_after_held`` and a learnt run's test."""
     recent = log[-count:] if count > 0 else []
     return len(recent) == count > 0 and all(row["held_fraction"] >= 1.0 for row in recent)
 
@@ -266,7 +267,9 @@ def train_pilco(
     else:
         state, policy, model = resumed
         rng.bit_generator.state = state.rng_state
-    while state.iteration < config.iterations and not _held_long_enough(state.log, config):
+    while state.iteration < config.iterations and not held_long_enough(
+        state.log, config.stop_after_held
+    ):
         state, model = _iterate(plant, config, state, policy, rng, starts)
         save_checkpoint(run_path, config, state, policy, model, generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
