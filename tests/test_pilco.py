@@ -416,7 +416,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
     assert first.curve[1]["interaction_seconds"] == pytest.approx(3 * 24 * 0.05)
     assert first.summary["model_selection"] == "final"
     # the controller carries PILCO's control period
-    assert isinstance(first.policy, HeldPolicy) and first.policy.action_repeat == 3
+    assert isinstance(first.policy, HeldPolicy) and first.policy.action_repeat == 2
     resumed = train_pilco(
         "pendulum", hybrid=True, seed=3, run_dir=run, iterations=2, progress=False, **TINY
     )
@@ -424,7 +424,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
     saved = json.loads((run / "curve.json").read_text())["curve"]
     assert saved[:2] == json.loads(json.dumps(first.curve))
     loaded = load_pilco_controller(run)
-    assert isinstance(loaded, HeldPolicy) and loaded.action_repeat == 3
+    assert isinstance(loaded, HeldPolicy) and loaded.action_repeat == 2
     obs = torch.tensor([[0.5, 0.8, -1.0]], dtype=DTYPE)
     torch.testing.assert_close(loaded(obs), resumed.policy(obs))
     # The same seed without resuming gives the same run (determinism).

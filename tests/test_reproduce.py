@@ -18,7 +18,12 @@ from leoc.control import design_lqr
 from leoc.evaluation.rollout import response_test
 from leoc.experiments.controllers import load_trained_controller
 from leoc.experiments.profiles import DEFAULT_CONTROLLERS, get_profile, run_specs
-from leoc.experiments.reproduce import EVALUATION_FILE, reproduce, run_dir_of
+from leoc.experiments.reproduce import (
+    EVALUATION_FILE,
+    pilco_action_repeat,
+    reproduce,
+    run_dir_of,
+)
 from leoc.policies import LinearController
 from leoc.systems import make_system
 
@@ -126,7 +131,10 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
             )
             for controller in DEFAULT_CONTROLLERS
         }
-        assert runs["pilco_hybrid"]["action_repeat"] == runs["linear_pilco"]["action_repeat"] == 3
+        period = pilco_action_repeat(get_profile("smoke"), system)
+        assert period == {"pendulum": 2}.get(system, 3)
+        assert runs["pilco_hybrid"]["action_repeat"] == runs["linear_pilco"]["action_repeat"]
+        assert runs["linear_pilco"]["action_repeat"] == period
         assert runs["ddpg_hybrid"]["action_repeat"] == runs["linear"]["action_repeat"] == 1
         band = make_system(system).settling_band
         for hybrid in ("ddpg_hybrid", "pilco_hybrid"):
@@ -146,7 +154,7 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
         saved = np.asarray(runs["pilco_hybrid"]["responses"]["impulse"]["deviation"])
         np.testing.assert_array_equal(library, saved)
         printed = _simulate_json(system, run_folder)
-        assert printed["action_repeat"] == 3
+        assert printed["action_repeat"] == period
         np.testing.assert_array_equal(np.asarray(printed["deviation"]), saved)
     assert {row["controller"] for row in results["responses"]} == set(DEFAULT_CONTROLLERS)
     _damaged_run_folders_are_one_line_errors(out, systems[0])

@@ -15,7 +15,7 @@ from leoc.systems.rollout import simulate
 
 
 @pytest.mark.parametrize("name", SYSTEM_NAMES)
-@pytest.mark.parametrize("action_repeat", [1, 3])
+@pytest.mark.parametrize("action_repeat", [1, 2, 3])
 def test_the_nominal_lqr_recovers_from_every_corner_of_the_operating_region(name, action_repeat):
     system = make_system(name)
     controller = lqr_controller(design_lqr(system, action_repeat=action_repeat))

@@ -104,11 +104,12 @@ def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
     }
 
 
-def pilco_action_repeat(profile: Profile) -> int:
-    """PILCO's control period under ``profile`` (its override, else the PILCO default)."""
+def pilco_action_repeat(profile: Profile, system: str) -> int:
+    """PILCO's control period on ``system`` under ``profile`` (its override, else the system's
+    PILCO default)."""
     from leoc.pilco.config import PilcoConfig
 
-    return int(profile.pilco_overrides.get("action_repeat", PilcoConfig.action_repeat))
+    return PilcoConfig.for_system(system, **profile.pilco_overrides).action_repeat
 
 
 def train_controller(
@@ -121,7 +122,9 @@ def train_controller(
         from leoc.control import design_lqr
         from leoc.policies import lqr_controller
 
-        repeat = pilco_action_repeat(profile) if spec.controller == "linear_pilco" else 1
+        repeat = (
+            pilco_action_repeat(profile, spec.system) if spec.controller == "linear_pilco" else 1
+        )
         return lqr_controller(design_lqr(system, action_repeat=repeat)), None
     if spec.framework == "pilco":
         from leoc.pilco.train import train_pilco

@@ -32,9 +32,10 @@ START_SPEED_SPREAD = 0.1
 # Hold test: 50 steps (2.5 s) inside the hold band at the end of the episode.
 HOLD_MIN_STEPS = 50
 # Robustness starts: theta +/- 0.2 rad (11.5 deg), theta_dot +/- 0.3 rad/s. The nominal LQR (at
-# dt and at PILCO's 3-step period) recovers from every corner of this box. Holding theta = 0.2
-# rad takes m g l sin(theta) / 2 = 1.0 N m of the 2 N m limit, so at 2x g or mass the corners
-# are at the actuator's reach and beyond it any controller must fail: a sweep that can fail.
+# dt, at PILCO's 2-step period and at 3 steps) recovers from every corner of this box. Holding
+# theta = 0.2 rad takes m g l sin(theta) / 2 = 1.0 N m of the 2 N m limit, so at 2x g or mass
+# the corners are at the actuator's reach and beyond it any controller must fail: a sweep that
+# can fail.
 OPERATING_REGION = (0.2, 0.3)
 
 
