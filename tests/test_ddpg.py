@@ -386,8 +386,11 @@ def test_baseline_physical_policy_matches_sb3_predict():
 
 @pytest.mark.slow
 def test_hybrid_ddpg_learns_to_hold_pendulum_on_most_seeds(tmp_path):
-    """Three seeds: at least two reach and hold the operating point with a return above -600
-    (swing-up in a few seconds, then balanced); one seed's outcome is not the test."""
+    """The paper's budget (10k steps) on three seeds: at least two reach and hold the operating
+    point with a return above -600 (swing-up in a few seconds, then balanced); one seed's
+    outcome is not the test. Measured (benchmarks/bench_ddpg_seeds.py --hybrid --seeds 0 1 2 3):
+    seeds 0-3 learnt by steps 2000, 5500, 6000 and 4000, so 3000 steps (this test's budget
+    before) was a 1-in-4 draw."""
     learnt = []
     for seed in range(3):
         result = train_ddpg(
@@ -396,10 +399,10 @@ def test_hybrid_ddpg_learns_to_hold_pendulum_on_most_seeds(tmp_path):
             hybrid=True,
             seed=seed,
             run_dir=tmp_path / f"seed{seed}",
-            total_steps=3000,
             eval_interval=500,
             progress=False,
         )
+        assert result.config["total_steps"] == 10_000  # the paper's pendulum budget
         learnt.append(result.reached_steps is not None and result.best_return > -600.0)
     assert sum(learnt) >= 2, learnt
 
