@@ -111,6 +111,14 @@ def test_probability_that_the_hybrid_beats_its_baseline():
     assert row["framework"] == "ddpg" and row["probability"] == 1.0  # every hybrid run is better
 
 
+def test_a_run_folder_without_its_machine_says_so():
+    from leoc.experiments.report import machine_line
+
+    assert machine_line(None).startswith("Machine: not recorded")
+    line = machine_line({"cpu": "AMD EPYC", "logical_cpus": 2, "platform": "Linux-6"})
+    assert line == "Machine of the last invocation: AMD EPYC, 2 logical CPUs, Linux-6."
+
+
 def test_runs_from_several_code_versions_are_said_plainly():
     evaluations = _evaluations(1.0)
     one = code_versions(evaluations)

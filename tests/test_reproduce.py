@@ -59,6 +59,11 @@ def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> 
         assert cells[("mass", 1.0)] == cells[("gravity", 1.0)] == 1.0, system_name
         assert cells[("gravity", 5.0)] == 0.0, system_name
     assert "Linear controllers are not expected to swing up" in text
+    # the machine of the invocation is recorded and reported
+    machine = json.loads((tmp_path / "meta.json").read_text())["machine"]
+    assert machine["logical_cpus"] == os.cpu_count()
+    assert machine["memory_gib"] > 0 and machine["cpu"]
+    assert f"Machine of the last invocation: {machine['cpu']}, {os.cpu_count()} logical" in text
 
 
 def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> None:

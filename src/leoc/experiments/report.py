@@ -837,6 +837,19 @@ def write_report(out_dir: str | Path) -> Path:
     return path
 
 
+def machine_line(machine: dict[str, Any] | None) -> str:
+    """The report's line on the machine of the last invocation (``meta.json``'s ``machine``)."""
+    if not machine:
+        return "Machine: not recorded (a run folder written before leoc recorded it)."
+    memory = machine.get("memory_gib")
+    return (
+        f"Machine of the last invocation: {machine.get('cpu', 'unknown CPU')}, "
+        f"{machine.get('logical_cpus', '?')} logical CPUs"
+        + (f", {memory} GiB memory" if memory is not None else "")
+        + f", {machine.get('platform', 'unknown platform')}."
+    )
+
+
 def render_markdown(
     meta: dict[str, Any],
     evaluations: Evaluations,
@@ -860,6 +873,8 @@ def render_markdown(
         else "Wall time: not finished.",
         "",
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta.get("versions", {}).items()),
+        "",
+        machine_line(meta.get("machine")),
         "",
         code_line(code_versions(evaluations)),
         "",

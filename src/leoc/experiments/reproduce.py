@@ -67,6 +67,26 @@ def versions() -> dict[str, str]:
     return found
 
 
+def machine() -> dict[str, Any]:
+    """The machine an invocation runs on (with Ray: the driver's; the workers may differ): OS,
+    architecture, CPU model, logical CPUs and memory."""
+    found: dict[str, Any] = {
+        "platform": platform.platform(),
+        "architecture": platform.machine(),
+        "cpu": platform.processor() or "unknown",
+        "logical_cpus": os.cpu_count(),
+    }
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                found["cpu"] = line.partition(":")[2].strip()
+                break
+    with contextlib.suppress(ValueError, OSError, AttributeError):
+        pages, size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+        found["memory_gib"] = round(pages * size / 2**30, 1)
+    return found
+
+
 def code_commit() -> str | None:
     """The git commit of the leoc source that runs (``+dirty`` when tracked files differ from
     it), or None outside a git checkout: runs of one study that span several invocations can
@@ -321,6 +341,7 @@ def reproduce(
         backend=backend,
         address=address,
         versions=versions(),
+        machine=machine(),
         command=" ".join(sys.argv),
     )
     write_json_atomic(meta_path, meta)
