@@ -199,6 +199,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         controllers=args.controllers,
         backend=args.backend,
         address=args.address,
+        variant=args.variant,
     )
     print(path.read_text())
     print(f"report written to {path}")
@@ -548,7 +549,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="quick (default: 1 seed, reduced budgets), paper (paper budgets, 3 seeds) or "
         "smoke (a tiny pipeline check)",
     )
-    reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
+    reproduce.add_argument(
+        "--out",
+        help="output folder (default runs/reproduce-PROFILE, runs/reproduce-PROFILE-authors for "
+        "the authors' variant)",
+    )
+    reproduce.add_argument(
+        "--variant",
+        choices=("leoc", "authors"),
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
+        "u_max with a sin squash, their env rules, DDPG and PILCO settings); default leoc",
+    )
     reproduce.add_argument(
         "--jobs",
         type=positive_int,
@@ -624,7 +636,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "reproduce" and args.out is None:
-        args.out = str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}")
+        suffix = "" if args.variant == "leoc" else f"-{args.variant}"
+        args.out = str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}{suffix}")
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         return int(args.func(args))
