@@ -73,7 +73,10 @@ def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evalu
         try:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise ValueError(f"{path}: damaged evaluation file ({error})") from error
+            raise ValueError(
+                f"{path}: damaged evaluation file ({error}); rerun the 'leoc reproduce' command "
+                "of this folder: it sets the damaged file aside and redoes that run"
+            ) from error
         spec = data["spec"]
         if meta is not None and not _selected(spec, meta):
             continue
@@ -733,6 +736,8 @@ def _flag_block(flags: list[str], none_text: str) -> list[str]:
 def write_report(out_dir: str | Path) -> Path:
     """Aggregate the finished runs of ``out_dir`` into numbers, figures and ``report.md``."""
     out = Path(out_dir)
+    if not out.is_dir():
+        raise FileNotFoundError(f"run_dir: the folder {str(out)!r} does not exist")
     meta_path = out / META_FILE
     if not meta_path.is_file():
         raise FileNotFoundError(

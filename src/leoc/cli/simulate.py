@@ -1,0 +1,190 @@
+"""``leoc simulate``: impulse or step response of a controller from the operating point."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from leoc.cli._args import SYSTEM_HELP, positive_float, positive_int, system_or_run_dir
+from leoc.cli.lqr import METHODS
+
+LINEAR = "linear"
+
+
+def add_parser(commands: Any) -> None:
+    """Add the ``simulate`` command to the subparsers ``commands``."""
+    simulate = commands.add_parser(
+        "simulate",
+        help="impulse or step response of a controller from the operating point",
+        description="Run the impulse or step test of a controller from the operating point and "
+        "print its steady-state error, overshoot, peak deviation and settling time. "
+        "'leoc simulate RUN_DIR' simulates the controller of a run folder on the system it "
+        "was trained for.",
+    )
+    simulate.add_argument(
+        "target",
+        nargs="?",
+        type=system_or_run_dir,
+        metavar="SYSTEM|RUN_DIR",
+        help=f"{SYSTEM_HELP}; or a run folder (its system is read from it). Optional with "
+        "--controller RUN_DIR",
+    )
+    simulate.add_argument(
+        "--controller",
+        default=LINEAR,
+        help="'linear' (the LQR) or a run folder written by 'leoc train' or printed by "
+        "'leoc reproduce' (default: linear); a trained controller runs at its trained period",
+    )
+    simulate.add_argument(
+        "--action-repeat",
+        type=positive_int,
+        default=1,
+        help="control period of the linear controller in simulator steps (its LQR is designed "
+        "for it; PILCO's period is 2 on the pendulum, 3 on cartpole and 3 on mountaincar); "
+        "default 1",
+    )
+    simulate.add_argument(
+        "--band",
+        type=positive_float,
+        help="absolute settling band (deg or m); default 2%% of the peak error",
+    )
+    simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
+    simulate.add_argument(
+        "--steps", type=positive_int, default=200, help="episode length (default 200)"
+    )
+    simulate.add_argument(
+        "--method", choices=METHODS, default="discrete", help="LQR design of 'linear'"
+    )
+    simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    simulate.add_argument(
+        "--json", action="store_true", help="print the metrics and e(t) as JSON instead"
+    )
+    simulate.set_defaults(run=run)
+
+
+class Target(NamedTuple):
+    """What to simulate: the system's name and the controller ('linear' or a run folder)."""
+
+    system: str
+    controller: str
+
+
+def resolve_target(target: str | Path | None, controller: str) -> Target:
+    """The system and controller of ``leoc simulate [SYSTEM|RUN_DIR] [--controller C]``.
+
+    Raises
+    ------
+    ValueError
+        No system given and none to read from a run folder, or two controllers given.
+    """
+    from leoc.experiments.controllers import trained_system
+
+    if isinstance(target, Path):
+        if controller != LINEAR:
+            raise ValueError(
+                f"controller: expected one controller, found the run folder {str(target)!r} "
+                f"and --controller {controller!r}"
+            )
+        return Target(trained_system(target), str(target))
+    if target is None:
+        if controller == LINEAR:
+            raise ValueError(
+                "system: expected a system name or a run folder (e.g. 'leoc simulate pendulum' "
+                "or 'leoc simulate runs/pendulum_ddpg_hybrid_seed0'), found neither"
+            )
+        return Target(trained_system(controller), controller)
+    return Target(target, controller)
+
+
+def load_controller(spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1):
+    """``linear`` (the LQR of the system, designed for and run at ``action_repeat``) or a run
+    folder written by ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
+    from leoc.control import design_lqr
+    from leoc.policies import lqr_controller
+    from leoc.systems import make_system
+
+    if spec == LINEAR:
+        system = make_system(system_name)
+        return lqr_controller(design_lqr(system, method=method, action_repeat=action_repeat))
+    from leoc.experiments.controllers import load_trained_controller
+
+    return load_trained_controller(Path(spec), system=system_name)
+
+
+def controller_label(spec: str, period: int) -> str:
+    """The legend label of a simulated controller: the LQR and its period, or the run folder
+    as ``SYSTEM/CONTROLLER/seedN`` (a reproduce run) or its folder name."""
+    if spec == LINEAR:
+        return f"LQR (period {period} step{'s' if period > 1 else ''})"
+    parts = Path(spec).resolve().parts
+    if len(parts) >= 3 and parts[-1].startswith("seed"):
+        return "/".join(parts[-3:])
+    return parts[-1]
+
+
+def run(args: argparse.Namespace) -> int:
+    from leoc.evaluation.rollout import control_period, response_test
+    from leoc.systems import make_system
+
+    target = resolve_target(args.target, args.controller)
+    system = make_system(target.system)
+    controller = load_controller(target.controller, target.system, args.method, args.action_repeat)
+    result = response_test(system, controller, args.test, steps=args.steps, band=args.band)
+    period = control_period(controller)
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "system": target.system,
+                    "controller": target.controller,
+                    "test": args.test,
+                    "action_repeat": period,
+                    "metrics": result.metrics._asdict(),
+                    "deviation": result.deviation.tolist(),
+                    "total_reward": result.trajectory.total_reward,
+                }
+            )
+        )
+        return 0
+    _print_metrics(args, target, system, result, period)
+    if args.plot:
+        from leoc.evaluation.plots import plot_responses
+
+        label = controller_label(target.controller, period)
+        record = {
+            "deviation": result.deviation,
+            "terminated": result.metrics.terminated,
+            "settled": result.metrics.settled,
+        }
+        path = plot_responses(
+            {target.system: {args.test: {label: [record]}}}, args.plot, labels={label: label}
+        )
+        print(f"figure written to {path}")
+    return 0
+
+
+def _print_metrics(args: argparse.Namespace, target: Target, system, result, period: int) -> None:
+    metrics = result.metrics
+    unit = "deg" if system.main_in_degrees else "m"
+    settling = (
+        "not settled"
+        if metrics.settling_time is None
+        else f"{metrics.settling_time} steps ({metrics.settling_seconds:.3g} s)"
+    )
+    band = (
+        f"{metrics.band:.3g} {unit}, absolute"
+        if metrics.band_fraction is None
+        else f"{metrics.band:.3g} {unit} = {metrics.band_fraction:.0%} of the peak error"
+    )
+    print(
+        f"{args.test} response of {target.controller} on {target.system} ({args.steps} steps, "
+        f"control period {period} step{'s' if period > 1 else ''})"
+    )
+    print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
+    print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")
+    print(f"  peak deviation:     {metrics.peak_deviation:.6g} {unit}")
+    print(f"  settling time:      {settling} (band {band})")
+    print(f"  terminated:         {'yes' if metrics.terminated else 'no'}")
+    print(f"  return:             {result.trajectory.total_reward:.4f}")
