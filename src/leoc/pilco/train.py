@@ -39,7 +39,7 @@ from leoc.pilco.checkpoint import (
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPPosterior, fit_gp
 from leoc.pilco.objective import PolicyOptimisation, optimise_policy
-from leoc.pilco.policy import build_policy
+from leoc.pilco.policy import build_policy, redraw_rbf
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
 from leoc.systems import make_system
@@ -100,7 +100,7 @@ def _random_rollouts(
             system,
             controller,
             system.sample_start(rng, "swing_up"),
-            config.episode_steps,
+            config.training_rollout_steps,
             config.action_repeat,
         )
         for _ in range(config.initial_rollouts)
@@ -148,23 +148,56 @@ def _first_state(
     return state, policy
 
 
+def _restart_policy(
+    best: PolicyOptimisation,
+    policy: nn.Module,
+    model: GPPosterior,
+    system: System,
+    config: PilcoConfig,
+    generator: torch.Generator,
+    observations: np.ndarray,
+) -> PolicyOptimisation:
+    """One policy-optimisation restart from a freshly drawn RBF part: keep whichever of it and
+    ``best`` (the policy's current parameters) predicts the lower cost. The figures returned
+    add up both optimisations."""
+    kept = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+    redraw_rbf(policy, system, config, generator, observations)
+    fresh = optimise_policy(policy, model, system, config)
+    if not fresh.cost < best.cost:
+        policy.load_state_dict(kept)
+    return PolicyOptimisation(
+        min(best.cost, fresh.cost),
+        best.iterations + fresh.iterations,
+        best.evaluations + fresh.evaluations,
+        best.restarts + fresh.restarts + 1,
+    )
+
+
 def _iterate(
     system: System,
     config: PilcoConfig,
     state: RunState,
     policy: nn.Module,
     rng: np.random.Generator,
+    generator: torch.Generator,
     starts: np.ndarray,
 ) -> tuple[RunState, GPPosterior]:
     """One PILCO iteration: fit GP, optimise policy, run it, add its data, evaluate it."""
     start_time = time.perf_counter()
     model = fit_gp(state.inputs, state.targets, config.gp, rng, init=state.hyper)
     optimisation = optimise_policy(policy, model, system, config)
+    restarts = config.policy_restarts
+    if state.iteration < len(restarts) and restarts[state.iteration] > 0:
+        observations = state.inputs[:, : system.obs_dim]
+        for _ in range(restarts[state.iteration]):
+            optimisation = _restart_policy(
+                optimisation, policy, model, system, config, generator, observations
+            )
     rollout = run_rollout(
         system,
         HeldPolicy(policy, config.action_repeat),
         system.sample_start(rng, "swing_up"),
-        config.episode_steps,
+        config.training_rollout_steps,
         config.action_repeat,
     )
     steps = state.interaction_steps + rollout.steps
@@ -270,7 +303,7 @@ def train_pilco(
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
     ):
-        state, model = _iterate(plant, config, state, policy, rng, starts)
+        state, model = _iterate(plant, config, state, policy, rng, generator, starts)
         save_checkpoint(run_path, config, state, policy, model, generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
         if progress:
