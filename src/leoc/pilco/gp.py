@@ -313,8 +313,8 @@ def fit_gp(
         # A fixed noise: no floor, and log sigma a constant that the objective below uses in
         # place of the optimised one (whose gradient is then zero, so L-BFGS never moves it).
         floor_var = torch.zeros_like(floor_var)
-        fixed_log_noise = torch.full((y.shape[1],), 0.5 * math.log(settings.fixed_noise_var))
-        fixed_log_noise = fixed_log_noise.to(DTYPE)
+        log_noise = 0.5 * math.log(settings.fixed_noise_var)
+        fixed_log_noise = torch.full((y.shape[1],), log_noise, dtype=DTYPE)
     log_input_std = torch.log(x.std(0).clamp(min=MIN_INPUT_STD))
     sparse = x.shape[0] > settings.max_full_points
     inducing = None
