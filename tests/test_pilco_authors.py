@@ -233,6 +233,8 @@ def test_authors_overrides_give_their_numbers(name) -> None:
     assert (config.initial_rollouts, config.policy_iterations) == (3, 50)
     assert config.policy_restarts == (1, 1, 1, 1) and config.eval_episodes == 3
     assert config.gp.fixed_noise_var == 1e-3 and config.cost_width == 1.0
+    # Evaluator saves from loop index int(num_rollouts / 2) + 1 on, leoc's iteration = index + 1
+    assert config.select_best_from == {"pendulum": 6, "cartpole": 7, "mountaincar": 6}[name]
     assert config.iterations == {"pendulum": 8, "cartpole": 10, "mountaincar": 8}[name]
     assert config.num_basis == {"pendulum": 30, "cartpole": 60, "mountaincar": 60}[name]
     assert (
@@ -257,6 +259,44 @@ def test_defaults_keep_leocs_own_settings() -> None:
     assert config.start_mean is None and config.start_variance is None
     assert config.rollout_steps is None and config.policy_restarts == ()
     assert config.gp.fixed_noise_var is None and config.hybrid_method == "quadrature"
+    assert config.select_best_from == 0
     # a config survives its dict round trip (checkpoints) with the new fields set
     authors = PilcoConfig.for_system("cartpole", **authors_pilco_overrides("cartpole", False))
     assert PilcoConfig.from_dict(authors.to_dict()) == authors
+
+
+def test_select_best_keeps_the_best_evaluated_policy(tmp_path) -> None:
+    from leoc.pilco.checkpoint import load_pilco_controller
+    from leoc.pilco.train import train_pilco
+    from leoc.training import evaluate_episodes, evaluation_starts
+
+    result = train_pilco(
+        "pendulum",
+        seed=2,
+        run_dir=tmp_path / "run",
+        iterations=3,
+        progress=False,
+        select_best_from=2,
+        **{**TINY, "eval_episodes": 2},
+    )
+    eligible = result.curve[2:]
+    best = max(eligible, key=lambda row: row["mean_return"])  # the first of equal maxima
+    assert result.summary["model_selection"].endswith(f"(iteration {best['iteration']})")
+    system = make_system("pendulum")
+    system.episode_steps = TINY["episode_steps"]
+    starts = evaluation_starts(system, 2, 2)
+    again = evaluate_episodes(system, result.policy, starts)
+    assert again.mean_return == pytest.approx(best["mean_return"], rel=1e-12)
+    loaded = load_pilco_controller(tmp_path / "run")
+    assert evaluate_episodes(system, loaded, starts).mean_return == again.mean_return
+    # an unreachable first iteration keeps the final policy
+    late = train_pilco(
+        "pendulum",
+        seed=2,
+        run_dir=tmp_path / "late",
+        iterations=1,
+        progress=False,
+        select_best_from=5,
+        **{**TINY, "eval_episodes": 2},
+    )
+    assert late.summary["model_selection"] == "final"

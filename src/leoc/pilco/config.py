@@ -87,6 +87,10 @@ class PilcoConfig:
         Extra policy optimisations per iteration, each from a freshly drawn RBF part (the
         hybrid keeps its linear part and relevance), keeping the lowest predicted cost: entry
         i for iteration i + 1, none beyond the tuple.
+    select_best_from : int
+        0 (leoc's rule, :mod:`leoc.training`): the run's controller is the final policy.
+        k >= 1: the policy after the iteration >= k with the highest mean evaluation return
+        (the earliest on ties), or the final one if the run stops before iteration k.
     """
 
     system: str = "pendulum"
@@ -115,6 +119,7 @@ class PilcoConfig:
     start_variance: tuple[float, ...] | None = None
     rollout_steps: int | None = None
     policy_restarts: tuple[int, ...] = ()
+    select_best_from: int = 0
 
     @classmethod
     def for_system(cls, name: str, **overrides: Any) -> PilcoConfig:
@@ -161,7 +166,7 @@ class PilcoConfig:
             raise ValueError(
                 f"rollout_steps: expected None or a positive integer, found {self.rollout_steps!r}"
             )
-        for name in ("initial_rollouts", "seed", "stop_after_held"):
+        for name in ("initial_rollouts", "seed", "stop_after_held", "select_best_from"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
@@ -279,6 +284,11 @@ AUTHORS_NOISE_VAR = 1e-3
 AUTHORS_EVAL_EPISODES = 3
 """Evaluation episodes after each iteration (``Evaluator.eval_num_episodes = 3``, the gin
 files)."""
+AUTHORS_SELECT_AFTER_HALF = 2
+"""Model selection: their ``Evaluator`` saves the policy whenever its mean evaluation return
+beats the best so far, from loop index ``rollouts > int(num_rollouts / 2)`` on (dao/trainer.py),
+and the saved policy is the one evaluated: with leoc's iteration = loop index + 1,
+``select_best_from = num_rollouts // 2 + 2``."""
 AUTHORS_HYBRID_METHOD = "mixture"
 """The hybrid's moment approximation (``HybridController.compute_action``, pilco/controllers.py):
 r at the mean, mixture moments; see :func:`leoc.pilco.propagate.mixture_relevance_moments`."""
@@ -332,9 +342,6 @@ AUTHORS_NOT_REPLICATED = {
     "1 + 0.1 N(0, 1)); leoc's weights directly, centres and length-scales from the data, "
     "weights 0.1 u_max N(0, 1) (the same scale)",
     "relevance bound": "S >= 1e-4 (Lambda <= 1e4); leoc's log Lambda is unbounded",
-    "model selection": "their Evaluator keeps the best 3-episode evaluation return of "
-    "iterations > num_rollouts / 2 (dao/trainer.py); a training-loop rule beside DDPG's "
-    "best-of-last-third, left to the variant's evaluation settings",
 }
 """The authors' PILCO choices that :func:`authors_pilco_overrides` does not set, and why."""
 
@@ -365,6 +372,7 @@ def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
             f"system: the authors' PILCO settings exist for {sorted(AUTHORS_SYSTEM_SETTINGS)}, "
             f"found {system!r}"
         )
+    settings = AUTHORS_SYSTEM_SETTINGS[system]
     overrides: dict[str, Any] = {
         "action_repeat": AUTHORS_SUBS,
         "horizon": AUTHORS_HORIZON,
@@ -375,7 +383,8 @@ def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
         "cost_width": 1.0,
         "eval_episodes": AUTHORS_EVAL_EPISODES,
         "gp_fixed_noise_var": AUTHORS_NOISE_VAR,
-        **AUTHORS_SYSTEM_SETTINGS[system],
+        "select_best_from": settings["iterations"] // 2 + AUTHORS_SELECT_AFTER_HALF,
+        **settings,
     }
     if hybrid:
         overrides.update(

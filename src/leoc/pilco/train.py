@@ -12,6 +12,10 @@ period wherever it runs: it is returned, saved and loaded as a
 on the ``action_repeat``-step held map, so pi(a) = G(a) and dpi/dx(a) = W hold for the closed
 loop actually run.
 
+Model selection: the final policy (:mod:`leoc.training`), or with ``select_best_from = k`` the
+best-evaluated policy of iterations >= k (the authors' rule), written as ``controller.pt`` and
+returned at the end; the checkpoint keeps the latest policy, so a resumed run goes on from it.
+
 Learning curve and run folder: the trainer contract of :mod:`leoc.training` (evaluation
 episodes from fixed starts after every iteration, ``config.json``, ``curve.json``/``curve.csv``
 with PILCO's own columns added, ``learning_curve.png``), plus ``controller.pt`` (policy state +
@@ -31,10 +35,12 @@ from torch import nn
 
 from leoc.io import write_text_atomic
 from leoc.pilco.checkpoint import (
+    BestPolicy,
     RunState,
     load_pilco_controller,
     resume_checkpoint,
     save_checkpoint,
+    save_controller,
 )
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPPosterior, fit_gp
@@ -227,6 +233,20 @@ def _iterate(
     return new_state, model
 
 
+def _best_policy(
+    config: PilcoConfig, state: RunState, policy: nn.Module, kept: BestPolicy | None
+) -> BestPolicy | None:
+    """The policy kept so far (``kept``), replaced by the iteration just run (``state``) if it
+    is eligible (``PilcoConfig.select_best_from``) and its mean evaluation return is higher."""
+    if config.select_best_from < 1 or state.iteration < config.select_best_from:
+        return kept
+    mean_return = float(state.log[-1]["mean_return"])
+    if kept is not None and not mean_return > kept.mean_return:
+        return kept
+    parameters = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+    return BestPolicy(state.iteration, mean_return, parameters)
+
+
 def held_long_enough(log: list[dict[str, Any]], count: int) -> bool:
     """Whether the last ``count`` (> 0) iterations' evaluations held the operating point in
     every episode: the early stop of ``stop_after_held`` and a learnt run's test."""
@@ -303,12 +323,21 @@ def train_pilco(
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
     ):
+        kept = state.best
         state, model = _iterate(plant, config, state, policy, rng, generator, starts)
+        state = state._replace(best=_best_policy(config, state, policy, kept))
         save_checkpoint(run_path, config, state, policy, model, generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
         if progress:
             print(_progress_line(state.log[-1], config.iterations), flush=True)
     summary = curve_summary(state.log, plant.dt)
+    if state.best is not None:
+        policy.load_state_dict(state.best.policy_state)
+        save_controller(run_path, config, state.best.policy_state, model)
+        summary["model_selection"] = (
+            f"best evaluation of iterations >= {config.select_best_from} "
+            f"(iteration {state.best.iteration})"
+        )
     write_curve(run_path, state.log, summary, _title(config))
     policy.eval()
     held = HeldPolicy(policy, config.action_repeat).eval()
