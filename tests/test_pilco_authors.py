@@ -235,6 +235,7 @@ def test_authors_overrides_give_their_numbers(name) -> None:
     assert config.gp.fixed_noise_var == 1e-3 and config.cost_width == 1.0
     # Evaluator saves from loop index int(num_rollouts / 2) + 1 on, leoc's iteration = index + 1
     assert config.select_best_from == {"pendulum": 6, "cartpole": 7, "mountaincar": 6}[name]
+    assert config.deploy_action_repeat == 1 and config.controller_action_repeat == 1
     assert config.iterations == {"pendulum": 8, "cartpole": 10, "mountaincar": 8}[name]
     assert config.num_basis == {"pendulum": 30, "cartpole": 60, "mountaincar": 60}[name]
     assert (
@@ -259,7 +260,8 @@ def test_defaults_keep_leocs_own_settings() -> None:
     assert config.start_mean is None and config.start_variance is None
     assert config.rollout_steps is None and config.policy_restarts == ()
     assert config.gp.fixed_noise_var is None and config.hybrid_method == "quadrature"
-    assert config.select_best_from == 0
+    assert config.select_best_from == 0 and config.deploy_action_repeat is None
+    assert config.controller_action_repeat == config.action_repeat == 2
     # a config survives its dict round trip (checkpoints) with the new fields set
     authors = PilcoConfig.for_system("cartpole", **authors_pilco_overrides("cartpole", False))
     assert PilcoConfig.from_dict(authors.to_dict()) == authors
@@ -300,3 +302,31 @@ def test_select_best_keeps_the_best_evaluated_policy(tmp_path) -> None:
         **{**TINY, "eval_episodes": 2},
     )
     assert late.summary["model_selection"] == "final"
+
+
+def test_deploy_action_repeat_sets_the_controller_period_only(tmp_path) -> None:
+    from leoc.pilco.checkpoint import load_pilco_controller
+    from leoc.pilco.train import train_pilco
+    from leoc.policies import HeldPolicy
+    from leoc.training import evaluate_episodes, evaluation_starts
+
+    result = train_pilco(
+        "pendulum",
+        seed=4,
+        run_dir=tmp_path / "run",
+        iterations=1,
+        progress=False,
+        deploy_action_repeat=1,
+        **TINY,
+    )
+    assert result.config["action_repeat"] == 2  # trained holding each action 2 steps
+    assert result.curve[1]["data_size"] == 3 * 48 // 2 + 48 // 2
+    assert result.policy.action_repeat == 1
+    assert load_pilco_controller(tmp_path / "run").action_repeat == 1
+    system = make_system("pendulum")
+    system.episode_steps = TINY["episode_steps"]
+    starts = evaluation_starts(system, 4, TINY["eval_episodes"])
+    every_step = evaluate_episodes(system, HeldPolicy(result.policy.policy, 1), starts)
+    assert every_step.mean_return == pytest.approx(result.curve[-1]["mean_return"], rel=1e-12)
+    with pytest.raises(ValueError, match="deploy_action_repeat"):
+        PilcoConfig(deploy_action_repeat=0)

@@ -148,4 +148,4 @@ def load_pilco_controller(run_dir: str | Path) -> nn.Module:
         ) from error
     policy = build_policy(make_system(config.system), config, torch.Generator().manual_seed(0))
     policy.load_state_dict(saved["policy_state"])
-    return HeldPolicy(policy.eval(), config.action_repeat).eval()
+    return HeldPolicy(policy.eval(), config.controller_action_repeat).eval()

@@ -87,6 +87,10 @@ class PilcoConfig:
         Extra policy optimisations per iteration, each from a freshly drawn RBF part (the
         hybrid keeps its linear part and relevance), keeping the lowest predicted cost: entry
         i for iteration i + 1, none beyond the tuple.
+    deploy_action_repeat : int or None
+        Control period, in simulator steps, of the controller evaluated, returned and saved;
+        None: ``action_repeat`` (the period it was trained at). Training rollouts always hold
+        each action ``action_repeat`` steps.
     select_best_from : int
         0 (leoc's rule, :mod:`leoc.training`): the run's controller is the final policy.
         k >= 1: the policy after the iteration >= k with the highest mean evaluation return
@@ -119,6 +123,7 @@ class PilcoConfig:
     start_variance: tuple[float, ...] | None = None
     rollout_steps: int | None = None
     policy_restarts: tuple[int, ...] = ()
+    deploy_action_repeat: int | None = None
     select_best_from: int = 0
 
     @classmethod
@@ -158,14 +163,12 @@ class PilcoConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected a positive integer, found {value!r}")
-        if self.rollout_steps is not None and (
-            isinstance(self.rollout_steps, bool)
-            or not isinstance(self.rollout_steps, int)
-            or self.rollout_steps < 1
-        ):
-            raise ValueError(
-                f"rollout_steps: expected None or a positive integer, found {self.rollout_steps!r}"
-            )
+        for name in ("rollout_steps", "deploy_action_repeat"):
+            value = getattr(self, name)
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int) or value < 1
+            ):
+                raise ValueError(f"{name}: expected None or a positive integer, found {value!r}")
         for name in ("initial_rollouts", "seed", "stop_after_held", "select_best_from"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
@@ -191,6 +194,14 @@ class PilcoConfig:
         """Simulator steps of each real training rollout (``rollout_steps`` or
         ``episode_steps``)."""
         return self.episode_steps if self.rollout_steps is None else self.rollout_steps
+
+    @property
+    def controller_action_repeat(self) -> int:
+        """Control period of the evaluated, returned and saved controller
+        (``deploy_action_repeat`` or ``action_repeat``)."""
+        return (
+            self.action_repeat if self.deploy_action_repeat is None else self.deploy_action_repeat
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -284,6 +295,11 @@ AUTHORS_NOISE_VAR = 1e-3
 AUTHORS_EVAL_EPISODES = 3
 """Evaluation episodes after each iteration (``Evaluator.eval_num_episodes = 3``, the gin
 files)."""
+AUTHORS_DEPLOY_ACTION_REPEAT = 1
+"""The trained controller runs every simulator step: their ``Evaluator`` (dao/trainer.py) and
+the response metrics (plotting/compute_metrics.py, through ``Evaluator``) drive the saved
+policy with tf-agents' ``DynamicEpisodeDriver``, one action per environment step, although it
+was trained holding each action SUBS = 3 steps."""
 AUTHORS_SELECT_AFTER_HALF = 2
 """Model selection: their ``Evaluator`` saves the policy whenever its mean evaluation return
 beats the best so far, from loop index ``rollouts > int(num_rollouts / 2)`` on (dao/trainer.py),
@@ -384,6 +400,7 @@ def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
         "eval_episodes": AUTHORS_EVAL_EPISODES,
         "gp_fixed_noise_var": AUTHORS_NOISE_VAR,
         "select_best_from": settings["iterations"] // 2 + AUTHORS_SELECT_AFTER_HALF,
+        "deploy_action_repeat": AUTHORS_DEPLOY_ACTION_REPEAT,
         **settings,
     }
     if hybrid:

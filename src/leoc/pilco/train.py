@@ -10,7 +10,8 @@ Timing choice (documented in :mod:`leoc.pilco.rollout`): the policy decides ever
 period wherever it runs: it is returned, saved and loaded as a
 :class:`~leoc.policies.HeldPolicy`, and the LQR part of the hybrid is designed by discrete LQR
 on the ``action_repeat``-step held map, so pi(a) = G(a) and dpi/dx(a) = W hold for the closed
-loop actually run.
+loop actually run. ``deploy_action_repeat`` (the authors' choice: 1) evaluates, returns and saves
+it at another period instead.
 
 Model selection: the final policy (:mod:`leoc.training`), or with ``select_best_from = k`` the
 best-evaluated policy of iterations >= k (the authors' rule), written as ``controller.pt`` and
@@ -132,7 +133,7 @@ def _progress_line(row: dict[str, Any], total: int) -> str:
 
 def _evaluate(system: System, config: PilcoConfig, policy: nn.Module, starts: np.ndarray) -> Any:
     """The policy's evaluation episodes, at its control period (leoc.training)."""
-    return evaluate_episodes(system, HeldPolicy(policy, config.action_repeat), starts)
+    return evaluate_episodes(system, HeldPolicy(policy, config.controller_action_repeat), starts)
 
 
 def _first_state(
@@ -293,7 +294,8 @@ def train_pilco(
     Returns
     -------
     TrainResult
-        The final policy as a :class:`~leoc.policies.HeldPolicy` at ``action_repeat``, the
+        The run's controller (the final policy, or the ``select_best_from`` one) as a
+        :class:`~leoc.policies.HeldPolicy` at ``controller_action_repeat``, the
         learning curve (one row per iteration, iteration 0 = the random rollouts), the config,
         its summary and the last GP posterior.
     """
@@ -340,5 +342,5 @@ def train_pilco(
         )
     write_curve(run_path, state.log, summary, _title(config))
     policy.eval()
-    held = HeldPolicy(policy, config.action_repeat).eval()
+    held = HeldPolicy(policy, config.controller_action_repeat).eval()
     return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)
