@@ -330,3 +330,32 @@ def test_deploy_action_repeat_sets_the_controller_period_only(tmp_path) -> None:
     assert every_step.mean_return == pytest.approx(result.curve[-1]["mean_return"], rel=1e-12)
     with pytest.raises(ValueError, match="deploy_action_repeat"):
         PilcoConfig(deploy_action_repeat=0)
+
+
+@pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
+def test_authors_hybrid_is_their_hybrid_controller(name) -> None:
+    """u = u_max sin(r K o + (1 - r) H(o)) with K their u_max-free gain, r = 1 / (1 + d)^2 and
+    d = (o - a)^T diag(S) (o - a), S = 1 at the start (HybridController, pilco/controllers.py);
+    H is zeroed here so that the value is written out from their formula."""
+    from leoc.control.lqr import design_lqr
+    from leoc.pilco.policy import build_policy
+
+    system = make_system(name)
+    config = PilcoConfig.for_system(name, hybrid=True, **authors_pilco_overrides(name, True))
+    policy = build_policy(system, config, torch.Generator().manual_seed(0))
+    design = design_lqr(system, method="authors", action_repeat=config.action_repeat)
+    np.testing.assert_array_equal(policy.linear.W.detach().numpy(), design.W)
+    with torch.no_grad():
+        policy.nonlinear.weights.zero_()
+    limit = system.action_limit
+    gain = design.W / limit  # their LinearController's W (u = u_max sin(W o))
+    gen = np.random.default_rng(1)
+    target = system.operating_obs
+    for _ in range(5):
+        obs = target + 0.3 * gen.normal(size=system.obs_dim)
+        distance = float(np.sum((obs - target) ** 2))  # diag(S) = I
+        relevance = 1.0 / (1.0 + distance) ** 2
+        expected = limit * np.sin(relevance * (gain @ obs))
+        with torch.no_grad():
+            action = policy(torch.as_tensor(obs)[None]).numpy()[0]
+        np.testing.assert_allclose(action, expected, rtol=1e-12, atol=1e-12)

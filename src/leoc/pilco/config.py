@@ -95,6 +95,9 @@ class PilcoConfig:
         0 (leoc's rule, :mod:`leoc.training`): the run's controller is the final policy.
         k >= 1: the policy after the iteration >= k with the highest mean evaluation return
         (the earliest on ties), or the final one if the run stops before iteration k.
+    step_rules : dict
+        Fields of the :class:`~leoc.systems.StepRules` the real system steps under (empty:
+        leoc's rules; the authors' variant sets theirs).
     """
 
     system: str = "pendulum"
@@ -125,6 +128,7 @@ class PilcoConfig:
     policy_restarts: tuple[int, ...] = ()
     deploy_action_repeat: int | None = None
     select_best_from: int = 0
+    step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @classmethod
     def for_system(cls, name: str, **overrides: Any) -> PilcoConfig:
@@ -177,6 +181,14 @@ class PilcoConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not 0 < value < math.inf:
                 raise ValueError(f"{name}: expected a positive number, found {value!r}")
+        from leoc.systems import StepRules
+
+        if not isinstance(self.step_rules, dict):
+            raise ValueError(f"step_rules: expected a dict, found {self.step_rules!r}")
+        try:
+            StepRules(**self.step_rules)
+        except TypeError as error:
+            raise ValueError(f"step_rules: {error}") from error
         if self.relevance not in RELEVANCE_KINDS:
             raise ValueError(
                 f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"
