@@ -131,8 +131,7 @@ class LearningCurveCallback(BaseCallback):
     def _on_training_end(self) -> None:
         if self._last_eval_step != self.num_timesteps:
             self._evaluate()
-        if self._selected_actor is not None:
-            self.model.actor.load_state_dict(self._selected_actor)
+        self.restore_selected()
         if self._bar is not None:
             self._bar.update(self.num_timesteps - self._bar_position)
             self._bar.close()
@@ -155,6 +154,11 @@ class LearningCurveCallback(BaseCallback):
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"
             )
         return result
+
+    def restore_selected(self) -> None:
+        """Load the selected actor into the model (``"best_last_third"``; no-op otherwise)."""
+        if self._selected_actor is not None:
+            self.model.actor.load_state_dict(self._selected_actor)
 
     def _consider_for_selection(self, steps: int, mean_return: float) -> None:
         """Keep a copy of the actor if this evaluation is the best candidate so far."""
