@@ -92,6 +92,7 @@ def test_new_fields_default_to_leoc_and_are_validated():
         "hidden_init": "torch",
         "last_layer_init": None,
         "relevance_parametrisation": "log_lambda",
+        "actor_output_clip": True,
         "model_selection": "final",
     }
     assert {name: getattr(config, name) for name in defaults} == defaults
@@ -106,6 +107,7 @@ def test_new_fields_default_to_leoc_and_are_validated():
         "critic_action_layer": 3,
         "last_layer_init": -0.1,
         "noise_reset": "no",
+        "actor_output_clip": 1,
     }
     for name, value in bad.items():
         with pytest.raises(ValueError, match=name):
@@ -362,6 +364,30 @@ def test_precision_relevance_keeps_identities_and_formula(system_name):
     with torch.no_grad():
         inside = model.actor(obs.float()).double() * system.action_limit
     torch.testing.assert_close(inside, policy(obs), rtol=F32_TOL, atol=F32_TOL)
+
+
+def test_unclipped_actor_returns_the_blend_and_keeps_identities():
+    system = make_system("cartpole")
+    design = design_lqr(system)
+    clipped, unclipped = (
+        _precision_model("cartpole", clip_output=flag).actor for flag in (True, False)
+    )
+    unclipped.load_state_dict(clipped.state_dict())
+    generator = torch.Generator().manual_seed(2)
+    with torch.no_grad():
+        for actor in (clipped, unclipped):
+            for param in actor.hybrid.nonlinear.parameters():
+                param.copy_(torch.randn(param.shape, generator=torch.Generator().manual_seed(9)))
+        obs = 3.0 * torch.randn(256, system.obs_dim, generator=generator)
+        blend = unclipped(obs)  # r G~ + (1 - r) tanh(MLP), unbounded (TF-Agents' actor)
+        assert float(blend.abs().max()) > 1.0
+        torch.testing.assert_close(clipped(obs), blend.clamp(-1.0, 1.0), rtol=0, atol=0)
+    policy = physical_policy(unclipped)  # the executed action is clipped all the same
+    assert float(policy(obs.double()).abs().max()) <= system.action_limit
+    point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None])[0], point)
+    np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=F64_ATOL)
+    assert unclipped._get_constructor_parameters()["clip_output"] is False
 
 
 def test_precision_is_trained_and_round_trips(tmp_path):

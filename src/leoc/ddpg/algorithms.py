@@ -26,6 +26,10 @@ their defaults keep SB3's behaviour bit for bit:
   :math:`|e| - \tfrac12` beyond). With ``"huber"`` the update is :meth:`_train_step`, a
   re-implementation of SB3's TD3 update with only the loss changed (with ``"mse"`` it gives
   SB3's numbers bit for bit; a test checks it).
+* ``target_action_clip``: True (SB3) clips the target actor's action to [-1, 1] in the TD
+  target; False uses it as it comes, as TF-Agents' DDPG does (``critic_loss`` feeds
+  ``target_actor_network``'s output to the target critic unclipped). False also runs
+  :meth:`_train_step`.
 
 The LEOC policy (:class:`leoc.ddpg.HybridTD3Policy`) also works with plain
 ``stable_baselines3.DDPG`` and ``TD3``; these classes only reproduce the paper's settings.
@@ -74,6 +78,7 @@ class _PaperSettingsMixin:
         target_update_interval: int = 1,
         warmup: str = "uniform",
         critic_loss: str = "mse",
+        target_action_clip: bool = True,
         **kwargs: Any,
     ) -> None:
         if warmup not in WARMUPS:
@@ -81,6 +86,7 @@ class _PaperSettingsMixin:
         critic_loss_fn(critic_loss)  # validates the name
         self.warmup = warmup
         self.critic_loss = critic_loss
+        self.target_action_clip = bool(target_action_clip)
         super().__init__(*args, **kwargs)  # the SB3 algorithm after this mixin in the MRO
         self._init_paper_settings(actor_learning_rate, target_update_interval)
 
@@ -118,8 +124,11 @@ class _PaperSettingsMixin:
         return super()._sample_action(starts, action_noise, n_envs)  # type: ignore[misc]
 
     def _train_calls(self, gradient_steps: int, batch_size: int) -> None:
-        """SB3's own update (critic_loss "mse"), else :meth:`_train_step` per gradient step."""
-        if getattr(self, "critic_loss", "mse") == "mse":
+        """SB3's own update (MSE loss, clipped target actions), else :meth:`_train_step`."""
+        own = getattr(self, "critic_loss", "mse") != "mse" or not getattr(
+            self, "target_action_clip", True
+        )
+        if not own:
             super().train(gradient_steps, batch_size)  # type: ignore[misc]
             return
         self.policy.set_training_mode(True)  # type: ignore[attr-defined]
@@ -131,7 +140,8 @@ class _PaperSettingsMixin:
         r"""One TD3/DDPG gradient step as SB3's ``TD3.train``, with the critic loss ``loss_fn``.
 
         Target: :math:`y = r + (1 - done)\,\gamma \min_k Q'_k(s', \operatorname{clip}(
-        \mu'(s') + \epsilon))`, :math:`\epsilon` clipped Gaussian smoothing noise (zero std for
+        \mu'(s') + \epsilon))` (no clip with ``target_action_clip=False``), :math:`\epsilon`
+        clipped Gaussian smoothing noise (zero std for
         DDPG); critic loss :math:`\sum_k \mathrm{loss}(Q_k(s, a), y)`; every ``policy_delay``
         updates the actor loss :math:`-\mathrm{mean}\, Q_1(s, \mu(s))` and the soft target
         updates with coefficient ``tau``.
@@ -142,9 +152,9 @@ class _PaperSettingsMixin:
         with torch.no_grad():
             noise = data.actions.clone().data.normal_(0, self.target_policy_noise)  # type: ignore[attr-defined]
             noise = noise.clamp(-self.target_noise_clip, self.target_noise_clip)  # type: ignore[attr-defined]
-            next_actions = (self.actor_target(data.next_observations) + noise).clamp(  # type: ignore[attr-defined]
-                -NORMALISED_LIMIT, NORMALISED_LIMIT
-            )
+            next_actions = self.actor_target(data.next_observations) + noise  # type: ignore[attr-defined]
+            if self.target_action_clip:
+                next_actions = next_actions.clamp(-NORMALISED_LIMIT, NORMALISED_LIMIT)
             next_q = torch.cat(self.critic_target(data.next_observations, next_actions), dim=1)  # type: ignore[attr-defined]
             next_q, _ = torch.min(next_q, dim=1, keepdim=True)
             target_q = data.rewards + (1 - data.dones) * discounts * next_q

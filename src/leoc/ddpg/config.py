@@ -95,6 +95,10 @@ AUTHORS_DDPG: dict[str, Any] = {
     "relevance_parametrisation": "precision",
     "lambda_init": 1.0,
     "learn_lambda": True,
+    # DDPG/ddpg.py MyActorNetwork.call returns scale_to_spec(r g + (1 - r) h) unclipped (only
+    # the policies clip, ActorPolicy(clip=True), OUNoisePolicy(clip=True)); TF-Agents'
+    # DdpgAgent feeds the actor's and target actor's actions to the critics unclipped.
+    "actor_output_clip": False,
     # dao/trainer.py: the policy saved when iteration > int(num_iterations / 3 * 2) and the
     # evaluation return beats the best so far; data/*DDPG*.gin: Evaluator.eval_num_episodes = 3.
     "model_selection": "best_last_third",
@@ -212,6 +216,10 @@ class DDPGConfig:
         Initial diagonal of Lambda (the paper: identity).
     learn_lambda : bool
         Train Lambda's parameter with the actor (False: frozen buffer).
+    actor_output_clip : bool
+        Clip the hybrid actor's blend and the target actions to the action box inside the
+        training graph (leoc, SB3) or leave them unbounded as TF-Agents' DDPG does (the
+        executed action is clipped either way).
     relevance_parametrisation : {"log_lambda", "precision"}
         The paper's relevance trained in :math:`\log\lambda` (positive Lambda, leoc) or in the
         precision :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 /
@@ -272,6 +280,7 @@ class DDPGConfig:
     lambda_init: float = 1.0
     learn_lambda: bool = True
     relevance_parametrisation: str = "log_lambda"
+    actor_output_clip: bool = True
     lqr_method: str = "discrete"
     relevance: str = "paper"
     roa_rho_fraction: float = 1.0
@@ -357,8 +366,9 @@ class DDPGConfig:
                 raise ValueError(
                     f"{name}: expected one of {allowed}, found {getattr(self, name)!r}"
                 )
-        if not isinstance(self.noise_reset, bool):
-            raise ValueError(f"noise_reset: expected a bool, found {self.noise_reset!r}")
+        for name in ("noise_reset", "actor_output_clip"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected a bool, found {getattr(self, name)!r}")
         if not self.ou_theta > 0 or not self.ou_sigma >= 0:
             raise ValueError(
                 f"ou_theta, ou_sigma: expected theta > 0 and sigma >= 0, found "

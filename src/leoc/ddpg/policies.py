@@ -150,6 +150,11 @@ class HybridActor(Actor):
         :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 / lambda_init``
         (:class:`~leoc.policies.PrecisionRelevance`, nrjc/LEOC's ``S``); ``learn_lambda`` then
         says whether :math:`S` is trained.
+    clip_output : bool
+        Whether the actor clips its blend to [-1, 1] (default). False: the blend is returned
+        unbounded, as TF-Agents' actor network returns ``scale_to_spec(r g + (1 - r) h)``
+        (nrjc/LEOC ``DDPG/ddpg.py``), so the actor loss sees the critic beyond the box; the
+        executed action is clipped all the same (SB3's collection, :func:`physical_policy`).
     relevance : {"paper", "roa"}
         ``paper``: :math:`r = (1 + d)^{-2}` with ``lambda_init``/``learn_lambda``. ``roa``:
         :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's certified set
@@ -199,6 +204,7 @@ class HybridActor(Actor):
         learn_lambda: bool = True,
         relevance: str = "paper",
         relevance_parametrisation: str = "log_lambda",
+        clip_output: bool = True,
         roa_obs_layout: Sequence[Sequence[Any]] | None = None,
         roa_operating_state: Sequence[float] | None = None,
         roa_lyapunov_matrix: Sequence[Sequence[float]] | None = None,
@@ -234,6 +240,7 @@ class HybridActor(Actor):
         self.learn_lambda = learn_lambda
         self.relevance_kind = relevance
         self.relevance_parametrisation = relevance_parametrisation
+        self.clip_output = bool(clip_output)
         self.roa_kwargs: dict[str, Any] = {}
         self.register_buffer("physical_gain", torch.as_tensor(gain))
         self.register_buffer("physical_bias", torch.as_tensor(bias))
@@ -313,6 +320,7 @@ class HybridActor(Actor):
             learn_lambda=self.learn_lambda,
             relevance=self.relevance_kind,
             relevance_parametrisation=self.relevance_parametrisation,
+            clip_output=self.clip_output,
             **self.roa_kwargs,
         )
         return data
@@ -338,6 +346,8 @@ class HybridActor(Actor):
             relevance = hybrid.relevance_module(features)  # (B, 1)
         linear = torch.addmm(hybrid.linear.b, features, hybrid.linear.W.T)  # (B, F)
         blend = torch.lerp(hybrid.nonlinear(features), linear, relevance)
+        if not self.clip_output:
+            return blend
         return torch.clamp(blend, -NORMALISED_LIMIT, NORMALISED_LIMIT)
 
     def relevance(self, obs: Tensor) -> Tensor:
@@ -572,7 +582,7 @@ class HybridTD3Policy(LeocTD3Policy):
     critic_action_layer, critic_action_units, hidden_init, last_layer_init
         See :class:`LeocTD3Policy`.
     lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance,
-    relevance_parametrisation, roa_*, learn_width
+    relevance_parametrisation, clip_output, roa_*, learn_width
         Passed to :class:`HybridActor` (see there); :func:`hybrid_policy_kwargs` builds them
         from a system's LQR design (and, for ``relevance="roa"``, its certificate).
     """
@@ -593,6 +603,7 @@ class HybridTD3Policy(LeocTD3Policy):
         learn_lambda: bool = True,
         relevance: str = "paper",
         relevance_parametrisation: str = "log_lambda",
+        clip_output: bool = True,
         **kwargs: Any,
     ) -> None:
         roa_names = (
@@ -612,6 +623,7 @@ class HybridTD3Policy(LeocTD3Policy):
             "learn_lambda": bool(learn_lambda),
             "relevance": relevance,
             "relevance_parametrisation": relevance_parametrisation,
+            "clip_output": bool(clip_output),
             **roa,
         }
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
@@ -697,6 +709,7 @@ def hybrid_policy_kwargs(
     lqr_method: str = "discrete",
     relevance: str = "paper",
     relevance_parametrisation: str = "log_lambda",
+    clip_output: bool = True,
     rho_in_fraction: float = 1.0,
     width_init: float = DEFAULT_ROA_WIDTH,
     learn_width: bool = True,
@@ -709,7 +722,7 @@ def hybrid_policy_kwargs(
     system : leoc.systems.System or str
         The system (or its name); ``W, b`` come from :func:`leoc.control.design_lqr` and ``a``
         is ``system.operating_obs``.
-    lambda_init, learn_lambda, relevance_parametrisation
+    lambda_init, learn_lambda, relevance_parametrisation, clip_output
         See :class:`HybridActor`.
     lqr_method : {"discrete", "continuous", "authors"}
         LQR design method.
@@ -739,6 +752,7 @@ def hybrid_policy_kwargs(
         "learn_lambda": learn_lambda,
         "relevance": relevance,
         "relevance_parametrisation": relevance_parametrisation,
+        "clip_output": clip_output,
         **roa,
         **extra,
     }
