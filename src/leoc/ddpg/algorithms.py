@@ -45,12 +45,12 @@ import torch.nn.functional as F
 from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.utils import polyak_update, update_learning_rate
 
+from leoc.ddpg.config import CRITIC_LOSSES, WARMUPS
+
 __all__ = ["CRITIC_LOSSES", "HUBER_DELTA", "LeocDDPG", "LeocTD3", "WARMUPS", "critic_loss_fn"]
 
 NO_TARGET_UPDATE = 0.0  # Polyak coefficient that leaves the targets unchanged
 FULL_PROGRESS = 1.0  # SB3's "progress remaining" at the start of training
-WARMUPS = ("uniform", "policy")
-CRITIC_LOSSES = ("mse", "huber")
 HUBER_DELTA = 1.0  # tf.compat.v1.losses.huber_loss's default delta (TF-Agents' DDPG)
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actions live in [-1, 1]
 

@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from leoc.ddpg.config import MODEL_SELECTIONS
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
 __all__ = ["MODEL_SELECTIONS", "LearningCurveCallback", "last_third_start"]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
-MODEL_SELECTIONS = ("final", "best_last_third")
 SELECTION_FRACTION = 2.0 / 3.0  # the selection window opens after two thirds of the updates
 
 

@@ -41,8 +41,8 @@ TOTAL_STEPS_BY_SYSTEM = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 
 # Hold band of the "reached and held the operating point" test, in the units of
 # ``System.main_coordinate`` (degrees for the pendulum and cart-pole angles, metres for the car).
 PAPER_HIDDEN_SIZES = (400, 300)
-# Choices of the authors' fields (their meaning: DDPGConfig's docstring). Literal copies of the
-# names in leoc.ddpg's modules, which import torch and SB3 (this module stays light).
+# Choices of the fields where the authors differ (their meaning: DDPGConfig's docstring); the
+# modules that act on them (algorithms, policies, callbacks, train) import them from here.
 NOISE_UNITS = ("normalised", "physical")
 WARMUPS = ("uniform", "policy")
 CRITIC_LOSSES = ("mse", "huber")

@@ -69,6 +69,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
+from leoc.ddpg.config import CRITIC_ACTION_UNITS, HIDDEN_INITS
 from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance, ROARelevance
 from leoc.policies.relevance import (
     DEFAULT_ROA_WIDTH,
@@ -92,8 +93,6 @@ __all__ = [
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
 ACTION_DTYPE = torch.float32  # SB3 actors and replay data are float32
-CRITIC_ACTION_UNITS = ("normalised", "physical")
-HIDDEN_INITS = ("torch", "tf_agents")
 
 
 def action_box(action_space: spaces.Box) -> tuple[np.ndarray, np.ndarray]:
