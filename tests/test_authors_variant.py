@@ -272,3 +272,35 @@ def test_reproduce_variants_side_by_side_in_appendix_d(tmp_path) -> None:
             echo=lambda _: None,
             variant="leoc",
         )
+
+
+@pytest.mark.slow
+def test_smoke_profile_runs_the_whole_pipeline_on_the_authors_variant(tmp_path) -> None:
+    """Every controller of the paper on the cart-pole (the system where the authors' choices
+    differ most) trains and evaluates under the authors' variant, with their settings recorded."""
+    from leoc.experiments.reproduce import reproduce
+
+    report = reproduce(
+        tmp_path,
+        profile_name="smoke",
+        systems=["cartpole"],
+        jobs=2,
+        echo=lambda _: None,
+        variant="authors",
+    )
+    assert "Appendix D side by side" in report.read_text()
+    runs = tmp_path / "runs" / "cartpole"
+    ddpg = json.loads((runs / "ddpg_hybrid/seed0/train/config.json").read_text())
+    assert ddpg["lqr_method"] == "authors" and ddpg["critic_loss"] == "huber"
+    assert ddpg["step_rules"]["exit_penalty"] == AUTHORS_EXIT
+    pilco = json.loads((runs / "pilco_hybrid/seed0/train/config.json").read_text())
+    assert pilco["hybrid_method"] == "mixture" and pilco["gp"]["fixed_noise_var"] == 1e-3
+    for controller in ("linear", "ddpg_baseline", "ddpg_hybrid", "pilco_baseline", "pilco_hybrid"):
+        run = json.loads((runs / controller / "seed0" / "evaluation.json").read_text())
+        assert run["variant"] == "authors"
+        # the authors deploy PILCO every simulator step, DDPG too
+        assert run["action_repeat"] == 1
+        assert len(run["responses"]["impulse"]["deviation_authors"]) <= 401
+
+
+AUTHORS_EXIT = -100.0
