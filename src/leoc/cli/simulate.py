@@ -113,6 +113,17 @@ def load_controller(spec: str, system_name: str, method: str = "discrete", actio
     return load_trained_controller(Path(spec), system=system_name)
 
 
+def controller_key(spec: str) -> str:
+    """The controller's name for its colour: ``linear``, the CONTROLLER of a reproduce run
+    folder ``.../SYSTEM/CONTROLLER/seedN``, else ``trained``."""
+    if spec == LINEAR:
+        return LINEAR
+    parts = Path(spec).resolve().parts
+    if len(parts) >= 3 and parts[-1].startswith("seed"):
+        return parts[-2]
+    return "trained"
+
+
 def controller_label(spec: str, period: int) -> str:
     """The legend label of a simulated controller: the LQR and its period, or the run folder
     as ``SYSTEM/CONTROLLER/seedN`` (a reproduce run) or its folder name."""
@@ -152,14 +163,16 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from leoc.evaluation.plots import plot_responses
 
-        label = controller_label(target.controller, period)
+        key = controller_key(target.controller)
         record = {
             "deviation": result.deviation,
             "terminated": result.metrics.terminated,
             "settled": result.metrics.settled,
         }
         path = plot_responses(
-            {target.system: {args.test: {label: [record]}}}, args.plot, labels={label: label}
+            {target.system: {args.test: {key: [record]}}},
+            args.plot,
+            labels={key: controller_label(target.controller, period)},
         )
         print(f"figure written to {path}")
     return 0
