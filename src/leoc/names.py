@@ -38,6 +38,12 @@ DEFAULT_CONTROLLERS = tuple(name for name in CONTROLLERS if not name.endswith("_
 and the two linear references (the ROA-relevance hybrids are added on request)."""
 PROFILE_NAMES = ("quick", "smoke", "paper")
 """The profiles of ``leoc reproduce`` (``leoc.experiments.profiles.PROFILES``, same order)."""
+VARIANT_NAMES = ("leoc", "authors")
+"""Implementations (``leoc.experiments.variants``): leoc's defaults, or the authors' choices."""
+METRIC_SET_NAMES = ("leoc", "authors")
+"""Response metric sets (``leoc.evaluation.metric_sets``)."""
+LQR_METHODS = ("discrete", "continuous", "authors")
+"""LQR designs of ``leoc.control.design_lqr``."""
 
 
 def register_builtin_envs() -> None:

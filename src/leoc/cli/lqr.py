@@ -7,8 +7,7 @@ import json
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, system_name
-
-METHODS = ("discrete", "continuous")
+from leoc.names import LQR_METHODS as METHODS
 
 
 def add_parser(commands: Any) -> None:
@@ -26,7 +25,7 @@ def add_parser(commands: Any) -> None:
         choices=METHODS,
         default="discrete",
         help="discrete: dlqr on the autodiff linearisation (default); continuous: lqr on the "
-        "paper's analytic model",
+        "paper's analytic model; authors: nrjc/LEOC's lqr on their models (R = 1) times u_max",
     )
     lqr.add_argument("--q", type=float, nargs="+", help="diagonal of Q (default per system)")
     lqr.add_argument("--r", type=float, nargs="+", help="diagonal of R (default 1)")

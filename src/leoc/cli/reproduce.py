@@ -7,7 +7,13 @@ from typing import Any
 
 from leoc.cli._args import positive_int, system_name
 from leoc.cli.train import DEFAULT_RUNS_DIR
-from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, PAPER_SYSTEM_NAMES, PROFILE_NAMES
+from leoc.names import (
+    CONTROLLERS,
+    DEFAULT_CONTROLLERS,
+    PAPER_SYSTEM_NAMES,
+    PROFILE_NAMES,
+    VARIANT_NAMES,
+)
 
 
 def add_parser(commands: Any) -> None:
@@ -27,7 +33,18 @@ def add_parser(commands: Any) -> None:
         help="quick (default: 1 seed, reduced budgets), paper (paper budgets, 3 seeds) or "
         "smoke (a tiny pipeline check)",
     )
-    reproduce.add_argument("--out", help="output folder (default runs/reproduce-PROFILE)")
+    reproduce.add_argument(
+        "--out",
+        help="output folder (default runs/reproduce-PROFILE, runs/reproduce-PROFILE-authors for "
+        "the authors' variant)",
+    )
+    reproduce.add_argument(
+        "--variant",
+        choices=VARIANT_NAMES,
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
+        "u_max with a sin squash, their env rules, DDPG and PILCO settings); default leoc",
+    )
     reproduce.add_argument(
         "--jobs",
         type=positive_int,
@@ -71,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
     from leoc.experiments.reproduce import reproduce
     from leoc.experiments.summary import summary_lines
 
-    out = args.out or str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}")
+    suffix = "" if args.variant == "leoc" else f"-{args.variant}"
+    out = args.out or str(DEFAULT_RUNS_DIR / f"reproduce-{args.profile}{suffix}")
     path = reproduce(
         out,
         profile_name=args.profile,
@@ -81,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         controllers=args.controllers,
         backend=args.backend,
         address=args.address,
+        variant=args.variant,
     )
     for line in summary_lines(path.parent):
         print(line)

@@ -9,6 +9,7 @@ from typing import Any, NamedTuple
 
 from leoc.cli._args import SYSTEM_HELP, positive_float, positive_int, system_or_run_dir
 from leoc.cli.lqr import METHODS
+from leoc.names import METRIC_SET_NAMES, VARIANT_NAMES
 
 LINEAR = "linear"
 
@@ -52,10 +53,28 @@ def add_parser(commands: Any) -> None:
     )
     simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
     simulate.add_argument(
-        "--steps", type=positive_int, default=200, help="episode length (default 200)"
+        "--steps",
+        type=positive_int,
+        help="episode length (default: the variant's, 200; the authors' cart-pole record: 400)",
     )
     simulate.add_argument(
-        "--method", choices=METHODS, default="discrete", help="LQR design of 'linear'"
+        "--method",
+        choices=METHODS,
+        help="LQR design of the linear controller (default: the variant's; leoc: discrete)",
+    )
+    simulate.add_argument(
+        "--variant",
+        choices=VARIANT_NAMES,
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
+        "u_max with a sin squash, their env rules); default leoc",
+    )
+    simulate.add_argument(
+        "--metrics",
+        choices=METRIC_SET_NAMES,
+        default="leoc",
+        help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
+        "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
     )
     simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
     simulate.add_argument(
@@ -98,16 +117,25 @@ def resolve_target(target: str | Path | None, controller: str) -> Target:
     return Target(target, controller)
 
 
-def load_controller(spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1):
-    """``linear`` (the LQR of the system, designed for and run at ``action_repeat``) or a run
-    folder written by ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
-    from leoc.control import design_lqr
-    from leoc.policies import lqr_controller
-    from leoc.systems import make_system
+def load_controller(
+    spec: str,
+    system_name: str,
+    method: str | None = None,
+    action_repeat: int = 1,
+    variant: str = "leoc",
+):
+    """``linear`` (the variant's linear reference of the system, designed for and run at
+    ``action_repeat``; ``method`` overrides its LQR design) or a run folder written by
+    ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
+    import dataclasses
 
+    from leoc.experiments.variants import get_variant
+
+    chosen = get_variant(variant)
     if spec == LINEAR:
-        system = make_system(system_name)
-        return lqr_controller(design_lqr(system, method=method, action_repeat=action_repeat))
+        if method is not None:
+            chosen = dataclasses.replace(chosen, lqr_method=method)
+        return chosen.linear_controller(chosen.system(system_name), action_repeat)
     from leoc.experiments.controllers import load_trained_controller
 
     return load_trained_controller(Path(spec), system=system_name)
@@ -137,12 +165,21 @@ def controller_label(spec: str, period: int) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from leoc.evaluation.rollout import control_period, response_test
-    from leoc.systems import make_system
+    from leoc.experiments.variants import get_variant
 
+    if args.band is not None and args.metrics == "authors":
+        raise ValueError("--band: the authors' metrics fix the band (pi/180); leave --band out")
     target = resolve_target(args.target, args.controller)
-    system = make_system(target.system)
-    controller = load_controller(target.controller, target.system, args.method, args.action_repeat)
-    result = response_test(system, controller, args.test, steps=args.steps, band=args.band)
+    variant = get_variant(args.variant)
+    system = variant.system(target.system)
+    controller = load_controller(
+        target.controller, target.system, args.method, args.action_repeat, args.variant
+    )
+    if args.steps is None:
+        args.steps = variant.steps_for(target.system)
+    result = response_test(
+        system, controller, args.test, steps=args.steps, band=args.band, metric_set=args.metrics
+    )
     period = control_period(controller)
     if args.json:
         print(
@@ -151,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
                     "system": target.system,
                     "controller": target.controller,
                     "test": args.test,
+                    "variant": args.variant,
+                    "metrics_set": args.metrics,
                     "action_repeat": period,
                     "metrics": result.metrics._asdict(),
                     "deviation": result.deviation.tolist(),
@@ -193,7 +232,8 @@ def _print_metrics(args: argparse.Namespace, target: Target, system, result, per
     )
     print(
         f"{args.test} response of {target.controller} on {target.system} ({args.steps} steps, "
-        f"control period {period} step{'s' if period > 1 else ''})"
+        f"control period {period} step{'s' if period > 1 else ''}; variant {args.variant}, "
+        f"{args.metrics} metrics)"
     )
     print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
     print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")

@@ -91,6 +91,9 @@ class DDPGConfig:
         Environment steps between two evaluations.
     eval_episodes : int
         Deterministic swing-up episodes per evaluation, on a separate environment instance.
+    step_rules : dict
+        Fields of the :class:`~leoc.systems.StepRules` the training and evaluation environments
+        step under (empty: leoc's rules; the authors' variant sets theirs).
     """
 
     system: str
@@ -123,6 +126,7 @@ class DDPGConfig:
     learn_width: bool = True
     eval_interval: int = 1_000
     eval_episodes: int = 5
+    step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from leoc.systems import system_names
@@ -171,6 +175,14 @@ class DDPGConfig:
             )
         if not isinstance(self.roa_width, (int, float)) or not self.roa_width > 0:
             raise ValueError(f"roa_width: expected a positive number, found {self.roa_width!r}")
+        from leoc.systems import StepRules
+
+        if not isinstance(self.step_rules, dict):
+            raise ValueError(f"step_rules: expected a dict, found {self.step_rules!r}")
+        try:
+            StepRules(**self.step_rules)
+        except TypeError as error:
+            raise ValueError(f"step_rules: {error}") from error
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts: expected >= 0, found {self.learning_starts}")
 

@@ -165,7 +165,7 @@ def train_ddpg(
     -------
     DDPGResult
     """
-    from leoc.systems import make_env, make_system
+    from leoc.systems import StepRules, make_env, make_system
 
     if total_steps is not None:
         overrides["total_steps"] = total_steps
@@ -179,7 +179,8 @@ def train_ddpg(
         json.dumps({**config_dict, "versions": _versions()}, indent=2),
     )
 
-    system_obj = make_system(system)  # the edge: the config's name, resolved once
+    # the edge: the config's name, resolved once, stepping under the config's rules
+    system_obj = make_system(system).with_rules(StepRules(**config.step_rules))
     env = make_env(system_obj)
     model = build_model(config, seed, env)
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger

@@ -61,6 +61,9 @@ class PilcoConfig:
     stop_after_held : int
         Stop early once this many consecutive evaluations held the operating point in every
         episode (0: never; for multi-seed measurements).
+    step_rules : dict
+        Fields of the :class:`~leoc.systems.StepRules` the real system steps under (empty:
+        leoc's rules; the authors' variant sets theirs).
     """
 
     system: str = "pendulum"
@@ -83,6 +86,7 @@ class PilcoConfig:
     gp: GPSettings = dataclasses.field(default_factory=GPSettings)
     num_threads: int | None = None
     stop_after_held: int = 0
+    step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @classmethod
     def for_system(cls, name: str, **overrides: Any) -> PilcoConfig:
@@ -129,6 +133,14 @@ class PilcoConfig:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not 0 < value < math.inf:
                 raise ValueError(f"{name}: expected a positive number, found {value!r}")
+        from leoc.systems import StepRules
+
+        if not isinstance(self.step_rules, dict):
+            raise ValueError(f"step_rules: expected a dict, found {self.step_rules!r}")
+        try:
+            StepRules(**self.step_rules)
+        except TypeError as error:
+            raise ValueError(f"step_rules: {error}") from error
         if self.relevance not in RELEVANCE_KINDS:
             raise ValueError(
                 f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"

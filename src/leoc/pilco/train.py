@@ -42,7 +42,7 @@ from leoc.pilco.objective import PolicyOptimisation, optimise_policy
 from leoc.pilco.policy import build_policy
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
-from leoc.systems import make_system
+from leoc.systems import StepRules, make_system
 from leoc.systems.base import System
 from leoc.systems.rollout import RandomController
 from leoc.training import (
@@ -251,7 +251,7 @@ def train_pilco(
         torch.set_num_threads(config.num_threads)
     run_path = Path(run_dir) if run_dir is not None else _default_run_dir(config)
     run_path.mkdir(parents=True, exist_ok=True)
-    plant = make_system(system)
+    plant = make_system(system).with_rules(StepRules(**config.step_rules))
     plant.episode_steps = config.episode_steps
     rng = np.random.default_rng(seed)
     generator = torch.Generator().manual_seed(seed)
