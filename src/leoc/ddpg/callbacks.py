@@ -9,6 +9,7 @@ evaluation, so points are comparable and PILCO's curves are measured the same wa
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -21,6 +22,8 @@ from leoc.training import Evaluation, curve_row, evaluate_episodes
 __all__ = ["LearningCurveCallback"]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
+PROGRESS_LINE_INTERVAL_S = 10.0
+"""Seconds between the plain progress lines of ``progress="lines"``."""
 
 
 class LearningCurveCallback(BaseCallback):
@@ -36,8 +39,10 @@ class LearningCurveCallback(BaseCallback):
         Environment steps between evaluations.
     save_best : callable, optional
         Called with the SB3 model whenever the mean return improves (saves ``best_model.zip``).
-    progress : bool
-        Show a tqdm progress bar over the total steps.
+    progress : bool or "lines"
+        True: a tqdm progress bar over the total steps; ``"lines"``: a plain line (for a log
+        file) every ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation:
+        ``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``.
     total_steps : int
         Length of the progress bar.
 
@@ -56,7 +61,7 @@ class LearningCurveCallback(BaseCallback):
         eval_starts: np.ndarray,
         eval_interval: int,
         save_best: Callable[[Any], None] | None = None,
-        progress: bool = True,
+        progress: bool | str = True,
         total_steps: int = 0,
     ) -> None:
         super().__init__(verbose=0)
@@ -72,9 +77,15 @@ class LearningCurveCallback(BaseCallback):
         self._bar: Any = None
         self._bar_position = 0
         self._last_eval_step = -1
+        self._lines = progress == "lines"
+        self._started = time.monotonic()
+        self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
+        self._last: Evaluation | None = None
 
     def _on_training_start(self) -> None:
-        if self.progress:
+        self._started = time.monotonic()
+        self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
+        if self.progress is True:
             from tqdm.auto import tqdm
 
             self._bar = tqdm(total=self.total_steps, unit="step", desc="train", leave=True)
@@ -82,12 +93,34 @@ class LearningCurveCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         steps = self.num_timesteps
-        if steps % PROGRESS_REFRESH_STEPS == 0 and self._bar is not None:
-            self._bar.update(steps - self._bar_position)
-            self._bar_position = steps
+        if steps % PROGRESS_REFRESH_STEPS == 0:
+            if self._bar is not None:
+                self._bar.update(steps - self._bar_position)
+                self._bar_position = steps
+            if self._lines and time.monotonic() >= self._next_line:
+                self._print_line()
         if steps % self.eval_interval == 0:
             self._evaluate()
         return True
+
+    def progress_line(self) -> str:
+        """``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``."""
+        steps = int(self.num_timesteps)
+        elapsed = max(time.monotonic() - self._started, 1e-9)
+        share = steps / self.total_steps if self.total_steps else 0.0
+        text = (
+            f"[ddpg] step {steps}/{self.total_steps} ({share:.0%}), {steps / elapsed:.0f} steps/s"
+        )
+        if self._last is not None:
+            text += (
+                f", last evaluation: return {self._last.mean_return:.1f}, "
+                f"held {self._last.held_fraction:.0%}"
+            )
+        return text
+
+    def _print_line(self) -> None:
+        print(self.progress_line(), flush=True)
+        self._next_line = time.monotonic() + PROGRESS_LINE_INTERVAL_S
 
     def _on_training_end(self) -> None:
         if self._last_eval_step != self.num_timesteps:
@@ -108,8 +141,11 @@ class LearningCurveCallback(BaseCallback):
             self.best_policy = policy
             if self.save_best is not None:
                 self.save_best(self.model)
+        self._last = result
         if self._bar is not None:
             self._bar.set_postfix(
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"
             )
+        if self._lines:
+            self._print_line()
         return result
