@@ -19,12 +19,22 @@ def add_parser(commands: Any) -> None:
     plot.add_argument(
         "run_dir", type=Path, metavar="RUN_DIR", help="the reproduce or published folder"
     )
+    plot.add_argument(
+        "--compare",
+        type=Path,
+        metavar="OTHER_DIR",
+        help="a reproduce folder of the other implementation variant: the report's appendix-D "
+        "table then sets both beside the paper (recorded in RUN_DIR's meta.json, so later "
+        "'leoc plot RUN_DIR' keeps it)",
+    )
     plot.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from leoc.experiments.report import write_report
+    from leoc.experiments.report import record_companion, write_report
 
+    if args.compare is not None:
+        record_companion(args.run_dir, args.compare)
     path = write_report(args.run_dir)
     print(f"figures and report regenerated: {path}")
     return 0

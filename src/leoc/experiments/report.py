@@ -24,6 +24,7 @@ from leoc.evaluation.plots.responses import plot_responses
 from leoc.evaluation.plots.robustness import plot_robustness
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
+from leoc.experiments.appendix_d import appendix_d_section
 from leoc.experiments.layout import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import (
@@ -646,6 +647,35 @@ def _flag_block(flags: list[str], none_text: str) -> list[str]:
     return ["**What failed:**", ""] + [f"- {flag}" for flag in flags] + [""]
 
 
+def record_companion(out_dir: str | Path, other: str | Path) -> None:
+    """Record in ``out_dir``'s ``meta.json`` the reproduce folder ``other`` (of the other
+    implementation variant) whose runs the appendix-D table sets beside this folder's; stored
+    relative to ``out_dir`` so that a published pair of folders keeps it.
+
+    Raises
+    ------
+    FileNotFoundError
+        Either folder has no ``meta.json``.
+    ValueError
+        Both folders hold the same variant.
+    """
+    import os
+
+    out, companion = Path(out_dir), Path(other)
+    metas = []
+    for folder, name in ((out, "run_dir"), (companion, "compare")):
+        if not (folder / META_FILE).is_file():
+            raise FileNotFoundError(f"{name}: no {META_FILE} in {str(folder)!r}")
+        metas.append(json.loads((folder / META_FILE).read_text()))
+    variants = [meta.get("variant", "leoc") for meta in metas]
+    if variants[0] == variants[1]:
+        raise ValueError(
+            f"compare: expected a folder of the other variant, found {variants[1]!r} in both"
+        )
+    metas[0]["compare"] = os.path.relpath(companion.resolve(), out.resolve())
+    write_json_atomic(out / META_FILE, metas[0])
+
+
 def write_report(out_dir: str | Path) -> Path:
     """Aggregate the finished runs of ``out_dir`` into numbers, figures and ``report.md``."""
     out = Path(out_dir)
@@ -752,6 +782,7 @@ def write_report(out_dir: str | Path) -> Path:
         flags,
         figures,
         run_seconds,
+        appendix_d_section(out, meta, evaluations),
     )
     write_text_atomic(path, document)
     return path
@@ -777,7 +808,10 @@ def render_markdown(
     flags: dict[str, list[str]],
     figures: list[tuple[str, str]],
     run_seconds: float,
+    appendix: list[str] | None = None,
 ) -> str:
+    """The markdown of ``report.md``; ``appendix`` (the appendix-D section of
+    :mod:`leoc.experiments.appendix_d`) goes before the response tables."""
     responses, robustness = tables["responses"], tables["robustness"]
     wall = meta.get("wall_seconds_last_invocation")
     lines = [
@@ -852,6 +886,9 @@ def render_markdown(
         "The paper's numbers (appendix D, typed in) do not state their band; its mountain-car "
         "settling times (~201 steps) exceed the 200-step episode.",
         "",
+    ]
+    lines += appendix or []
+    lines += [
         "## Impulse response",
         "",
     ]

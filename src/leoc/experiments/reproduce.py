@@ -126,12 +126,14 @@ def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
     }
 
 
-def pilco_action_repeat(profile: Profile, system: str) -> int:
-    """PILCO's control period on ``system`` under ``profile`` (its override, else the system's
-    PILCO default)."""
+def pilco_action_repeat(profile: Profile, system: str, variant: Variant = LEOC) -> int:
+    """The control period PILCO's controllers run at on ``system`` under ``profile`` and
+    ``variant`` (the period they are deployed at: the authors train holding each action 3 steps
+    but deploy every step)."""
     from leoc.pilco.config import PilcoConfig
 
-    return PilcoConfig.for_system(system, **profile.pilco_overrides).action_repeat
+    settings = {**variant.training_settings("pilco", system, True), **profile.pilco_overrides}
+    return PilcoConfig.for_system(system, **settings).controller_action_repeat
 
 
 def train_controller(
@@ -142,9 +144,17 @@ def train_controller(
     system = variant.system(spec.system)
     if spec.framework == "linear":
         repeat = (
-            pilco_action_repeat(profile, spec.system) if spec.controller == "linear_pilco" else 1
+            pilco_action_repeat(profile, spec.system, variant)
+            if spec.controller == "linear_pilco"
+            else 1
         )
         return variant.linear_controller(system, repeat), None
+    # the variant's settings, then the profile's budgets and overrides, then the run's relevance
+    settings = {
+        **variant.training_settings(spec.framework, spec.system, spec.hybrid),
+        **(profile.pilco_overrides if spec.framework == "pilco" else profile.ddpg_overrides),
+        "relevance": spec.relevance,
+    }
     if spec.framework == "pilco":
         from leoc.pilco.train import train_pilco
 
@@ -152,11 +162,10 @@ def train_controller(
             spec.system,
             hybrid=spec.hybrid,
             seed=spec.seed,
-            relevance=spec.relevance,
             run_dir=train_dir,
             iterations=profile.pilco_iterations.get(spec.system),
             progress=True,
-            **profile.pilco_overrides,
+            **settings,
         )
     else:
         from leoc.ddpg.train import train_ddpg
@@ -166,11 +175,10 @@ def train_controller(
             algo="ddpg",
             hybrid=spec.hybrid,
             seed=spec.seed,
-            relevance=spec.relevance,
             run_dir=train_dir,
             total_steps=profile.ddpg_steps.get(spec.system),
             progress="lines",
-            **profile.ddpg_overrides,
+            **settings,
         )
     return result.policy, _curve(result.curve)
 
