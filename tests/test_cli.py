@@ -84,7 +84,8 @@ def test_the_parser_imports_nothing_heavy() -> None:
         "import sys\n"
         "from leoc.cli import build_parser\n"
         "build_parser().parse_args(['simulate', 'pendulum', '--steps', '5'])\n"
-        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'scipy', 'control')\n"
+        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'scipy', 'control',\n"
+        "         'gymnasium', 'numpy')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
