@@ -84,7 +84,8 @@ def test_the_parser_imports_nothing_heavy() -> None:
         "import sys\n"
         "from leoc.cli import build_parser\n"
         "build_parser().parse_args(['simulate', 'pendulum', '--steps', '5'])\n"
-        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'scipy', 'control')\n"
+        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'scipy', 'control',\n"
+        "         'gymnasium', 'numpy')\n"
         "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
@@ -102,6 +103,11 @@ def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
     assert names.PAPER_SYSTEM_NAMES == SYSTEM_NAMES
     assert system_names()[: len(names.BUILTIN_SYSTEM_NAMES)] == names.BUILTIN_SYSTEM_NAMES
     assert names.PROFILE_NAMES == tuple(PROFILES)
+    from leoc.evaluation.metric_sets import METRIC_SETS
+    from leoc.experiments.variants import VARIANT_NAMES
+
+    assert names.VARIANT_NAMES == VARIANT_NAMES
+    assert names.METRIC_SET_NAMES == tuple(METRIC_SETS)
     for name, (env_id, entry_point) in names.BUILTIN_ENV_IDS.items():
         assert gym.registry[env_id].max_episode_steps == make_system(name).episode_steps
         if name in envs.BUILTIN_ENVS:
@@ -137,6 +143,12 @@ def test_simulate_takes_the_system_from_a_run_folder(tmp_path, capsys) -> None:
         resolve_target(run, str(run))
     with pytest.raises(ValueError, match="found neither"):
         resolve_target(None, LINEAR)
+
+
+def test_the_authors_metrics_refuse_a_band_in_one_line(capsys) -> None:
+    assert main(["simulate", "pendulum", "--metrics", "authors", "--band", "0.1"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--band: the authors' metrics fix the band" in line
 
 
 def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:

@@ -483,3 +483,33 @@ def test_roa_training_step_reaches_width_and_network_and_round_trips(tmp_path):
     assert DDPGConfig.from_dict(config.as_dict()).relevance == "roa"
     with pytest.raises(ValueError, match="relevance: expected one of"):
         DDPGConfig.for_system("pendulum", relevance="flat")
+
+
+def test_ddpg_progress_lines_give_steps_speed_and_the_last_return() -> None:
+    import time
+
+    from leoc.ddpg.callbacks import LearningCurveCallback
+    from leoc.training import Evaluation
+
+    callback = LearningCurveCallback(
+        make_system("pendulum"), np.zeros((1, 2)), 500, progress="lines", total_steps=10_000
+    )
+    callback.num_timesteps = 2500
+    callback._started = time.monotonic() - 25.0
+    assert callback.progress_line().startswith("[ddpg] step 2500/10000 (25%), 10")
+    callback._last = Evaluation(-812.34, 1.0, [-812.34], [None])
+    assert callback.progress_line().endswith("last evaluation: return -812.3, held 0%")
+
+
+def test_profiles_carry_measured_run_costs() -> None:
+    from leoc.experiments.profiles import FALLBACK_RUN_SECONDS, RunSpec, get_profile
+
+    quick, paper, smoke = (get_profile(name) for name in ("quick", "paper", "smoke"))
+    spec = RunSpec("cartpole", "pilco_hybrid", 0)
+    assert paper.expected_seconds(spec) == 454.0  # results/paper, median over its seeds
+    assert quick.expected_seconds(spec) < paper.expected_seconds(spec)
+    # a user's system: the mean of the same controller elsewhere
+    other = RunSpec("acrobot", "ddpg_hybrid", 0)
+    assert paper.expected_seconds(other) == pytest.approx((111.0 + 150.0 + 116.0) / 3)
+    assert smoke.cost_model is None and quick.cost_model is not None
+    assert smoke.expected_seconds(spec) == FALLBACK_RUN_SECONDS["pilco"]

@@ -25,13 +25,18 @@ def test_atomic_files_get_ordinary_permissions_under_the_umask(tmp_path, umask):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
-def test_importing_leoc_registers_the_gymnasium_environments():
+@pytest.mark.parametrize(
+    "imports", ["import gymnasium as gym, leoc", "import leoc\nimport gymnasium as gym"]
+)
+def test_importing_leoc_registers_the_gymnasium_environments(imports):
+    """Before or after gymnasium: ``import leoc`` defers the registration until gymnasium is
+    imported (so the ``leoc`` command starts without it)."""
     script = (
-        "import gymnasium as gym, leoc\n"
+        f"{imports}\n"
         "env = gym.make('leoc/PendulumSwingUp-v0')\n"
-        "print(env.spec.id)\n"
+        "print(env.spec.id, type(env.unwrapped).__name__)\n"
     )
     out = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=120
     )
-    assert out.stdout.strip() == "leoc/PendulumSwingUp-v0"
+    assert out.stdout.strip() == "leoc/PendulumSwingUp-v0 PendulumSwingUpEnv"

@@ -17,9 +17,10 @@ import pytest
 from leoc.cli import main
 from leoc.experiments import sweep as sweep_module
 from leoc.experiments.sweep import (
+    WRAP_INDENT,
     BackendUnavailableError,
     default_run_dir,
-    estimate_remaining,
+    fit_lines,
     format_seconds,
     last_log_line,
     sweep,
@@ -221,11 +222,40 @@ def slow_runner(spec: str, out_dir: Path) -> dict[str, object]:
 
 
 # --------------------------------------------------------------------------- helpers, errors
-def test_eta_closed_form_and_time_format() -> None:
-    assert estimate_remaining([], [5.0], 3, 2) is None
-    # mean 10 s; 4 queued (40 s) + running runs with 3 s and 12 s elapsed (7 s + 0 s): 47 s / 2
-    assert estimate_remaining([8.0, 12.0], [3.0, 12.0], 4, 2) == pytest.approx(23.5)
+def test_time_format() -> None:
     assert [format_seconds(s) for s in (0, 59.6, 75, 3700)] == ["0s", "1m00s", "1m15s", "1h01m"]
+
+
+def test_progress_lines_wrap_to_the_terminal_without_losing_a_number() -> None:
+    line = (
+        "  cartpole/pilco_hybrid/seed0 (1m15s): [pilco] iter  9/10 predicted cost   6.199 "
+        "rollout return    -52.95 eval return    -56.56 held 100% data  642 interaction  "
+        "39.00 s wall   40.9 s"
+    )
+    lines = fit_lines(line, 80)
+    assert len(lines) == 3 and all(len(text) <= 80 for text in lines)
+    assert lines[0].startswith("  cartpole/pilco_hybrid/seed0 (1m15s): [pilco] iter 9/10")
+    assert lines[1].startswith(WRAP_INDENT) and not lines[1].startswith(WRAP_INDENT + " ")
+    numbers = ["9/10", "6.199", "-52.95", "-56.56", "100%", "642", "39.00", "40.9"]
+    assert all(number in " ".join(lines).split() for number in numbers)
+    assert fit_lines("  short", 80) == ["  short"]
+
+
+def test_the_eta_comes_from_the_expected_costs_from_the_first_report(tmp_path) -> None:
+    messages: list[str] = []
+    sweep(
+        ["first", "a", "b", "c"],
+        slow_runner,
+        tmp_path,
+        jobs=1,
+        progress_interval_s=5.0,
+        echo=messages.append,
+        expected_seconds=lambda spec: 1.2,
+        progress_of=lambda line: 0.5 if "step 1 of 2" in line else None,
+    )
+    first = next(m for m in messages if " running, " in m)
+    # reported as the first run starts: 1.2 s for it and 3 x 1.2 s queued, on one worker
+    assert "[0s] 0 done, 1 running, 3 queued; ETA 5s" in first
 
 
 def test_last_log_line_reads_progress_bars_and_missing_files(tmp_path) -> None:
@@ -296,3 +326,31 @@ def test_smoke_profile_on_ray_equals_the_local_backend(tmp_path, ray_instance) -
                 evaluation.pop(key)
             runs[name] = evaluation
         assert runs["ray"] == runs["local"], controller  # bit-for-bit the same numbers
+
+
+# ------------------------------------------------------------------------------------- ETA
+def test_eta_deals_the_queue_to_the_first_free_worker() -> None:
+    from leoc.experiments.eta import PRIOR_WEIGHT_S, Finished, Running, estimate_remaining
+
+    # on schedule so far: 2 workers, one with 50 s left of a 100 s run (half done per its log),
+    # 60 s and 10 s queued: the 60 s run goes to the free worker, the 10 s one to the worker
+    # free at 50 s: max(50 + 10, 60) = 60 s
+    assert estimate_remaining([], [Running(100.0, 50.0, 0.5)], [60.0, 10.0], 2) == 60.0
+    assert estimate_remaining([], [Running(100.0, 50.0, 0.5)], [60.0, 30.0], 2) == 80.0
+    # two short runs last do not stretch the ETA: the long running run sets it
+    assert estimate_remaining([], [Running(300.0, 100.0)], [5.0, 5.0], 2) == 200.0
+    # runs so far twice as slow as expected (with the prior's weight): everything scales
+    finished = [Finished(100.0, 200.0)]
+    factor = (200.0 + PRIOR_WEIGHT_S) / (100.0 + PRIOR_WEIGHT_S)
+    assert estimate_remaining(finished, [], [50.0], 1) == pytest.approx(50.0 * factor)
+    # a running run past its expectation keeps a second, not a negative time
+    assert estimate_remaining([], [Running(10.0, 30.0)], [], 1) == 1.0
+
+
+def test_trainer_progress_reads_ddpg_and_pilco_lines() -> None:
+    from leoc.experiments.eta import trainer_progress
+
+    line = "[ddpg] step 2500/10000 (25%), 98 steps/s, last evaluation: return -812.3, held 0%"
+    assert trainer_progress(line) == 0.25
+    assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") == pytest.approx(6 / 20)
+    assert trainer_progress("== pendulum/linear/seed0 (quick profile)") is None

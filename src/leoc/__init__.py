@@ -9,12 +9,13 @@ __version__ = "0.1.0"
 import importlib
 from typing import Any
 
-from leoc.names import register_builtin_envs
+from leoc.names import register_builtin_envs_with_gymnasium
 
 # gymnasium convention: importing the package registers its environments (leoc/...-v0). The ids
-# are registered by entry point here, so ``import leoc`` (and the ``leoc`` command's start-up)
-# does not import torch; ``leoc.systems`` registers each system in full when first imported.
-register_builtin_envs()
+# are registered by entry point (now, or when gymnasium is first imported), so ``import leoc``
+# (and the ``leoc`` command's start-up) imports neither torch nor gymnasium; ``leoc.systems``
+# registers each system in full when first imported.
+register_builtin_envs_with_gymnasium()
 
 _SUBPACKAGES = ("control", "ddpg", "evaluation", "experiments", "pilco", "policies", "systems")
 

@@ -7,6 +7,11 @@ them, and ``tests/test_cli.py`` checks that they agree with the registry and the
 
 from __future__ import annotations
 
+import importlib.abc
+import importlib.machinery
+import sys
+from typing import Any
+
 PAPER_SYSTEM_NAMES = ("pendulum", "cartpole", "mountaincar")
 """The paper's three benchmark systems (what ``leoc reproduce`` runs by default)."""
 BUILTIN_SYSTEM_NAMES = (*PAPER_SYSTEM_NAMES, "acrobot")
@@ -38,6 +43,12 @@ DEFAULT_CONTROLLERS = tuple(name for name in CONTROLLERS if not name.endswith("_
 and the two linear references (the ROA-relevance hybrids are added on request)."""
 PROFILE_NAMES = ("quick", "smoke", "paper")
 """The profiles of ``leoc reproduce`` (``leoc.experiments.profiles.PROFILES``, same order)."""
+VARIANT_NAMES = ("leoc", "authors")
+"""Implementations (``leoc.experiments.variants``): leoc's defaults, or the authors' choices."""
+METRIC_SET_NAMES = ("leoc", "authors")
+"""Response metric sets (``leoc.evaluation.metric_sets``)."""
+LQR_METHODS = ("discrete", "continuous", "authors")
+"""LQR designs of ``leoc.control.design_lqr``."""
 
 
 def register_builtin_envs() -> None:
@@ -60,3 +71,38 @@ def register_builtin_envs() -> None:
             max_episode_steps=BUILTIN_EPISODE_STEPS,
             kwargs=kwargs,
         )
+
+
+class _RegisterAfterImport(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Finds ``gymnasium`` with the normal machinery and, once it has been executed, registers
+    the built-in environments; then steps aside (it is used once)."""
+
+    def __init__(self) -> None:
+        self._loader: Any = None
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        if name != "gymnasium" or self not in sys.meta_path:
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        if spec is None or spec.loader is None:
+            return spec
+        self._loader, spec.loader = spec.loader, self
+        return spec
+
+    def create_module(self, spec: Any) -> Any:
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module: Any) -> None:
+        self._loader.exec_module(module)
+        register_builtin_envs()
+
+
+def register_builtin_envs_with_gymnasium() -> None:
+    """Register the built-in ids now if gymnasium is imported, else as soon as it is: ``import
+    leoc`` then stays free of gymnasium's (and numpy's) import time, which the ``leoc`` command
+    does not need to answer ``--help``, and ``gymnasium.make("leoc/...")`` works either way."""
+    if "gymnasium" in sys.modules:
+        register_builtin_envs()
+    elif not any(isinstance(finder, _RegisterAfterImport) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _RegisterAfterImport())

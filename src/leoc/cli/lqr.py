@@ -7,8 +7,7 @@ import json
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, system_name
-
-METHODS = ("discrete", "continuous", "authors")
+from leoc.names import LQR_METHODS as METHODS
 
 
 def add_parser(commands: Any) -> None:

@@ -7,7 +7,13 @@ from typing import Any
 
 from leoc.cli._args import positive_int, system_name
 from leoc.cli.train import DEFAULT_RUNS_DIR
-from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, PAPER_SYSTEM_NAMES, PROFILE_NAMES
+from leoc.names import (
+    CONTROLLERS,
+    DEFAULT_CONTROLLERS,
+    PAPER_SYSTEM_NAMES,
+    PROFILE_NAMES,
+    VARIANT_NAMES,
+)
 
 
 def add_parser(commands: Any) -> None:
@@ -34,7 +40,7 @@ def add_parser(commands: Any) -> None:
     )
     reproduce.add_argument(
         "--variant",
-        choices=("leoc", "authors"),
+        choices=VARIANT_NAMES,
         default="leoc",
         help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
         "u_max with a sin squash, their env rules, DDPG and PILCO settings); default leoc",

@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
             for label, entry in basins.items()
         }
         report["plot"] = str(
-            plot_basins(system, certificate, slices, dims, args.slice_points, args.plot)
+            plot_basins(system, certificate, slices, dims, args.slice_points, args.plot, box=box)
         )
     report["seconds"] = time.perf_counter() - started
     if args.json:

@@ -9,9 +9,9 @@ from typing import Any, NamedTuple
 
 from leoc.cli._args import SYSTEM_HELP, positive_float, positive_int, system_or_run_dir
 from leoc.cli.lqr import METHODS
+from leoc.names import METRIC_SET_NAMES, VARIANT_NAMES
 
 LINEAR = "linear"
-VARIANT_CHOICES = ("leoc", "authors")
 
 
 def add_parser(commands: Any) -> None:
@@ -60,18 +60,18 @@ def add_parser(commands: Any) -> None:
     simulate.add_argument(
         "--method",
         choices=METHODS,
-        help="LQR design of 'linear' (default: the variant's; leoc: discrete)",
+        help="LQR design of the linear controller (default: the variant's; leoc: discrete)",
     )
     simulate.add_argument(
         "--variant",
-        choices=VARIANT_CHOICES,
+        choices=VARIANT_NAMES,
         default="leoc",
         help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
         "u_max with a sin squash, their env rules); default leoc",
     )
     simulate.add_argument(
         "--metrics",
-        choices=VARIANT_CHOICES,
+        choices=METRIC_SET_NAMES,
         default="leoc",
         help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
         "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
@@ -131,14 +131,25 @@ def load_controller(
 
     from leoc.experiments.variants import get_variant
 
+    chosen = get_variant(variant)
     if spec == LINEAR:
-        chosen = get_variant(variant)
         if method is not None:
             chosen = dataclasses.replace(chosen, lqr_method=method)
         return chosen.linear_controller(chosen.system(system_name), action_repeat)
     from leoc.experiments.controllers import load_trained_controller
 
     return load_trained_controller(Path(spec), system=system_name)
+
+
+def controller_key(spec: str) -> str:
+    """The controller's name for its colour: ``linear``, the CONTROLLER of a reproduce run
+    folder ``.../SYSTEM/CONTROLLER/seedN``, else ``trained``."""
+    if spec == LINEAR:
+        return LINEAR
+    parts = Path(spec).resolve().parts
+    if len(parts) >= 3 and parts[-1].startswith("seed"):
+        return parts[-2]
+    return "trained"
 
 
 def controller_label(spec: str, period: int) -> str:
@@ -156,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
     from leoc.evaluation.rollout import control_period, response_test
     from leoc.experiments.variants import get_variant
 
+    if args.band is not None and args.metrics == "authors":
+        raise ValueError("--band: the authors' metrics fix the band (pi/180); leave --band out")
     target = resolve_target(args.target, args.controller)
     variant = get_variant(args.variant)
     system = variant.system(target.system)
@@ -164,8 +177,6 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.steps is None:
         args.steps = variant.steps_for(target.system)
-    if args.band is not None and args.metrics == "authors":
-        raise ValueError(f"band: the authors' metrics fix the band (pi/180), found {args.band}")
     result = response_test(
         system, controller, args.test, steps=args.steps, band=args.band, metric_set=args.metrics
     )
@@ -191,14 +202,16 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from leoc.evaluation.plots import plot_responses
 
-        label = controller_label(target.controller, period)
+        key = controller_key(target.controller)
         record = {
             "deviation": result.deviation,
             "terminated": result.metrics.terminated,
             "settled": result.metrics.settled,
         }
         path = plot_responses(
-            {target.system: {args.test: {label: [record]}}}, args.plot, labels={label: label}
+            {target.system: {args.test: {key: [record]}}},
+            args.plot,
+            labels={key: controller_label(target.controller, period)},
         )
         print(f"figure written to {path}")
     return 0

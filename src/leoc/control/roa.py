@@ -96,6 +96,7 @@ __all__ = [
     "empirical_basin",
     "lqr_closed_loop",
     "lyapunov_value",
+    "draw_basin_slices",
     "plot_basins",
     "slice_grid",
     "state_deviation",
@@ -773,6 +774,12 @@ def _ellipse_boundary(P: np.ndarray, rho: float, dims: tuple[int, int], points: 
 ELLIPSE_POINTS = 400
 
 
+BASIN_COLOURS = ("#d9d9d9", "#74c476")
+"""Slice cells whose start does not / does converge and hold."""
+BOX_COLOUR = "#1f77b4"
+CAPTION_CHARS_PER_INCH = 15
+
+
 def plot_basins(
     system: System,
     certificate: LyapunovCertificate,
@@ -780,22 +787,46 @@ def plot_basins(
     dims: tuple[int, int],
     points: int,
     path: str | Path,
+    box: np.ndarray | None = None,
 ) -> Path:
-    """One panel per controller: the basin on a slice grid (:func:`slice_grid` with the same
-    ``dims`` and ``points``) and the certified ellipse's slice over it. Returns the PNG path."""
+    """:func:`draw_basin_slices` saved as a PNG at ``path``; returns the path."""
+    from leoc.io import save_figure_atomic
+
+    figure = draw_basin_slices(system, certificate, basins, dims, points, box)
+    return save_figure_atomic(figure, Path(path))
+
+
+def draw_basin_slices(
+    system: System,
+    certificate: LyapunovCertificate,
+    basins: Mapping[str, Basin],
+    dims: tuple[int, int],
+    points: int,
+    box: np.ndarray | None = None,
+) -> Any:
+    """One panel per controller: the basin on a 2-D slice through the operating point
+    (:func:`slice_grid` with the same ``dims`` and ``points``), the certified set's slice over
+    it and, when given, the basin ``box``'s slice (the box the command's percentages refer
+    to). Axes in state units; each panel's title gives the share of *this slice* held.
+    Returns the matplotlib figure."""
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch, Rectangle
 
-    from leoc.io import save_figure_atomic
+    from leoc.systems.units import state_axis_label
 
     count = len(basins)
-    fig, axes = plt.subplots(1, count, figsize=(4.2 * count, 4.0), squeeze=False)
+    fig, axes = plt.subplots(
+        1, count, figsize=(4.6 * max(count, 2), 4.4), squeeze=False, layout="constrained"
+    )
     boundary = _ellipse_boundary(certificate.P, certificate.rho, dims, ELLIPSE_POINTS)
     first, second = dims
-    colours = ListedColormap(["#d9d9d9", "#74c476"])
+    centre = certificate.operating_state
     for axis, (label, basin) in zip(axes[0], basins.items(), strict=True):
         if basin.starts.shape[0] != points * points:
             raise ValueError(
@@ -805,15 +836,52 @@ def plot_basins(
         grid_a = basin.starts[:, first].reshape(points, points)
         grid_b = basin.starts[:, second].reshape(points, points)
         held = basin.held.reshape(points, points).astype(float)
-        axis.pcolormesh(grid_a, grid_b, held, cmap=colours, vmin=0.0, vmax=1.0, shading="nearest")
-        centre = certificate.operating_state
+        axis.pcolormesh(
+            grid_a,
+            grid_b,
+            held,
+            cmap=ListedColormap(BASIN_COLOURS),
+            vmin=0.0,
+            vmax=1.0,
+            shading="nearest",
+        )
         axis.plot(centre[first] + boundary[:, 0], centre[second] + boundary[:, 1], "k-", lw=1.5)
-        axis.set_title(f"{label}: {basin.fraction:.0%} held")
-        axis.set_xlabel(system.state_names[first])
-        axis.set_ylabel(system.state_names[second])
-    fig.suptitle(
-        f"{system.name}: basins (green: converged and held) and certified set "
-        f"V <= {certificate.rho:.4g} (black)"
+        if box is not None:
+            axis.add_patch(
+                Rectangle(
+                    (centre[first] - box[first], centre[second] - box[second]),
+                    2 * box[first],
+                    2 * box[second],
+                    fill=False,
+                    edgecolor=BOX_COLOUR,
+                    linestyle="--",
+                    linewidth=1.2,
+                )
+            )
+        axis.set_title(f"{label}: {basin.fraction:.0%} of this slice held")
+        axis.set_xlabel(state_axis_label(system, first))
+        axis.set_ylabel(state_axis_label(system, second))
+    handles = [
+        Patch(color=BASIN_COLOURS[1], label="converges and holds"),
+        Patch(color=BASIN_COLOURS[0], label="does not"),
+        plt.Line2D([], [], color="k", label=f"certified set V <= {certificate.rho:.3g}"),
+    ]
+    if box is not None:
+        handles.append(plt.Line2D([], [], color=BOX_COLOUR, ls="--", label="basin box"))
+    others = [n for k, n in enumerate(system.state_names) if k not in dims]
+    caption = (
+        f"{system.name}: starts on the {system.state_names[first]}-"
+        f"{system.state_names[second]} plane through the operating point"
+        + (f" ({', '.join(others)} at the operating point)" if others else "")
+        + "; the command's percentages of the box count starts drawn in the whole basin box."
     )
-    fig.tight_layout()
-    return save_figure_atomic(fig, Path(path))
+    fig.legend(
+        handles=handles,
+        loc="outside lower center",
+        ncol=len(handles),
+        fontsize="small",
+        frameon=False,
+        title=textwrap.fill(caption, int(fig.get_figwidth() * CAPTION_CHARS_PER_INCH)),
+        title_fontsize="small",
+    )
+    return fig

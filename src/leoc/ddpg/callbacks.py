@@ -17,6 +17,7 @@ best so far; that saved policy is their controller).
 from __future__ import annotations
 
 import copy
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -30,6 +31,8 @@ from leoc.training import Evaluation, curve_row, evaluate_episodes
 __all__ = ["MODEL_SELECTIONS", "LearningCurveCallback", "last_third_start"]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
+PROGRESS_LINE_INTERVAL_S = 10.0
+"""Seconds between the plain progress lines of ``progress="lines"``."""
 SELECTION_FRACTION = 2.0 / 3.0  # the selection window opens after two thirds of the updates
 
 
@@ -58,8 +61,10 @@ class LearningCurveCallback(BaseCallback):
         Environment steps between evaluations.
     save_best : callable, optional
         Called with the SB3 model whenever the mean return improves (saves ``best_model.zip``).
-    progress : bool
-        Show a tqdm progress bar over the total steps.
+    progress : bool or "lines"
+        True: a tqdm progress bar over the total steps; ``"lines"``: a plain line (for a log
+        file) every ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation:
+        ``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``.
     total_steps : int
         Length of the progress bar.
     model_selection : {"final", "best_last_third"}
@@ -84,7 +89,7 @@ class LearningCurveCallback(BaseCallback):
         eval_starts: np.ndarray,
         eval_interval: int,
         save_best: Callable[[Any], None] | None = None,
-        progress: bool = True,
+        progress: bool | str = True,
         total_steps: int = 0,
         model_selection: str = "final",
         selection_start: int = 0,
@@ -111,9 +116,15 @@ class LearningCurveCallback(BaseCallback):
         self._bar: Any = None
         self._bar_position = 0
         self._last_eval_step = -1
+        self._lines = progress == "lines"
+        self._started = time.monotonic()
+        self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
+        self._last: Evaluation | None = None
 
     def _on_training_start(self) -> None:
-        if self.progress:
+        self._started = time.monotonic()
+        self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
+        if self.progress is True:
             from tqdm.auto import tqdm
 
             self._bar = tqdm(total=self.total_steps, unit="step", desc="train", leave=True)
@@ -121,12 +132,34 @@ class LearningCurveCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         steps = self.num_timesteps
-        if steps % PROGRESS_REFRESH_STEPS == 0 and self._bar is not None:
-            self._bar.update(steps - self._bar_position)
-            self._bar_position = steps
+        if steps % PROGRESS_REFRESH_STEPS == 0:
+            if self._bar is not None:
+                self._bar.update(steps - self._bar_position)
+                self._bar_position = steps
+            if self._lines and time.monotonic() >= self._next_line:
+                self._print_line()
         if steps % self.eval_interval == 0:
             self._evaluate()
         return True
+
+    def progress_line(self) -> str:
+        """``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``."""
+        steps = int(self.num_timesteps)
+        elapsed = max(time.monotonic() - self._started, 1e-9)
+        share = steps / self.total_steps if self.total_steps else 0.0
+        text = (
+            f"[ddpg] step {steps}/{self.total_steps} ({share:.0%}), {steps / elapsed:.0f} steps/s"
+        )
+        if self._last is not None:
+            text += (
+                f", last evaluation: return {self._last.mean_return:.1f}, "
+                f"held {self._last.held_fraction:.0%}"
+            )
+        return text
+
+    def _print_line(self) -> None:
+        print(self.progress_line(), flush=True)
+        self._next_line = time.monotonic() + PROGRESS_LINE_INTERVAL_S
 
     def _on_training_end(self) -> None:
         if self._last_eval_step != self.num_timesteps:
@@ -148,11 +181,14 @@ class LearningCurveCallback(BaseCallback):
             self.best_policy = policy
             if self.save_best is not None:
                 self.save_best(self.model)
+        self._last = result
         self._consider_for_selection(steps, result.mean_return)
         if self._bar is not None:
             self._bar.set_postfix(
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"
             )
+        if self._lines:
+            self._print_line()
         return result
 
     def restore_selected(self) -> None:

@@ -161,7 +161,7 @@ def train_ddpg(
     seed: int = 0,
     run_dir: str | Path | None = None,
     total_steps: int | None = None,
-    progress: bool = True,
+    progress: bool | str = True,
     **overrides: Any,
 ) -> DDPGResult:
     """Train DDPG or TD3 (baseline MLP actor or LEOC hybrid) on ``system`` and save the run.
@@ -180,8 +180,10 @@ def train_ddpg(
         Output folder; default ``runs/ddpg/{system}-{algo}-{hybrid|baseline}-seed{seed}``.
     total_steps : int, optional
         Environment steps; default per system (10k, 15k for the cart-pole).
-    progress : bool
-        Show a progress bar.
+    progress : bool or "lines"
+        True: a progress bar; ``"lines"``: a plain line now and then (steps done / total,
+        steps per second, the last evaluation's return; for logs, ``leoc reproduce``); False:
+        nothing.
     **overrides
         Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...).
 

@@ -45,6 +45,10 @@ class Profile:
         The budgets of a system missing from the dicts (a user's registered system).
     pilco_overrides, ddpg_overrides : dict
         Further keyword settings passed to the trainers.
+    run_seconds : dict ``"system/controller"`` -> float
+        Measured wall time of one run of that kind on one worker (the ETA's expected costs,
+        :mod:`leoc.experiments.eta`); kinds not listed: :data:`FALLBACK_RUN_SECONDS` of their
+        framework.
     """
 
     name: str
@@ -56,6 +60,25 @@ class Profile:
     pilco_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     ddpg_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     description: str = ""
+    run_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def expected_seconds(self, spec: RunSpec) -> float:
+        """Expected wall time of ``spec`` on one worker: its measured kind, else the mean of
+        the measured runs of its controller on other systems, else the framework's fallback
+        (see :attr:`cost_model` for a profile with no measurements at all)."""
+        known = self.run_seconds.get(f"{spec.system}/{spec.controller}")
+        if known is not None:
+            return known
+        same = [v for k, v in self.run_seconds.items() if k.endswith(f"/{spec.controller}")]
+        if same:
+            return sum(same) / len(same)
+        return FALLBACK_RUN_SECONDS[spec.framework]
+
+    @property
+    def cost_model(self):
+        """:meth:`expected_seconds` for the sweep's ETA, or None when the profile has no
+        measured costs (the sweep then estimates from the runs that finish)."""
+        return self.expected_seconds if self.run_seconds else None
 
     def iterations_for(self, system: str) -> int | None:
         """PILCO iterations of ``system`` (None: the PILCO default)."""
@@ -65,6 +88,68 @@ class Profile:
         """DDPG steps of ``system`` (None: the DDPG default)."""
         return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
+
+FALLBACK_RUN_SECONDS = {"linear": 5.0, "ddpg": 120.0, "pilco": 250.0}
+"""Expected wall time of a run kind a profile has no measurement for (a user's system)."""
+
+# Measured run costs [s]: the median over seeds of each kind's wall time (training and
+# evaluation) in results/paper (leoc commit 008e601, 2 workers on a 2-core AMD EPYC).
+PAPER_RUN_SECONDS = {
+    "pendulum/linear": 4.0,
+    "pendulum/linear_pilco": 5.0,
+    "pendulum/ddpg_baseline": 107.0,
+    "pendulum/ddpg_hybrid": 111.0,
+    "pendulum/ddpg_hybrid_roa": 120.0,
+    "pendulum/pilco_baseline": 224.0,
+    "pendulum/pilco_hybrid": 238.0,
+    "pendulum/pilco_hybrid_roa": 229.0,
+    "cartpole/linear": 5.0,
+    "cartpole/linear_pilco": 5.0,
+    "cartpole/ddpg_baseline": 190.0,
+    "cartpole/ddpg_hybrid": 150.0,
+    "cartpole/ddpg_hybrid_roa": 180.0,
+    "cartpole/pilco_baseline": 368.0,
+    "cartpole/pilco_hybrid": 454.0,
+    "cartpole/pilco_hybrid_roa": 469.0,
+    "mountaincar/linear": 4.0,
+    "mountaincar/linear_pilco": 5.0,
+    "mountaincar/ddpg_baseline": 95.0,
+    "mountaincar/ddpg_hybrid": 116.0,
+    "mountaincar/ddpg_hybrid_roa": 134.0,
+    "mountaincar/pilco_baseline": 239.0,
+    "mountaincar/pilco_hybrid": 264.0,
+    "mountaincar/pilco_hybrid_roa": 270.0,
+}
+# The quick profile's run costs [s], derived from the paper profile's: each kind's evaluation
+# time (wall - training) plus its training time scaled by the quick budget (DDPG: steps; PILCO:
+# iterations), then every trained kind scaled by 1.204 so that the 18 default runs dealt to 2
+# workers take the 740 s the whole quick profile measured on an idle 2-core machine (README).
+QUICK_RUN_SECONDS = {
+    "pendulum/linear": 4.0,
+    "pendulum/linear_pilco": 5.0,
+    "pendulum/ddpg_baseline": 69.0,
+    "pendulum/ddpg_hybrid": 74.0,
+    "pendulum/ddpg_hybrid_roa": 82.0,
+    "pendulum/pilco_baseline": 138.0,
+    "pendulum/pilco_hybrid": 147.0,
+    "pendulum/pilco_hybrid_roa": 142.0,
+    "cartpole/linear": 5.0,
+    "cartpole/linear_pilco": 5.0,
+    "cartpole/ddpg_baseline": 127.0,
+    "cartpole/ddpg_hybrid": 104.0,
+    "cartpole/ddpg_hybrid_roa": 124.0,
+    "cartpole/pilco_baseline": 181.0,
+    "cartpole/pilco_hybrid": 224.0,
+    "cartpole/pilco_hybrid_roa": 231.0,
+    "mountaincar/linear": 4.0,
+    "mountaincar/linear_pilco": 5.0,
+    "mountaincar/ddpg_baseline": 74.0,
+    "mountaincar/ddpg_hybrid": 91.0,
+    "mountaincar/ddpg_hybrid_roa": 106.0,
+    "mountaincar/pilco_baseline": 90.0,
+    "mountaincar/pilco_hybrid": 101.0,
+    "mountaincar/pilco_hybrid_roa": 102.0,
+}
 
 PROFILES: dict[str, Profile] = {
     "quick": Profile(
@@ -77,6 +162,7 @@ PROFILES: dict[str, Profile] = {
             "quick profile: one seed and reduced training budgets (real training, not the "
             "paper's budgets); numbers are indicative, not a reproduction of the paper's"
         ),
+        run_seconds=QUICK_RUN_SECONDS,
     ),
     "smoke": Profile(
         name="smoke",
@@ -109,6 +195,7 @@ PROFILES: dict[str, Profile] = {
         pilco_iterations={name: None for name in SYSTEM_NAMES},
         ddpg_steps={name: None for name in SYSTEM_NAMES},
         description="paper profile: the paper's budgets (appendix C) over three seeds",
+        run_seconds=PAPER_RUN_SECONDS,
     ),
 }
 PROFILE_NAMES = tuple(PROFILES)

@@ -17,14 +17,11 @@ from typing import Any
 import numpy as np
 
 from leoc.evaluation.metrics import DEFAULT_RELATIVE_BAND, ResponseMetrics, summarise_metrics
-from leoc.evaluation.plots import (
-    _pyplot,
-    axes_handles,
-    controller_colour,
-    legend_below,
-    plot_responses,
-    save_figure,
-)
+from leoc.evaluation.plots.basins import plot_basins_summary
+from leoc.evaluation.plots.learning import plot_learning_curves
+from leoc.evaluation.plots.relevance import plot_relevance
+from leoc.evaluation.plots.responses import plot_responses
+from leoc.evaluation.plots.robustness import plot_robustness
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
 from leoc.experiments.appendix_d import appendix_d_section
@@ -423,159 +420,31 @@ def swing_up_flags(rows: list[dict[str, Any]]) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------ figures
-def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path) -> Path:
-    """Figure 6: return vs interaction time, baseline vs hybrid, rows = framework."""
-    plt = _pyplot()
-    systems = list(curves)
-    frameworks = ("ddpg", "pilco")
-    figure, axes = plt.subplots(
-        2, max(1, len(systems)), figsize=(4.2 * max(1, len(systems)), 6.4), squeeze=False
-    )
-    for column, system in enumerate(systems):
-        for row, framework in enumerate(frameworks):
-            axis = axes[row][column]
-            for kind in ("baseline", "hybrid"):
-                key = f"{framework}_{kind}"
-                curve = curves[system].get(key)
-                if curve is None:
-                    continue
-                seconds = np.array(curve["seconds"])
-                colour = controller_colour(key)
-                if "iqm" in curve:  # >= 3 seeds: IQM and its 95 % bootstrap band
-                    centre = np.array(curve["iqm"])
-                    low, high = np.array(curve["ci_low"]), np.array(curve["ci_high"])
-                    label = f"{_label(key)} (IQM, 95% CI, n={curve['n_seeds']})"
-                else:  # fewer seeds: no interval, the mean (and std when there are two)
-                    centre, std = np.array(curve["mean"]), np.array(curve["std"])
-                    low, high = centre - std, centre + std
-                    label = f"{_label(key)} (n={curve['n_seeds']}: no interval)"
-                axis.plot(
-                    seconds,
-                    centre,
-                    color=colour,
-                    marker="." if len(seconds) < 20 else None,
-                    label=label,
-                )
-                axis.fill_between(seconds, low, high, color=colour, alpha=0.2)
-            axis.set_title(f"{system}: {framework.upper()}")
-            axis.set_xlabel("interaction time [s]")
-            axis.set_ylabel("evaluation return")
-    legend_below(figure, axes_handles(axes))
-    return save_figure(figure, path)
-
-
-def plot_robustness(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Figure 8: fraction stabilised (top) and return (bottom) against the scale, per parameter."""
-    plt = _pyplot()
-    systems = list(dict.fromkeys(row["system"] for row in rows))
-    panels = [(p, q) for p in SCALED_PARAMETERS for q in ("fraction_stabilised", "return_mean")]
-    figure, axes = plt.subplots(
-        len(panels),
-        max(1, len(systems)),
-        figsize=(4.2 * max(1, len(systems)), 2.6 * len(panels)),
-        squeeze=False,
-    )
-    for column, system in enumerate(systems):
-        for row_index, (parameter, quantity) in enumerate(panels):
-            axis = axes[row_index][column]
-            for controller in CONTROLLERS:
-                selected = [
-                    r
-                    for r in rows
-                    if (r["system"], r["parameter"], r["controller"])
-                    == (system, parameter, controller)
-                ]
-                if not selected:
-                    continue
-                scale = np.array([r["scale"] for r in selected])
-                values = np.array([r[quantity] for r in selected])
-                colour = controller_colour(controller)
-                axis.plot(
-                    scale, values, color=colour, marker="o", markersize=3, label=_label(controller)
-                )
-                if quantity == "return_mean":
-                    std = np.array([r["return_std"] for r in selected])
-                    axis.fill_between(scale, values - std, values + std, color=colour, alpha=0.12)
-            axis.set_title(f"{system}: {parameter} scaled")
-            axis.set_xlabel(f"{parameter} / nominal")
-            axis.set_ylabel(
-                "fraction stabilised" if quantity == "fraction_stabilised" else "episode return"
-            )
-            if quantity == "fraction_stabilised":
-                axis.set_ylim(-0.05, 1.05)
-    legend_below(figure, axes_handles(axes))
-    return save_figure(figure, path)
-
-
-def plot_roa(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Empirical basins: per system, each controller's share of the basin box held and of its
-    LQR's certified set held, beside the certified set's own share of the box."""
-    plt = _pyplot()
-    systems = list(dict.fromkeys(row["system"] for row in rows))
-    figure, axes = plt.subplots(1, len(systems), figsize=(4.8 * len(systems), 3.6), squeeze=False)
-    for axis, system in zip(axes[0], systems, strict=True):
-        selected = [row for row in rows if row["system"] == system]
-        positions = np.arange(len(selected))
-        box = [row["basin_box_fraction"] for row in selected]
-        inside = [row["certified_set_held"] or 0.0 for row in selected]
-        axis.bar(positions - 0.2, box, 0.4, label="share of the basin box held", color="#1f77b4")
-        axis.bar(
-            positions + 0.2, inside, 0.4, label="share of the certified set held", color="#2ca02c"
-        )
-        axis.axhline(
-            selected[0]["certified_box_fraction"],
-            color="#222222",
-            linestyle=":",
-            label="certified set's share of the box (LQR at the first row's period)",
-        )
-        axis.set_xticks(positions)
-        axis.set_xticklabels(
-            [_label(row["controller"]) for row in selected], rotation=40, ha="right", fontsize=7
-        )
-        axis.set_ylim(0.0, 1.05)
-        axis.set_title(f"{system}: empirical basins")
-    legend_below(figure, axes_handles(axes))
-    return save_figure(figure, path)
-
-
-def plot_relevance(evaluations: Evaluations, path: Path) -> Path | None:
-    """Figure 4: main coordinate and r(x) along a swing-up, a grid of systems (rows) x hybrid
-    controllers (columns), first seed."""
-    grid = {
+def relevance_traces(evaluations: Evaluations) -> dict[tuple[str, str], dict[str, Any]]:
+    """The first seed's swing-up relevance trace of every hybrid, by (system, controller)."""
+    return {
         (system, controller): runs[0]["relevance"]
         for system, by_controller in evaluations.items()
         for controller, runs in by_controller.items()
         if runs and runs[0].get("relevance")
     }
-    if not grid:
+
+
+def write_relevance_figure(evaluations: Evaluations, path: Path) -> Path | None:
+    """Figure 4 (``relevance.png``), or None when no run has a relevance trace."""
+    traces = relevance_traces(evaluations)
+    if not traces:
         return None
-    plt = _pyplot()
-    systems = list(dict.fromkeys(system for system, _ in grid))
-    controllers = [c for c in CONTROLLERS if any(c == k for _, k in grid)]
-    figure, axes = plt.subplots(
-        len(systems),
-        len(controllers),
-        figsize=(4.4 * len(controllers), 2.8 * len(systems)),
-        squeeze=False,
+    names = list(dict.fromkeys(system for system, _ in traces))
+    systems = {name: make_system(name) for name in names}
+    return plot_relevance(
+        traces,
+        path,
+        systems,
+        [c for c in CONTROLLERS if any(c == k for _, k in traces)],
+        {name: system.episode_steps * system.dt for name, system in systems.items()},
+        CONTROLLER_LABELS,
     )
-    for row, system in enumerate(systems):
-        label = make_system(system).main_label
-        for column, controller in enumerate(controllers):
-            axis = axes[row][column]
-            trace = grid.get((system, controller))
-            if trace is None:
-                axis.set_axis_off()
-                continue
-            axis.plot(trace["time"], trace["main"], color="#1f77b4", label=label)
-            axis.set_xlabel("time [s]")
-            axis.set_ylabel(label, color="#1f77b4")
-            twin = axis.twinx()
-            twin.plot(trace["time"], trace["relevance"], color="#ff7f0e", label="r(x)")
-            twin.set_ylim(-0.05, 1.05)
-            twin.set_ylabel("relevance r(x)", color="#ff7f0e")
-            axis.set_title(f"{system}: {_label(controller)}")
-    figure.tight_layout()
-    return save_figure(figure, path)
 
 
 def _response_records(runs: list[dict[str, Any]], test: str) -> list[dict[str, Any]]:
@@ -886,15 +755,17 @@ def write_report(out_dir: str | Path) -> Path:
         )
         figures.append(("Impulse and step responses (paper figure 7)", "responses.png"))
     if any(curves.values()):
-        plot_learning_curves(curves, out / "learning_curves.png")
+        plot_learning_curves(curves, out / "learning_curves.png", CONTROLLER_LABELS)
         figures.append(("Learning curves (paper figure 6)", "learning_curves.png"))
     if robustness:
-        plot_robustness(robustness, out / "robustness.png")
+        plot_robustness(
+            robustness, out / "robustness.png", CONTROLLERS, SCALED_PARAMETERS, CONTROLLER_LABELS
+        )
         figures.append(("Robustness (paper figure 8)", "robustness.png"))
     if roa:
-        plot_roa(roa, out / "basins.png")
+        plot_basins_summary(roa, out / "basins.png", CONTROLLER_LABELS)
         figures.append(("Empirical basins and the certified region of attraction", "basins.png"))
-    if plot_relevance(evaluations, out / "relevance.png"):
+    if write_relevance_figure(evaluations, out / "relevance.png"):
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
     path = out / "report.md"
     document = render_markdown(

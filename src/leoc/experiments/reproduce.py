@@ -26,6 +26,7 @@ import torch
 
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
+from leoc.experiments.eta import trainer_progress
 from leoc.experiments.layout import (
     EVALUATION_FILE,
     LOG_FILE,
@@ -176,7 +177,7 @@ def train_controller(
             seed=spec.seed,
             run_dir=train_dir,
             total_steps=profile.ddpg_steps.get(spec.system),
-            progress=False,
+            progress="lines",
             **settings,
         )
     return result.policy, _curve(result.curve)
@@ -390,6 +391,8 @@ def reproduce(
         done_file=EVALUATION_FILE,
         log_file=LOG_FILE,
         echo=echo,
+        expected_seconds=profile.cost_model,
+        progress_of=trainer_progress,
     )
     if result.failed:
         echo(f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")

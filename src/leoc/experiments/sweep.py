@@ -29,16 +29,19 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import shutil
 import sys
 import tempfile
+import textwrap
 import time
 import traceback
 import uuid
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from leoc.experiments.eta import Finished, Running, estimate_remaining
 from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
 
 BACKENDS = ("local", "ray")
@@ -48,7 +51,11 @@ PROGRESS_INTERVAL_S = 15.0
 DEFAULT_MAX_RETRIES = 2
 """Times a run is started again after its worker died (a runner's own error is not retried)."""
 LOG_TAIL_BYTES = 2048
-LOG_LINE_CHARS = 120
+LOG_LINE_CHARS = 400
+"""Longest log line shown (progress lines are wrapped to the terminal, not cut)."""
+DEFAULT_TERMINAL_COLUMNS = 100
+"""Width of the progress lines when the output is not a terminal."""
+WRAP_INDENT = "      "
 TERMINATE_GRACE_S = 5.0
 """Seconds a local worker gets to exit after SIGTERM before it is killed."""
 SHARE_TOKEN_FILE = ".sweep-token"
@@ -146,23 +153,25 @@ def format_seconds(seconds: float) -> str:
     return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
 
 
-def estimate_remaining(
-    durations: Sequence[float], running_elapsed: Iterable[float], queued: int, slots: int
-) -> float | None:
-    r"""Seconds until the sweep ends, from the wall times of the runs finished so far.
+def terminal_columns() -> int:
+    """Columns of the terminal the progress goes to (``DEFAULT_TERMINAL_COLUMNS`` if none)."""
+    return shutil.get_terminal_size((DEFAULT_TERMINAL_COLUMNS, 24)).columns
 
-    With :math:`\bar d` the mean wall time of the finished runs, :math:`e_i` the elapsed time of
-    each running run, :math:`q` the queued runs and :math:`s` the parallel slots,
 
-    .. math:: \mathrm{ETA} = \frac{q \bar d + \sum_i \max(\bar d - e_i, 0)}{s} .
-
-    ``None`` before any run has finished.
-    """
-    if not durations:
-        return None
-    mean = sum(durations) / len(durations)
-    work = queued * mean + sum(max(mean - elapsed, 0.0) for elapsed in running_elapsed)
-    return work / max(1, slots)
+def fit_lines(text: str, width: int) -> list[str]:
+    """``text`` as lines of at most ``width`` characters, wrapped at spaces (continuations
+    indented), runs of spaces collapsed: a narrow terminal gets more lines, never fewer
+    numbers."""
+    indent = len(text) - len(text.lstrip(" "))
+    words = " ".join(text.split())
+    return textwrap.wrap(
+        words,
+        width=max(width, len(WRAP_INDENT) + 20),
+        initial_indent=" " * indent,
+        subsequent_indent=WRAP_INDENT,
+        break_long_words=False,
+        break_on_hyphens=False,
+    ) or [text]
 
 
 def _check_options(
@@ -488,7 +497,11 @@ class _Driver:
         log_file: str | None,
         max_retries: int,
         echo: Callable[[str], None],
+        expected_seconds: Callable[[Any], float] | None = None,
+        progress_of: Callable[[str], float | None] | None = None,
     ) -> None:
+        self.expected_seconds, self.progress_of = expected_seconds, progress_of
+        self.finished: list[Finished] = []
         self.backend, self.out_dir, self.run_dir = backend, out_dir, run_dir
         self.done_file, self.log_file, self.max_retries, self.echo = (
             done_file,
@@ -529,6 +542,9 @@ class _Driver:
         if outcome.kind == "ok":
             self.results[attempt.key] = outcome.result
             self.durations.append(wall)
+            expected = self._expected(attempt.spec)
+            if expected is not None:
+                self.finished.append(Finished(expected, wall))
             self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
             return None
         if outcome.kind == "died" and attempt.number <= self.max_retries:
@@ -548,27 +564,53 @@ class _Driver:
             self.echo(f"  see {log}")
         return None
 
-    def _progress(self, started: float, queued: int) -> None:
-        now = time.monotonic()
-        elapsed = [now - attempt.started for attempt in self.running.values()]
-        eta = estimate_remaining(self.durations, elapsed, queued, self.backend.slots())
-        eta_text = "ETA after the first run" if eta is None else f"ETA {format_seconds(eta)}"
-        self.echo(
-            f"[{format_seconds(now - started)}] {len(self.results)} done, "
-            f"{len(self.running)} running, {queued} queued; {eta_text}"
+    def _expected(self, spec: Any) -> float | None:
+        """A run's expected wall time: the caller's cost model, else the mean wall time of the
+        runs finished so far (None before the first)."""
+        if self.expected_seconds is not None:
+            return float(self.expected_seconds(spec))
+        return sum(self.durations) / len(self.durations) if self.durations else None
+
+    def _log_line(self, attempt: _Attempt) -> str:
+        if self.log_file is None:
+            return "running"
+        log = self.run_dir(self.out_dir, attempt.spec) / self.log_file
+        return last_log_line(log, default="running")
+
+    def _eta(self, now: float, pending: Sequence[_Attempt], lines: dict[str, str]) -> str:
+        queued = [self._expected(attempt.spec) for attempt in pending]
+        running = []
+        for attempt in self.running.values():
+            expected = self._expected(attempt.spec)
+            fraction = self.progress_of(lines[attempt.key]) if self.progress_of else None
+            running.append((expected, Running(expected or 0.0, now - attempt.started, fraction)))
+        if any(cost is None for cost in queued) or any(e is None for e, _ in running):
+            return "ETA after the first run"
+        remaining = estimate_remaining(
+            self.finished, [run for _, run in running], queued, self.backend.slots()
         )
+        return f"ETA {format_seconds(remaining)}"
+
+    def _progress(self, started: float, pending: Sequence[_Attempt]) -> None:
+        now = time.monotonic()
+        lines = {attempt.key: self._log_line(attempt) for attempt in self.running.values()}
+        width = terminal_columns()
+        header = (
+            f"[{format_seconds(now - started)}] {len(self.results)} done, "
+            f"{len(self.running)} running, {len(pending)} queued; "
+            f"{self._eta(now, pending, lines)}"
+        )
+        for line in fit_lines(header, width):
+            self.echo(line)
         for attempt in sorted(self.running.values(), key=lambda a: a.key):
-            line = "running"
-            if self.log_file is not None:
-                log = self.run_dir(self.out_dir, attempt.spec) / self.log_file
-                line = last_log_line(log, default="running")
             age = format_seconds(now - attempt.started)
-            self.echo(f"  {attempt.key} ({age}): {line}")
+            for line in fit_lines(f"  {attempt.key} ({age}): {lines[attempt.key]}", width):
+                self.echo(line)
 
     def run(self, pending: deque[_Attempt], progress_interval_s: float) -> None:
         started = time.monotonic()
         total = len(pending)
-        next_progress = started + progress_interval_s
+        next_progress = started  # the first report (and ETA) as soon as the first runs start
         while pending or self.running:
             while pending and len(self.running) < self.backend.slots():
                 attempt = pending.popleft()
@@ -582,7 +624,7 @@ class _Driver:
                 if retry is not None:
                     pending.appendleft(retry)
             if time.monotonic() >= next_progress and (pending or self.running):
-                self._progress(started, len(pending))
+                self._progress(started, pending)
                 next_progress = time.monotonic() + progress_interval_s
 
 
@@ -602,6 +644,8 @@ def sweep(
     max_retries: int = DEFAULT_MAX_RETRIES,
     progress_interval_s: float = PROGRESS_INTERVAL_S,
     echo: Callable[[str], None] = print,
+    expected_seconds: Callable[[Any], float] | None = None,
+    progress_of: Callable[[str], float | None] | None = None,
 ) -> SweepResult:
     """Run every spec not finished yet, on this machine or on a Ray cluster.
 
@@ -641,10 +685,19 @@ def sweep(
     max_retries : int
         Times a run is started again after its worker process, Ray worker or node died.
     progress_interval_s : float
-        Seconds between progress reports (done / running / queued, elapsed, ETA from the
-        finished runs' wall times, and each running run's last log line).
+        Seconds between progress reports (done / running / queued, elapsed, ETA, and each
+        running run's last log line); the first comes as soon as the first runs start.
     echo : callable
-        Receives every progress line (default ``print``).
+        Receives every progress line (default ``print``); lines are wrapped to the terminal's
+        width.
+    expected_seconds : callable ``spec -> float``, optional
+        Expected wall time of a run on one worker (e.g. the profile's measured costs); the ETA
+        is then shown from the first report and refined as runs progress
+        (:mod:`leoc.experiments.eta`). Default: the mean wall time of the finished runs, so no
+        ETA before the first one finishes.
+    progress_of : callable ``log line -> fraction or None``, optional
+        Reads how far a running run is from its last log line
+        (:func:`leoc.experiments.eta.trainer_progress`).
 
     Returns
     -------
@@ -680,7 +733,17 @@ def sweep(
         engine: Any = _LocalBackend(runner, out, slots)
     else:
         engine = _RayBackend(runner, out, run_dir, jobs, cpus_per_run, address, shared_out_dir)
-    driver = _Driver(engine, out, run_dir, done_file, log_file, max_retries, echo)
+    driver = _Driver(
+        engine,
+        out,
+        run_dir,
+        done_file,
+        log_file,
+        max_retries,
+        echo,
+        expected_seconds,
+        progress_of,
+    )
     try:
         echo(
             f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run on "

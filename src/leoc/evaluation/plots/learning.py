@@ -1,0 +1,105 @@
+"""Learning curves (the paper's figure 6): return against interaction time, baseline and hybrid,
+one row per framework and one column per system."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leoc.evaluation.plots.common import (
+    axes_handles,
+    controller_colour,
+    controller_style,
+    legend_below,
+    new_figure,
+    save_figure,
+)
+
+FRAMEWORKS = ("ddpg", "pilco")
+KINDS = ("baseline", "hybrid")
+BAND_ALPHA = 0.2
+MARKER_BELOW_POINTS = 20
+"""Curves with fewer grid points than this get a dot per evaluation."""
+
+
+def _centre_and_band(curve: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """IQM with its 95% bootstrap band (>= 3 seeds), else the mean and +/- one std."""
+    if "iqm" in curve:
+        centre = np.array(curve["iqm"])
+        return centre, np.array(curve["ci_low"]), np.array(curve["ci_high"]), "iqm"
+    centre, std = np.array(curve["mean"]), np.array(curve["std"])
+    return centre, centre - std, centre + std, "mean"
+
+
+def learning_caption(kinds: set[str], counts: set[int]) -> str:
+    """What the lines and bands are, for the seeds the figure holds."""
+    seeds = "/".join(str(n) for n in sorted(counts))
+    parts = [
+        "Return of the evaluation episodes (sum of rewards per 200-step episode, higher is "
+        "better) against the interaction time the learner had used (simulated seconds)."
+    ]
+    if "iqm" in kinds:
+        parts.append(
+            f"Line: interquartile mean over the seeds ({seeds}); shaded: its 95% "
+            "stratified-bootstrap confidence interval."
+        )
+    if "mean" in kinds:
+        parts.append(
+            "Line: mean over the seeds; shaded: +/- one standard deviation (too few seeds for "
+            "an interval)."
+        )
+    return " ".join(parts)
+
+
+def draw_learning_curves(
+    curves: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str] | None = None
+):
+    """The figure of :func:`plot_learning_curves` (not saved)."""
+    labels = dict(labels or {})
+    systems = list(curves)
+    figure, axes = new_figure(len(FRAMEWORKS), max(1, len(systems)), (4.2, 3.0))
+    kinds_used: set[str] = set()
+    counts: set[int] = set()
+    for column, system in enumerate(systems):
+        for row, framework in enumerate(FRAMEWORKS):
+            axis = axes[row][column]
+            for kind in KINDS:
+                key = f"{framework}_{kind}"
+                curve = curves[system].get(key)
+                if curve is None:
+                    continue
+                seconds = np.array(curve["seconds"])
+                centre, low, high, what = _centre_and_band(curve)
+                kinds_used.add(what)
+                counts.add(int(curve["n_seeds"]))
+                colour = controller_colour(key)
+                axis.plot(
+                    seconds,
+                    centre,
+                    color=colour,
+                    linestyle=controller_style(key),
+                    marker="." if len(seconds) < MARKER_BELOW_POINTS else None,
+                    label=labels.get(key, key),
+                )
+                axis.fill_between(seconds, low, high, color=colour, alpha=BAND_ALPHA, lw=0)
+            axis.set_title(f"{system}: {framework.upper()}")
+            axis.set_xlabel("interaction time [s]")
+            axis.set_ylabel("evaluation return")
+    legend_below(figure, axes_handles(axes), learning_caption(kinds_used, counts))
+    return figure
+
+
+def plot_learning_curves(
+    curves: Mapping[str, Mapping[str, Any]],
+    path: str | Path,
+    labels: Mapping[str, str] | None = None,
+) -> Path:
+    """Figure 6: return vs interaction time, baseline vs hybrid, rows = framework.
+
+    ``curves``: system -> controller -> the report's curve summary (``seconds``, ``mean``,
+    ``std``, ``n_seeds`` and, with three seeds or more, ``iqm``, ``ci_low``, ``ci_high``).
+    """
+    return save_figure(draw_learning_curves(curves, labels), path)
