@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -17,6 +18,7 @@ import numpy as np
 # Exit statuses of an interrupted command: 128 + the signal number, as a shell reports it.
 EXIT_SIGINT = 128 + signal.SIGINT
 EXIT_SIGTERM = 128 + signal.SIGTERM
+EXIT_SIGPIPE = 128 + signal.SIGPIPE
 ALGO_CHOICES = ("pilco", "ddpg", "td3")
 DEFAULT_RUNS_DIR = Path("runs")
 
@@ -292,33 +294,10 @@ def _print_roa(system, certificate, report: dict) -> None:
     )
     print("V(x) = z^T P z, z = x - a (angles wrapped); certified: V(F(x)) < V(x) on 0 < V <= rho")
     _print_matrix("P", certificate.P)
-    if not certificate.certified:
-        print(
-            f"rho = 0: no certified set (linear decrease {certificate.linear_decrease}, largest "
-            f"eigenvalue of A_cl^T P A_cl - P = {certificate.linear_decrease_eig:.4g})"
-        )
-    else:
-        print(
-            f"rho = {certificate.rho:.6g}"
-            + (" (capped by the search box)" if certificate.capped else "")
-        )
-        extent = ", ".join(
-            f"{name} +/- {width:.4g}"
-            for name, width in zip(system.state_names, certificate.extent, strict=True)
-        )
-        print(f"extent: {extent}")
-        print(
-            f"samples: {certificate.samples} uniform in the set in the final clean round "
-            f"({certificate.rounds} rounds); with confidence {certificate.confidence:g} the "
-            f"violating volume fraction is < {certificate.violation_bound:.3g}"
-        )
-        if certificate.grid is not None:
-            grid = certificate.grid
-            print(
-                f"dense grid: {grid.nodes} nodes ({grid.points_per_axis} per axis) all decrease; "
-                f"with the local Lipschitz estimate (max {grid.lipschitz:.4g}) the decrease is "
-                f"proved on {grid.core_level:.4g} < V < {grid.proved_level:.4g}"
-            )
+    from leoc.control.roa import describe_certificate
+
+    for line in describe_certificate(system, certificate):
+        print(line)
     box = ", ".join(
         f"{name} +/- {width:.4g}"
         for name, width in zip(system.state_names, report["box"], strict=True)
@@ -580,6 +559,21 @@ def _interrupted(args: argparse.Namespace, code: int) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ``leoc`` command; a reader that closes the pipe early (``leoc ... | head``)
+    ends it quietly with the status of a process killed by SIGPIPE, as a shell reports it."""
+    try:
+        status = _run(argv)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # Point stdout at /dev/null so that the interpreter's final flush does not raise again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return EXIT_SIGPIPE
+    return status
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "reproduce" and args.out is None:
