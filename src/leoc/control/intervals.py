@@ -311,9 +311,7 @@ def _sum_grads(terms: list[tuple[Tensor, Tensor]]) -> tuple[Tensor | None, Tenso
 
 
 def _add_grads(first: Jet, second: Jet) -> tuple[Tensor | None, Tensor | None]:
-    terms = [
-        (jet.dmid, jet.drad) for jet in (first, second) if jet.dmid is not None
-    ]  # type: ignore[misc]
+    terms = [(jet.dmid, jet.drad) for jet in (first, second) if jet.dmid is not None]  # type: ignore[misc]
     if len(terms) == 2:
         shape = torch.broadcast_shapes(terms[0][0].shape, terms[1][0].shape)
         terms = [(m.expand(shape), r.expand(shape)) for m, r in terms]

@@ -102,6 +102,10 @@ BOUND_SLACK = 1e-10
 """Relative slack on the dense S x S operations of the box bound (module docstring)."""
 LEVEL_MARGIN = 1e-12
 """The reported level is this fraction below the smallest unproved level (strict inequality)."""
+NO_BALL = (
+    "the rigorous linearisation proves no ball: the Jacobian enclosure is no contraction in the "
+    "V-norm"
+)
 STATUS_PROVED = "proved"
 STATUS_NOT_PROVED = "not proved"
 
@@ -460,20 +464,16 @@ def prove_level(
     with torch.no_grad():
         try:
             half_width, epsilon = _inner_level(system, controller, repeat, frame, cover)
-            inner_level, excluded = shrink * half_width**2, epsilon**2
+            inner_level, excluded = min(target, shrink * half_width**2), epsilon**2
             if half_width <= 0.0:
-                return finish(0.0, 0.0, 0.0, empty._replace(limited_by="decrease"), (
-                    "the rigorous linearisation proves no ball: the Jacobian enclosure is not a "
-                    "contraction in the V-norm"
-                ))
-            search = _annulus(
-                system, controller, repeat, frame, half_width, cover, fine, max_boxes
-            )
+                failed = empty._replace(limited_by="decrease")
+                return finish(0.0, 0.0, 0.0, failed, NO_BALL)
+            search = _annulus(system, controller, repeat, frame, half_width, cover, fine, max_boxes)
         except UnsupportedOperation as error:
             return finish(0.0, 0.0, 0.0, empty._replace(limited_by="unsupported"), str(error))
     level = min(search.level, cover**2)
-    rho = min(target, shrink * level * (1.0 - LEVEL_MARGIN))
-    rho = max(rho, inner_level)
+    # The inner ball is proved on its own; neither claim goes past the target.
+    rho = min(target, max(shrink * level * (1.0 - LEVEL_MARGIN), inner_level))
     reason = (
         f"decrease proved on {excluded:.3g} < V <= {rho:.6g} ({search.boxes} boxes); "
         f"limited by {search.limited_by}"

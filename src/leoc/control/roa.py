@@ -474,7 +474,8 @@ def describe_certificate(system: System, certificate: LyapunovCertificate) -> li
     proof = certificate.proof
     if proof is None:
         lines.append(
-            f"rho = {certificate.rho:.6g} (SAMPLED estimate, not proved: the proof was switched off)"
+            f"rho = {certificate.rho:.6g} (SAMPLED estimate, not proved: the proof was switched "
+            "off)"
         )
     elif proof.proved:
         lines.append(
