@@ -95,6 +95,9 @@ MAX_DEPTH = 120
 """Bisections of one box (each halves its widest side) at most, whatever the resolution."""
 MAX_BOXES = 3_000_000
 """Box evaluations before the search stops (the boxes still pending then count as unproved)."""
+MAX_SECONDS = 480.0
+"""Wall-clock budget of the box search (a safety valve for hard systems such as the acrobot;
+the paper systems finish far below it and are then reproducible box for box)."""
 BATCH = 16_384
 """Boxes evaluated per batched call, smallest levels first."""
 INNER_BISECTIONS = 40
@@ -131,8 +134,8 @@ class LevelProof(NamedTuple):
     limited_by : str
         What set ``rho``: ``target`` (all of the target proved), ``decrease`` (a box whose
         bound stays non-negative), ``region`` (a box possibly out of the allowed region),
-        ``budget`` (``max_boxes`` reached) or ``unsupported`` (the model has an operation
-        without an interval rule; ``reason`` names it).
+        ``budget`` (``max_boxes`` or ``max_seconds`` reached) or ``unsupported`` (the model
+        has an operation without an interval rule; ``reason`` names it).
     resolution : float
         Relative box size at which a failing box counts as unproved.
     seconds : float
@@ -361,6 +364,7 @@ def _annulus(
     cover: float,
     resolution: float,
     max_boxes: int,
+    deadline: float,
 ) -> _Search:
     """Best-first adaptive verification of the boxes between the inner ball and the cover."""
     centre, radius = _initial_cover(frame.factor.shape[0], cover)
@@ -372,7 +376,7 @@ def _annulus(
         centre, radius, depth, nearest = centre[keep], radius[keep], depth[keep], nearest[keep]
         if not centre.shape[0]:
             break
-        if evaluated >= max_boxes:
+        if evaluated >= max_boxes or time.perf_counter() > deadline:
             best, reason = min(best, float(nearest.min())), "budget"
             unproved += int(centre.shape[0])
             break
@@ -410,6 +414,7 @@ def prove_level(
     target: float,
     resolution: float | None = None,
     max_boxes: int = MAX_BOXES,
+    max_seconds: float = MAX_SECONDS,
 ) -> LevelProof:
     r"""Prove the decrease of :math:`V = |L^\top z|^2` on the largest level set it can, up to
     ``target`` (module docstring).
@@ -430,6 +435,9 @@ def prove_level(
         Relative size of the smallest boxes (default per state dimension, ``RESOLUTION``).
     max_boxes : int
         Evaluation budget.
+    max_seconds : float
+        Wall-clock budget of the box search; past it the pending boxes count as unproved
+        (``limited_by="budget"``: the level reported is still proved, only smaller).
 
     Returns
     -------
@@ -468,7 +476,10 @@ def prove_level(
             if half_width <= 0.0:
                 failed = empty._replace(limited_by="decrease")
                 return finish(0.0, 0.0, 0.0, failed, NO_BALL)
-            search = _annulus(system, controller, repeat, frame, half_width, cover, fine, max_boxes)
+            deadline = started + max_seconds
+            search = _annulus(
+                system, controller, repeat, frame, half_width, cover, fine, max_boxes, deadline
+            )
         except UnsupportedOperation as error:
             return finish(0.0, 0.0, 0.0, empty._replace(limited_by="unsupported"), str(error))
     level = min(search.level, cover**2)
