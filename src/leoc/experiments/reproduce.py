@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import json
 import os
 import platform
@@ -176,11 +177,34 @@ def train_controller(
     return result.policy, _curve(result.curve)
 
 
+@functools.lru_cache(maxsize=8)
+def certified_lqr(system_name: str, period: int) -> tuple[Any, Any]:
+    """The LQR design of the nominal system at ``period`` and its proved certificate (cached
+    per worker: the region of attraction and the hybrid claims of one run share them)."""
+    from leoc.control import certify_lqr, design_lqr
+
+    system = make_system(system_name)
+    design = design_lqr(system, action_repeat=period)
+    return design, certify_lqr(system, design)
+
+
+def hybrid_claims_of(system: System, controller: torch.nn.Module, seed: int) -> Any:
+    """:func:`leoc.evaluation.hybrid_claims.hybrid_claims` against the LQR at the controller's
+    period (None for non-hybrids)."""
+    from leoc.control.roa import default_basin_box
+    from leoc.evaluation.hybrid_claims import hybrid_claims
+    from leoc.policies import lqr_controller
+
+    design, certificate = certified_lqr(system.name, control_period(controller))
+    return hybrid_claims(
+        system, controller, lqr_controller(design), certificate, default_basin_box(system), seed
+    )
+
+
 def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[str, Any]:
     """The certificate of the LQR designed for the controller's period, and the controller's
     empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
     certified set (1.0 when the controller's basin contains it, on those starts)."""
-    from leoc.control import certify_lqr, design_lqr
     from leoc.control.roa import (
         basin_starts,
         box_fraction,
@@ -189,8 +213,7 @@ def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[st
         empirical_basin,
     )
 
-    period = control_period(controller)
-    certificate = certify_lqr(system, design_lqr(system, action_repeat=period))
+    certificate = certified_lqr(system.name, control_period(controller))[1]
     box = default_basin_box(system)
     basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
     inside = certified_set_check(system, controller, certificate) if certificate.certified else None
@@ -223,6 +246,7 @@ def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str,
     return {
         "action_repeat": control_period(controller),
         "roa": region_of_attraction(system, controller),
+        "hybrid_claims": hybrid_claims_of(system, controller, spec.seed),
         "responses": responses,
         "robustness": [
             {**point._asdict(), "return_mean": point.return_mean}
