@@ -28,7 +28,7 @@ from leoc.evaluation.impulse_sweep import (
 )
 from leoc.evaluation.rollout import response_offsets
 from leoc.experiments.claims_report import hybrid_claims_section
-from leoc.policies import LinearController, lqr_controller, roa_hybrid
+from leoc.policies import HeldPolicy, LinearController, lqr_controller, roa_hybrid
 from leoc.systems import make_system
 from leoc.systems.rollout import hold_step, rollout
 
@@ -114,6 +114,8 @@ def test_a_hybrid_that_is_its_lqr_matches_every_share_but_leaves_the_flat_top():
         rho_in_fraction=0.5,
     )
     assert flat_top_level(twin) == pytest.approx(0.5 * certificate.rho)
+    assert flat_top_level(HeldPolicy(twin, 2)) == flat_top_level(twin)
+    assert flat_top_level(lqr) is None
     claims = hybrid_claims(
         system,
         twin,

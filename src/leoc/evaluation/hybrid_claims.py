@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import torch
 
 from leoc.evaluation.basins import (
     SHELL_STARTS,
@@ -32,12 +33,18 @@ LQR_LABEL = "lqr"
 
 
 def flat_top_level(controller: Any) -> float | None:
-    """rho_in of an ROA-relevance hybrid (r == 1 on V <= rho_in); None for the paper's
-    relevance (r < 1 everywhere but at a) or a non-hybrid."""
-    policy = getattr(controller, "policy", controller)  # HeldPolicy wraps the hybrid
-    module = getattr(policy, "relevance_module", None)
-    level = getattr(module, "rho_in", None)
-    return None if level is None else float(level)
+    """rho_in of an ROA-relevance hybrid (r == 1 on V <= rho_in), found as the
+    :class:`~leoc.policies.ROARelevance` inside the controller however it is wrapped
+    (``HeldPolicy``, the DDPG actor in physical units, ...); None for the paper's relevance
+    (r < 1 everywhere but at a) or a non-hybrid."""
+    from leoc.policies.relevance import ROARelevance
+
+    if not isinstance(controller, torch.nn.Module):
+        return None
+    for module in controller.modules():
+        if isinstance(module, ROARelevance):
+            return float(module.rho_in)
+    return None
 
 
 def operating_region_corners(system: System) -> np.ndarray:
