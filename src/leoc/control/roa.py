@@ -749,7 +749,7 @@ def plot_basins(
         axis.set_xlabel(system.state_names[first])
         axis.set_ylabel(system.state_names[second])
     fig.suptitle(
-        f"{system.name}: basins (green: converged and held) and certified set "
+        f"{system.name}: basins (green: converged and held) and {certificate.basis} set "
         f"V <= {certificate.rho:.4g} (black)"
     )
     fig.tight_layout()
