@@ -14,11 +14,55 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["claims_rows", "hybrid_claims_section"]
+__all__ = ["claims_rows", "hybrid_claims_section", "roa_estimate_lines", "roa_method_text"]
 
 Evaluations = Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]]
 BY_CONSTRUCTION = "by construction"
 EVIDENCE = "evidence"
+
+
+def _proved(evaluations: Evaluations) -> bool:
+    """Whether the runs' ROA certificates are proofs (runs written before issue 21 hold only
+    the sampled estimate and no ``basis``)."""
+    return any(
+        (run.get("roa") or {}).get("certificate", {}).get("basis") == "proved"
+        for by_controller in evaluations.values()
+        for runs in by_controller.values()
+        for run in runs
+    )
+
+
+def roa_method_text(evaluations: Evaluations) -> str:
+    """The opening of the region-of-attraction paragraph: proved or sampled certificates."""
+    if _proved(evaluations):
+        return (
+            "For each controller: the proved region of attraction of the LQR designed for the "
+            "controller's period (V = (x - a)^T P (x - a) decreases along the nonlinear, "
+            "saturated, held closed loop on {V <= rho}, proved by interval arithmetic on "
+            "verified boxes, the set inside the allowed region; `leoc roa`), and the "
+        )
+    return (
+        "For each controller: the sampling certificate of the region of attraction of the LQR "
+        "designed for the controller's period (V = (x - a)^T P (x - a) decreases along the "
+        "nonlinear, saturated, held closed loop on {V <= rho}; `leoc roa`), and the "
+    )
+
+
+def roa_estimate_lines(evaluations: Evaluations, first: Mapping[str, Any]) -> list[str]:
+    """The sentence on the sampled estimate (the proof's target, or the certificate itself)."""
+    if _proved(evaluations):
+        return [
+            f"The proof aims at a sampled estimate ({first['samples']} samples per round; with "
+            f"confidence {first['confidence']:g} its violating share is below "
+            f"{first['violation_bound']:.2g}); rho in the table is the proved level.",
+            "",
+        ]
+    return [
+        f"Certificates: {first['samples']} samples per round; with confidence "
+        f"{first['confidence']:g} the violating share of the set is below "
+        f"{first['violation_bound']:.2g}.",
+        "",
+    ]
 
 
 def claims_rows(evaluations: Evaluations) -> list[dict[str, Any]]:
