@@ -215,7 +215,9 @@ class LyapunovCertificate(NamedTuple):
         """JSON-friendly description."""
         proof = None
         if self.proof is not None:
+            # Without its wall-clock seconds: a summary is reproducible (runs compare equal).
             proof = {**self.proof._asdict(), "status": self.proof.status}
+            del proof["seconds"]
         return {
             "rho": self.rho,
             "basis": self.basis,
