@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 
@@ -170,3 +171,18 @@ def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:
     )
     text = capsys.readouterr().out
     assert "control period 3 step(s)" in text and "violating volume fraction" in text
+
+
+@pytest.mark.parametrize("command", [["lqr", "pendulum", "--json"], ["--help"]])
+def test_a_closed_pipe_ends_without_traceback(command) -> None:
+    # The reader is gone before leoc writes (as with `leoc ... | head -0`): no traceback, and
+    # the status of a process ended by SIGPIPE (or 0 when the command exits on its own).
+    process = subprocess.Popen(
+        [sys.executable, "-m", "leoc.cli", *command],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    process.stdout.close()
+    _, errors = process.communicate(timeout=120)
+    assert b"Traceback" not in errors and b"BrokenPipeError" not in errors
+    assert process.returncode in (0, 128 + signal.SIGPIPE)

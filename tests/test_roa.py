@@ -8,6 +8,7 @@ volume; a smaller actuator limit gives a smaller set; a wrong P is rejected.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -43,10 +44,15 @@ def _single_thread():
     torch.set_num_threads(threads)
 
 
-def _certificate(name: str, **system_overrides: float):
-    system = make_system(name, **system_overrides) if system_overrides else make_system(name)
+@functools.cache
+def _cached(name: str, overrides: tuple[tuple[str, float], ...]):
+    system = make_system(name, **dict(overrides)) if overrides else make_system(name)
     design = design_lqr(system)
     return system, design, certify_lqr(system, design, samples=SAMPLES, seed=1)
+
+
+def _certificate(name: str, **system_overrides: float):
+    return _cached(name, tuple(sorted(system_overrides.items())))
 
 
 @pytest.mark.parametrize("name", SYSTEM_NAMES)
@@ -66,12 +72,15 @@ def test_every_certified_sample_converges_when_simulated(name):
     assert np.all(np.diff(values[moving], axis=1) < 0)
 
 
-def test_grid_proof_for_two_dimensional_states():
+def test_certificate_reports_the_proof_beside_the_sampled_estimate():
     _, _, certificate = _certificate("mountaincar")
-    grid = certificate.grid
-    assert grid is not None and grid.nodes > 100_000
-    assert 0.0 < grid.core_level < grid.proved_level <= certificate.rho
-    assert make_system("cartpole").state_dim == 4 and _certificate("cartpole")[2].grid is None
+    proof = certificate.proof
+    assert certificate.basis == "proved" and proof.proved
+    assert certificate.rho == proof.rho <= certificate.sampled_rho == proof.target
+    assert 0.0 < proof.inner_level <= certificate.rho and proof.excluded_level == 0.0
+    summary = certificate.summary()
+    assert summary["basis"] == "proved" and summary["proof"]["status"] == "proved"
+    assert summary["sampled_rho"] == certificate.sampled_rho
 
 
 # The car's set is cut by the track's end (x = 0.63 m past the hilltop) until the force is
@@ -99,7 +108,7 @@ def test_wrong_p_is_rejected():
     assert not checked.linear_decrease and checked.rho == 0.0 and not checked.certified
     # The sampling alone (no linear pre-check) drives rho to 0 as well.
     sampled = certify_level(
-        system, wrong, controller, samples=SAMPLES, seed=2, linear_check=False, grid_points=None
+        system, wrong, controller, samples=SAMPLES, seed=2, linear_check=False, prove=False
     )
     assert sampled.rho == 0.0
 

@@ -9,6 +9,7 @@ Ray inside ``run``, so ``--help`` answers at once (``benchmarks/bench_cli_startu
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -20,6 +21,7 @@ from leoc.cli._args import OneLineParser
 # Exit statuses of an interrupted command: 128 + the signal number, as a shell reports it.
 EXIT_SIGINT = 128 + signal.SIGINT
 EXIT_SIGTERM = 128 + signal.SIGTERM
+EXIT_SIGPIPE = 128 + signal.SIGPIPE
 COMMANDS = (lqr, simulate, roa, train, reproduce, plot, publish)
 RESUMABLE_COMMANDS = ("reproduce", "train")
 
@@ -60,7 +62,22 @@ def _interrupted(args: argparse.Namespace, code: int) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``leoc`` command; returns its exit status (2 for bad input)."""
+    """Run the ``leoc`` command; returns its exit status (2 for bad input). A reader that
+    closes the pipe early (``leoc ... | head``) ends it quietly with the status of a process
+    killed by SIGPIPE, as a shell reports it."""
+    try:
+        status = _run(argv)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # Point stdout at /dev/null so that the interpreter's final flush does not raise again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return EXIT_SIGPIPE
+    return status
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
@@ -77,4 +94,4 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
-__all__ = ["EXIT_SIGINT", "EXIT_SIGTERM", "build_parser", "main"]
+__all__ = ["EXIT_SIGINT", "EXIT_SIGPIPE", "EXIT_SIGTERM", "build_parser", "main"]

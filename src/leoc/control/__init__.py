@@ -15,7 +15,7 @@ from leoc.control.lqr import (
 )
 from leoc.control.roa import (
     Basin,
-    GridProof,
+    LevelProof,
     LyapunovCertificate,
     basin_starts,
     box_fraction,
@@ -34,7 +34,7 @@ from leoc.control.roa import (
 __all__ = [
     "DESIGN_METHODS",
     "Basin",
-    "GridProof",
+    "LevelProof",
     "LyapunovCertificate",
     "LQRDesign",
     "Linearisation",

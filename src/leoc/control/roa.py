@@ -1,6 +1,6 @@
 r"""Region of attraction: a Lyapunov-level certificate of the LQR, empirical basins of any policy.
 
-Letters: B batch (samples, grid nodes or starts), S state dimension, O observation dimension,
+Letters: B batch (samples or starts), S state dimension, O observation dimension,
 A action dimension, T simulator steps.
 
 **Certificate.** For an LQR design (:func:`leoc.control.design_lqr`) at control period
@@ -31,29 +31,26 @@ converges to :math:`a` (discrete-time Lyapunov theorem: :math:`V` continuous, po
 and strictly decreasing on the compact :math:`\Omega_\rho \setminus \{a\}`; Khalil 2002,
 Thm 4.1 and section 8.2 for the region of attraction estimate).
 
-It is computed by sampling, after Najafi, Babuska and Lopes (2016): draw :math:`n` points
-uniformly in the ellipsoid :math:`\Omega_\rho` (:math:`z = \sqrt\rho\, L^{-\top} u`,
-:math:`P = L L^\top`, :math:`u` uniform in the unit ball), and if any violates the decrease,
-lower :math:`\rho` to just below the smallest violating level and draw a *fresh* batch; stop at
-the first batch without a violation. Because the final batch is drawn after :math:`\rho` is
-fixed, it is an independent uniform sample of :math:`\Omega_\rho`: if the violating set had a
-volume fraction :math:`\epsilon` or more, :math:`n` clean samples would occur with probability
-at most :math:`(1 - \epsilon)^n \le e^{-\epsilon n}`. So with confidence :math:`1 - \delta`
-the violating volume fraction is below :math:`\ln(1/\delta) / n`. Before sampling, the
-linearisation is checked (Lyapunov's indirect method, Khalil Thm 4.7): if
+**Proof (the reported rho).** :func:`leoc.control.proof.prove_level` proves the decrease
+rigorously: a ball around :math:`a` by the linearisation with an interval enclosure of the
+Jacobian (its remainder bounded, not neglected), and the rest of the set by adaptively bisected
+boxes on which interval arithmetic over the analytic step bounds :math:`V(F(x)) - V(x)` from
+above; boxes possibly leaving the allowed region (track limits) fail, so the proved set lies
+inside it. ``LyapunovCertificate.rho`` is that proved level.
+
+**Sampled estimate (a second figure).** The proof aims at the level found by sampling, after
+Najafi, Babuska and Lopes (2016): draw :math:`n` points uniformly in the ellipsoid
+:math:`\Omega_\rho` (:math:`z = \sqrt\rho\, L^{-\top} u`, :math:`P = L L^\top`, :math:`u`
+uniform in the unit ball), and if any violates the decrease, lower :math:`\rho` to just below
+the smallest violating level and draw a *fresh* batch; stop at the first batch without a
+violation. Because the final batch is drawn after :math:`\rho` is fixed, it is an independent
+uniform sample of :math:`\Omega_\rho`: with confidence :math:`1 - \delta` the violating volume
+fraction is below :math:`\ln(1/\delta) / n`. That is a statistical statement, not a proof (a
+thin shell near the boundary can violate it unseen); it is kept as ``sampled_rho``. Before
+sampling, the linearisation is checked (Lyapunov's indirect method, Khalil Thm 4.7): if
 :math:`A_{cl}^\top P A_{cl} - P` (:math:`A_{cl}` the autodiff Jacobian of :math:`F` at
 :math:`a`) is not negative definite, :math:`V` increases arbitrarily close to :math:`a` and no
 :math:`\rho > 0` exists: the certificate is :math:`\rho = 0`.
-
-**Dense grid and Lipschitz margin (2-D states).** For a 2-D state every node of a regular grid
-inside :math:`\Omega_\rho` is checked too (deterministically). With
-:math:`\Delta(x) = V(F(x)) - V(x)` and a Lipschitz constant :math:`L` of :math:`\Delta`, every
-point within the half cell diagonal :math:`h` of a node :math:`c` with
-:math:`\Delta(c) + L h < 0` has :math:`\Delta < 0`: that part of the set is *proved*. :math:`L` is
-estimated as a safety factor times the largest :math:`\|\nabla\Delta\|` at the nodes (autograd),
-so the proof holds under that estimate; near :math:`a`, where :math:`\Delta = O(\|z\|^2)` and
-the margin :math:`L h` dominates, a small core around :math:`a` stays unproved by the grid
-(reported as ``core_level``) and rests on the sampling certificate and the linear check.
 
 **Empirical basin.** Any controller (the LQR, a trained run's controller, any torch module
 mapping observations to actions) is simulated from a seeded sample or a grid of starts in a
@@ -80,11 +77,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from leoc.control.proof import MAX_BOXES, LevelProof, prove_level
 from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
 
 __all__ = [
     "Basin",
-    "GridProof",
+    "LevelProof",
     "LinearClosedLoop",
     "LyapunovCertificate",
     "basin_starts",
@@ -93,6 +91,7 @@ __all__ = [
     "certify_level",
     "certify_lqr",
     "default_basin_box",
+    "describe_certificate",
     "empirical_basin",
     "lqr_closed_loop",
     "lyapunov_value",
@@ -120,46 +119,11 @@ BASIN_BOX_FACTOR = 3.0
 DEFAULT_BASIN_STARTS = 2_000
 DEFAULT_SLICE_POINTS = 41
 """Grid points per axis of a basin slice (plots)."""
-GRID_POINTS_2D = 601
-"""Grid points per axis of the dense grid check for 2-D states (over the set's bounding box)."""
-LIPSCHITZ_SAFETY = 2.0
-"""Factor on the largest sampled gradient norm of Delta used as its Lipschitz constant."""
 BOX_FRACTION_SAMPLES = 200_000
 SYMMETRY_RTOL = 1e-9
 """Allowed asymmetry of P, relative to its largest entry."""
 LINEAR_DECREASE_TOL = 0.0
 """The linear check needs max eig(A_cl^T P A_cl - P) < this (strictly negative definite)."""
-
-
-class GridProof(NamedTuple):
-    """Dense-grid check of a 2-D certificate (see the module docstring).
-
-    Attributes
-    ----------
-    points_per_axis : int
-    spacing : (2,) array
-        Grid steps per state entry.
-    nodes : int
-        Nodes inside the covering set (the certified set grown by half a cell diagonal).
-    lipschitz : float
-        Largest local Lipschitz constant used for Delta (``LIPSCHITZ_SAFETY`` times the largest
-        gradient norm over a node's 3x3 neighbourhood: an estimate, not a bound).
-    unproved_nodes : int
-        Covering nodes where ``Delta(c) + L_c h >= 0``.
-    core_level, proved_level : float
-        The grid proves the decrease on ``core_level < V < proved_level`` given the Lipschitz
-        estimate (the largest such annulus; ``(0, rho)`` when every node passes). Near a the
-        margin ``L_c h`` outweighs ``|Delta| = O(|z|^2)``; near the certified boundary Delta
-        tends to 0 (that is where rho was cut), so the annulus is narrower than the set.
-    """
-
-    points_per_axis: int
-    spacing: np.ndarray
-    nodes: int
-    lipschitz: float
-    unproved_nodes: int
-    core_level: float
-    proved_level: float
 
 
 class LyapunovCertificate(NamedTuple):
@@ -168,7 +132,8 @@ class LyapunovCertificate(NamedTuple):
     Attributes
     ----------
     rho : float
-        Certified level (0: no certificate).
+        Certified level: the *proved* level when ``proof`` is given (0: nothing proved), the
+        sampled estimate when the proof was switched off (``basis`` says which).
     P : (S, S) array
     operating_state : (S,) array
     angle_indices : tuple of int
@@ -193,8 +158,10 @@ class LyapunovCertificate(NamedTuple):
         Whether ``A_cl^T P A_cl - P`` is negative definite at a.
     linear_decrease_eig : float
         Its largest eigenvalue.
-    grid : GridProof or None
-        The dense grid check (2-D states only).
+    sampled_rho : float
+        The sampled estimate (the statistical statement above; the proof's target).
+    proof : LevelProof or None
+        The proof (None when switched off).
     """
 
     rho: float
@@ -210,11 +177,18 @@ class LyapunovCertificate(NamedTuple):
     capped: bool
     linear_decrease: bool
     linear_decrease_eig: float
-    grid: GridProof | None = None
+    sampled_rho: float = 0.0
+    proof: LevelProof | None = None
 
     @property
     def certified(self) -> bool:
         return self.rho > 0.0
+
+    @property
+    def basis(self) -> str:
+        """``proved`` (rho is a proved level), ``not proved`` (the proof found nothing) or
+        ``sampled`` (no proof was run: rho is the sampled estimate)."""
+        return "sampled" if self.proof is None else self.proof.status
 
     @property
     def extent(self) -> np.ndarray:
@@ -240,11 +214,15 @@ class LyapunovCertificate(NamedTuple):
 
     def summary(self) -> dict[str, Any]:
         """JSON-friendly description."""
-        grid = None
-        if self.grid is not None:
-            grid = {**self.grid._asdict(), "spacing": self.grid.spacing.tolist()}
+        proof = None
+        if self.proof is not None:
+            # Without its wall-clock seconds: a summary is reproducible (runs compare equal).
+            proof = {**self.proof._asdict(), "status": self.proof.status}
+            del proof["seconds"]
         return {
             "rho": self.rho,
+            "basis": self.basis,
+            "sampled_rho": self.sampled_rho,
             "P": self.P.tolist(),
             "operating_state": self.operating_state.tolist(),
             "extent": self.extent.tolist(),
@@ -257,7 +235,7 @@ class LyapunovCertificate(NamedTuple):
             "capped": self.capped,
             "linear_decrease": self.linear_decrease,
             "linear_decrease_eig": self.linear_decrease_eig,
-            "grid": grid,
+            "proof": proof,
         }
 
 
@@ -379,92 +357,6 @@ def _check_box(box: Any, system: System, name: str) -> np.ndarray:
     return values
 
 
-def _grid_axes(P: np.ndarray, level: float, points: int) -> list[np.ndarray]:
-    """Axes of a regular grid over the bounding box of ``{z^T P z <= level}``."""
-    extent = np.sqrt(level * np.diag(np.linalg.inv(P)))
-    return [np.linspace(-width, width, points) for width in extent]
-
-
-def _grid_nodes(P: np.ndarray, level: float, points: int) -> np.ndarray:
-    """Nodes (B, 2) of the grid of :func:`_grid_axes` that lie in ``{z^T P z <= level}``."""
-    mesh = np.stack(np.meshgrid(*_grid_axes(P, level, points), indexing="ij"), axis=-1)
-    mesh = mesh.reshape(-1, 2)
-    return mesh[np.einsum("bi,ij,bj->b", mesh, P, mesh) <= level]
-
-
-def _neighbourhood_max(values: np.ndarray) -> np.ndarray:
-    """Largest value over each node's 3x3 neighbourhood (edges padded with themselves)."""
-    padded = np.pad(values, 1, mode="edge")
-    rows, cols = values.shape
-    shifted = [padded[i : i + rows, j : j + cols] for i in range(3) for j in range(3)]
-    return np.max(np.stack(shifted), axis=0)
-
-
-def _largest_gap(lower: np.ndarray, upper: np.ndarray, top: float) -> tuple[float, float]:
-    """Largest interval of [0, top] that meets none of the intervals [lower_i, upper_i]."""
-    best = (0.0, 0.0)
-    reached = 0.0
-    for low, high in sorted(zip(lower.tolist(), upper.tolist(), strict=True)):
-        if low > reached and min(low, top) - reached > best[1] - best[0]:
-            best = (reached, min(low, top))
-        reached = max(reached, high)
-        if reached >= top:
-            break
-    if reached < top and top - reached > best[1] - best[0]:
-        best = (reached, top)
-    return best
-
-
-def _grid_proof(
-    system: System, P: np.ndarray, controller: Controller, repeat: int, rho: float, points: int
-) -> GridProof:
-    """Dense-grid Lipschitz margin of a 2-D certificate (see the module docstring).
-
-    Every point of the set lies within the half cell diagonal h of a node; the set is grown by
-    ``sqrt(lambda_max(P)) h`` in ``sqrt(V)`` (a norm with that Lipschitz constant) so those
-    nodes are all checked. A node c passes when ``Delta(c) + L_c h < 0``, ``L_c`` the safety
-    factor times the largest gradient norm of Delta over c's 3x3 neighbourhood. A failing node
-    leaves unproved at most its cell, whose levels lie in
-    ``[(sqrt V(c) - s h)^2, (sqrt V(c) + s h)^2]``, s = sqrt(lambda_max(P)); the proved annulus
-    is the largest level interval that none of these meets.
-    """
-    P_t = torch.as_tensor(P, dtype=DTYPE)
-    scale = math.sqrt(float(np.linalg.eigvalsh(P)[-1]))
-    axes = _grid_axes(P, rho, points)
-    spacing = np.array([axis[1] - axis[0] for axis in axes])
-    half_diagonal = 0.5 * float(np.linalg.norm(spacing))
-    grown = (math.sqrt(rho) + scale * half_diagonal) ** 2
-    axes = _grid_axes(P, grown, points + 2 * int(math.ceil(points * (math.sqrt(grown / rho) - 1))))
-    mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
-    spacing = np.array([axis[1] - axis[0] for axis in axes])
-    half_diagonal = 0.5 * float(np.linalg.norm(spacing))
-    deviation = torch.as_tensor(mesh.reshape(-1, 2), dtype=DTYPE).requires_grad_(True)
-    states = deviation + torch.as_tensor(system.operating_state, dtype=DTYPE)
-    following, _ = _closed_loop(system, controller, repeat, states)
-    change = lyapunov_value(P_t, state_deviation(system, following)) - lyapunov_value(
-        P_t, deviation
-    )
-    (gradient,) = torch.autograd.grad(change.sum(), deviation)
-    norms = gradient.norm(dim=-1).numpy().reshape(mesh.shape[:2])
-    lipschitz = LIPSCHITZ_SAFETY * _neighbourhood_max(norms).reshape(-1)
-    values = np.einsum("bi,ij,bj->b", mesh.reshape(-1, 2), P, mesh.reshape(-1, 2))
-    covering = values <= (math.sqrt(rho) + scale * half_diagonal) ** 2
-    failing = covering & (change.detach().numpy() + lipschitz * half_diagonal >= 0.0)
-    root = np.sqrt(values[failing])
-    lower = np.maximum(root - scale * half_diagonal, 0.0) ** 2
-    upper = (root + scale * half_diagonal) ** 2
-    core, proved = _largest_gap(lower, upper, rho)
-    return GridProof(
-        int(mesh.shape[0]),
-        spacing,
-        int(covering.sum()),
-        float(lipschitz[covering].max()),
-        int(failing.sum()),
-        core,
-        proved,
-    )
-
-
 def certify_level(
     system: System,
     P: Any,
@@ -475,10 +367,12 @@ def certify_level(
     seed: int = 0,
     search_box: Sequence[float] | None = None,
     rho_max: float | None = None,
-    grid_points: int | None = GRID_POINTS_2D,
     linear_check: bool = True,
+    prove: bool = True,
+    max_boxes: int = MAX_BOXES,
 ) -> LyapunovCertificate:
-    r"""Largest level :math:`\rho` with :math:`V(F(x)) < V(x)` on :math:`0 < V \le \rho`.
+    r"""Largest level :math:`\rho` with :math:`V(F(x)) < V(x)` on :math:`0 < V \le \rho`:
+    sampled, then proved (module docstring).
 
     Parameters
     ----------
@@ -501,11 +395,14 @@ def certify_level(
         ``SEARCH_BOX_FACTOR * system.operating_region``) and in the angle chart.
     rho_max : float, optional
         Further cap on the initial level.
-    grid_points : int or None
-        Points per axis of the dense grid check for 2-D states (None: no grid).
     linear_check : bool
         Check the linearised decrease first (rho = 0 if it fails). Off only to test the
         sampling on its own.
+    prove : bool
+        Prove the level (:func:`leoc.control.proof.prove_level`, aiming at the sampled
+        estimate); ``rho`` is then the proved level. Off: ``rho`` is the sampled estimate.
+    max_boxes : int
+        Box budget of the proof.
 
     Returns
     -------
@@ -522,9 +419,8 @@ def certify_level(
         raise ValueError(f"samples: expected a positive integer, found {samples!r}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence: expected a number in (0, 1), found {confidence!r}")
-    use_grid = grid_points is not None and system.state_dim == 2
-    if use_grid and (isinstance(grid_points, bool) or int(grid_points) < 2):
-        raise ValueError(f"grid_points: expected an integer >= 2 or None, found {grid_points!r}")
+    if isinstance(max_boxes, bool) or not isinstance(max_boxes, (int, np.integer)) or max_boxes < 1:
+        raise ValueError(f"max_boxes: expected a positive integer, found {max_boxes!r}")
     rng = np.random.default_rng(seed)
     P_t = torch.as_tensor(matrix, dtype=DTYPE)
     operating = torch.as_tensor(system.operating_state, dtype=DTYPE)
@@ -532,8 +428,13 @@ def certify_level(
     linear_ok, linear_eig = _linear_check(system, matrix, controller, repeat)
     delta = 1.0 - confidence
 
-    def result(rho: float, rounds: int, grid: GridProof | None = None) -> LyapunovCertificate:
-        bound = math.log(1.0 / delta) / samples if rho > 0.0 else float("nan")
+    def result(sampled: float, rounds: int) -> LyapunovCertificate:
+        bound = math.log(1.0 / delta) / samples if sampled > 0.0 else float("nan")
+        proof = None
+        rho = sampled
+        if prove:
+            proof = prove_level(system, matrix, controller, repeat, sampled, max_boxes=max_boxes)
+            rho = proof.rho
         return LyapunovCertificate(
             rho,
             matrix,
@@ -545,10 +446,11 @@ def certify_level(
             confidence,
             bound,
             initial,
-            rho == initial,
+            sampled == initial,
             linear_ok,
             linear_eig,
-            grid,
+            sampled,
+            proof,
         )
 
     if linear_check and not linear_ok:
@@ -556,21 +458,58 @@ def certify_level(
     rho = initial
     for rounds in range(1, MAX_ROUNDS + 1):
         deviation = _uniform_ellipsoid(matrix, rho, samples, rng)
-        if use_grid:
-            nodes = _grid_nodes(matrix, rho, int(grid_points))  # type: ignore[arg-type]
-            deviation = np.concatenate([deviation, nodes])
         states = torch.as_tensor(deviation, dtype=DTYPE) + operating
         value, violates = _decrease(system, P_t, controller, repeat, states)
         if not bool(violates.any()):
-            grid = None
-            if use_grid:
-                grid = _grid_proof(system, matrix, controller, repeat, rho, int(grid_points))  # type: ignore[arg-type]
-            return result(rho, rounds, grid)
+            return result(rho, rounds)
         smallest = float(value[violates].min())
         rho = float(np.nextafter(smallest, 0.0))
         if rho <= MIN_RELATIVE_LEVEL * initial:
             return result(0.0, rounds)
     return result(0.0, MAX_ROUNDS)
+
+
+def describe_certificate(system: System, certificate: LyapunovCertificate) -> list[str]:
+    """Lines for people: the proved level (or why there is none) and, apart, the sampled
+    estimate with its statistical statement."""
+    names = system.state_names
+    lines = []
+    proof = certificate.proof
+    if proof is None:
+        lines.append(
+            f"rho = {certificate.rho:.6g} (SAMPLED estimate, not proved: the proof was switched "
+            "off)"
+        )
+    elif proof.proved:
+        lines.append(
+            f"rho = {certificate.rho:.6g} (PROVED: V(F(x)) < V(x) for every x with "
+            f"{proof.excluded_level:.3g} < V(x) <= rho, the set and its held steps inside the "
+            f"allowed region; {proof.boxes} verified boxes, inner ball V <= "
+            f"{proof.inner_level:.4g} by the rigorous linearisation; limited by "
+            f"{proof.limited_by}; {proof.seconds:.1f} s)"
+        )
+    else:
+        lines.append(f"rho: NOT PROVED ({proof.reason}); the sampled estimate below is no proof")
+    if certificate.certified:
+        extent = ", ".join(
+            f"{name} +/- {width:.4g}" for name, width in zip(names, certificate.extent, strict=True)
+        )
+        lines.append(f"extent of the {certificate.basis} set: {extent}")
+    if certificate.sampled_rho > 0.0:
+        capped = " (capped by the search box)" if certificate.capped else ""
+        lines.append(
+            f"sampled estimate: rho_sampled = {certificate.sampled_rho:.6g}{capped}: "
+            f"{certificate.samples} uniform samples in the final clean round "
+            f"({certificate.rounds} rounds); with confidence {certificate.confidence:g} the "
+            f"violating volume fraction is < {certificate.violation_bound:.3g} (a statistical "
+            "statement, not a proof)"
+        )
+    else:
+        lines.append(
+            f"sampled estimate: 0 (linear decrease {certificate.linear_decrease}, largest "
+            f"eigenvalue of A_cl^T P A_cl - P = {certificate.linear_decrease_eig:.4g})"
+        )
+    return lines
 
 
 class LinearClosedLoop:
@@ -864,7 +803,7 @@ def draw_basin_slices(
     handles = [
         Patch(color=BASIN_COLOURS[1], label="converges and holds"),
         Patch(color=BASIN_COLOURS[0], label="does not"),
-        plt.Line2D([], [], color="k", label=f"certified set V <= {certificate.rho:.3g}"),
+        plt.Line2D([], [], color="k", label=f"{certificate.basis} set V <= {certificate.rho:.3g}"),
     ]
     if box is not None:
         handles.append(plt.Line2D([], [], color=BOX_COLOUR, ls="--", label="basin box"))

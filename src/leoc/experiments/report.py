@@ -25,6 +25,11 @@ from leoc.evaluation.plots.robustness import plot_robustness
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
 from leoc.experiments.appendix_d import appendix_d_section
+from leoc.experiments.claims_report import (
+    hybrid_claims_section,
+    roa_estimate_lines,
+    roa_method_text,
+)
 from leoc.experiments.layout import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import (
@@ -936,24 +941,18 @@ def render_markdown(
         "",
         "## Region of attraction",
         "",
-        "For each controller: the sampling certificate of the region of attraction of the LQR "
-        "designed for the controller's period (V = (x - a)^T P (x - a) decreases along the "
-        "nonlinear, saturated, held closed loop on {V <= rho}; `leoc roa`), and the "
-        "controller's empirical basin: the share of seeded starts in the basin box, and of "
+        roa_method_text(evaluations)
+        + "controller's empirical basin: the share of seeded starts in the basin box, and of "
         "starts uniform in that certified set, that converge and hold. A hybrid whose basin "
         "contains the set holds 100% of the latter.",
         "",
     ]
     if tables["roa"]:
         first = tables["roa"][0]
-        lines += [
-            f"Certificates: {first['samples']} samples per round; with confidence "
-            f"{first['confidence']:g} the violating share of the set is below "
-            f"{first['violation_bound']:.2g}.",
-            "",
-        ]
+        lines += roa_estimate_lines(evaluations, first)
     lines += _flag_block(flags["roa"], "every hybrid holds its LQR's whole certified set.")
     lines += roa_table(tables["roa"])
+    lines += hybrid_claims_section(evaluations)
     n_seeds = len(meta.get("seeds", []))
     lines += [
         "",

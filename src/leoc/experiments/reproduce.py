@@ -183,13 +183,38 @@ def train_controller(
     return result.policy, _curve(result.curve)
 
 
+def certified_lqr(system: System, period: int, lqr_method: str = "discrete") -> tuple[Any, Any]:
+    """The LQR design (``lqr_method``) of ``system`` at ``period`` and its proved certificate."""
+    from leoc.control import certify_lqr, design_lqr
+
+    design = design_lqr(system, method=lqr_method, action_repeat=period)  # type: ignore[arg-type]
+    return design, certify_lqr(system, design)
+
+
+def hybrid_claims_of(
+    system: System, controller: torch.nn.Module, seed: int, lqr: tuple[Any, Any]
+) -> Any:
+    """:func:`leoc.evaluation.hybrid_claims.hybrid_claims` against the LQR ``lqr`` (design and
+    certificate, :func:`certified_lqr`) at the controller's period (None for non-hybrids)."""
+    from leoc.control.roa import default_basin_box
+    from leoc.evaluation.hybrid_claims import hybrid_claims
+    from leoc.policies import lqr_controller
+
+    design, certificate = lqr
+    return hybrid_claims(
+        system, controller, lqr_controller(design), certificate, default_basin_box(system), seed
+    )
+
+
 def region_of_attraction(
-    system: System, controller: torch.nn.Module, lqr_method: str = "discrete"
+    system: System,
+    controller: torch.nn.Module,
+    lqr_method: str = "discrete",
+    certificate: Any = None,
 ) -> dict[str, Any]:
     """The certificate of the LQR designed for the controller's period, and the controller's
     empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
     certified set (1.0 when the controller's basin contains it, on those starts)."""
-    from leoc.control import certify_lqr, design_lqr
     from leoc.control.roa import (
         basin_starts,
         box_fraction,
@@ -198,9 +223,8 @@ def region_of_attraction(
         empirical_basin,
     )
 
-    period = control_period(controller)
-    design = design_lqr(system, method=lqr_method, action_repeat=period)  # type: ignore[arg-type]
-    certificate = certify_lqr(system, design)
+    if certificate is None:
+        certificate = certified_lqr(system, control_period(controller), lqr_method)[1]
     box = default_basin_box(system)
     basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
     inside = certified_set_check(system, controller, certificate) if certificate.certified else None
@@ -239,9 +263,11 @@ def evaluate_controller(
         system, controller, evaluation_starts(system, spec.seed, SWING_UP_EPISODES)
     )
     trace = relevance_trace(system, controller, spec.seed)
+    lqr = certified_lqr(system, control_period(controller), variant.lqr_method)
     return {
         "action_repeat": control_period(controller),
-        "roa": region_of_attraction(system, controller, variant.lqr_method),
+        "roa": region_of_attraction(system, controller, variant.lqr_method, lqr[1]),
+        "hybrid_claims": hybrid_claims_of(system, controller, spec.seed, lqr),
         "responses": responses,
         "robustness": [
             {**point._asdict(), "return_mean": point.return_mean}

@@ -438,7 +438,9 @@ def roa_hybrid(
         limit_t = torch.tensor(limit, dtype=linear.W.dtype)
 
         def saturated_linear(obs: Tensor) -> Tensor:
-            return apply_saturation(linear(obs), limit_t, saturation)
+            # G written out (not linear(obs)) so that the certificate's interval proof can
+            # evaluate it on interval enclosures (leoc.control.intervals).
+            return apply_saturation(obs @ linear.W.T + linear.b, limit_t, saturation)
 
         closed_loop = with_control_period(_Callable(saturated_linear), design.action_repeat)
         certificate = certify_lqr(system, design, closed_loop, **certify_options)

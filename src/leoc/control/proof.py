@@ -1,0 +1,492 @@
+r"""A proof that a sublevel set of :math:`V = z^\top P z` is a region of attraction.
+
+Letters: B batch (boxes), S state dimension.
+
+**Claim.** For the sampled-data closed loop :math:`F` that is actually run (the nonlinear step
+applied ``repeat`` times with the saturated action held, :mod:`leoc.control.roa`) and
+:math:`V(z) = |L^\top z|^2` (:math:`P = L L^\top`, Cholesky; equal to :math:`z^\top P z` to
+rounding), :func:`prove_level` returns a level :math:`\rho` with
+
+.. math::
+
+    V(F(z)) < V(z) \quad \text{for all } z \text{ with } \varepsilon^2 < V(z) \le \rho,
+
+and every state of :math:`\{V \le \rho\}` and of its held steps inside the allowed region
+(``System.out_of_bounds`` never true), :math:`\varepsilon` the stated excluded radius (0 when
+the operating point is an exact fixed point of the floating-point model, as for every built-in
+system). Then :math:`\{V \le \rho\}` is positively invariant and every trajectory from it
+converges to the operating point (Khalil 2002, Thm 4.1 and sec. 8.2; with
+:math:`\varepsilon > 0`, to the ball :math:`V \le \varepsilon^2`).
+
+**Coordinates.** In :math:`w = L^\top z` the set is the ball :math:`|w|^2 \le \rho` and
+:math:`\tilde F(w) = L^\top (F(a + L^{-\top} w) - a)` gives
+:math:`\Delta(w) = |\tilde F(w)|^2 - |w|^2`. (:math:`L^{-\top}` is computed; its error
+:math:`e \ge \|L^\top L^{-\top} - I\|_2` enters every bound, :math:`V \ge (1 - e)^2 |w|^2`.)
+
+**Inner ball: the linearisation, made rigorous.** On the box :math:`B_0 = [-s, s]^S`, interval
+arithmetic (:mod:`leoc.control.intervals`) encloses the Jacobian :math:`\tilde J(B_0)` in
+:math:`J_c \pm R`. By the mean-value theorem in integral form
+:math:`\tilde F(w) = \tilde F(0) + \bar J w` with :math:`\bar J` in that enclosure, so
+:math:`|\tilde F(w)| \le |\tilde F(0)| + k |w|`, :math:`k = \|J_c\|_2 + \|R\|_2`. If
+:math:`k < 1 - e` the decrease holds for :math:`|w| > \varepsilon = |\tilde F(0)| /
+(1 - e - k)` on the ball of radius s; the largest such s is found by bisection.
+
+**Annulus: adaptive verified boxes.** The ball is covered by boxes :math:`c \pm h` in w. On a
+box, with :math:`\delta = w - c`, :math:`\tilde F(c) \in f \pm f_r` (point enclosure) and
+:math:`\bar J = J_c + D`, :math:`|D| \le R` (enclosure over the box),
+
+.. math::
+
+    \Delta(w) = \Delta_0 + g^\top \delta + \delta^\top M \delta + E, \qquad
+    \Delta_0 = |f|^2 - |c|^2,\ g = 2 (J_c^\top f - c),\ M = J_c^\top J_c - I,
+
+with :math:`|E| \le 2 |f|^\top R h + 2 f_r^\top (|J_c| + R) h + 2 |f| |f_r| + |f_r|^2 +
+h^\top (2 |J_c|^\top R + R^\top R) h`. The quadratic part is bounded over the box in two ways
+and the smaller taken: :math:`\Delta_0 + |g|^\top h + \max(0, \lambda_{\max}(M)) |h|^2`, and,
+when :math:`M \prec 0`, its maximum over :math:`\mathbb{R}^S` at
+:math:`\delta^* = -M^{-1} g / 2` lowered by :math:`\lambda_{\max}(M)\,
+\operatorname{dist}(\delta^*, \text{box})^2`. This keeps the cancellation between
+:math:`V(F(z))` and :math:`V(z)` that plain interval evaluation loses (the dependency
+problem), so boxes a few percent of the radius wide suffice in 4-D. A box passes when the
+bound is negative and no state of it or of its held steps is possibly out of bounds; a failing
+box is bisected along its widest side, smallest levels first, until its size relative to its
+distance from a is below ``resolution`` (``RESOLUTION``); boxes
+inside the inner ball or outside the target ball are skipped. The proved level is the
+smallest :math:`\min_{\text{box}} |w|^2` of the boxes left unproved (or the target).
+
+Floating point: the interval evaluator rounds outward (:mod:`leoc.control.intervals`); the
+few dense operations on S x S matrices of the bound (products, ``eigvalsh``) get a relative
+slack ``BOUND_SLACK`` of their magnitudes, many orders above their rounding errors.
+
+References
+----------
+H. K. Khalil, *Nonlinear Systems*, 3rd ed., Prentice Hall, 2002.
+R. E. Moore, R. B. Kearfott and M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009,
+sec. 6.1 (mean-value form).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet
+from leoc.systems.base import DTYPE, System
+
+__all__ = ["LevelProof", "prove_level"]
+
+Controller = Callable[[Tensor], Tensor]
+
+INITIAL_BOXES_PER_AXIS = {2: 16, 3: 8, 4: 6}
+"""Boxes per axis of the first cover of the target ball (default 4 beyond four dimensions)."""
+DEFAULT_INITIAL_BOXES = 4
+RESOLUTION = {2: 2e-6, 3: 1e-4, 4: 1e-3}
+"""A failing box counts as unproved once its widest half-width is below this fraction of its
+distance from a (or of the inner ball's radius, if larger): the resolution is relative, so
+boxes near the inner ball get as fine as those at the boundary."""
+DEFAULT_RESOLUTION = 1e-3
+MAX_DEPTH = 120
+"""Bisections of one box (each halves its widest side) at most, whatever the resolution."""
+MAX_BOXES = 3_000_000
+"""Box evaluations before the search stops (the boxes still pending then count as unproved)."""
+MAX_SECONDS = 480.0
+"""Wall-clock budget of the box search (a safety valve for hard systems such as the acrobot;
+the paper systems finish far below it and are then reproducible box for box)."""
+BATCH = 16_384
+"""Boxes evaluated per batched call, smallest levels first."""
+INNER_BISECTIONS = 40
+BOUND_SLACK = 1e-10
+"""Relative slack on the dense S x S operations of the box bound (module docstring)."""
+LEVEL_MARGIN = 1e-12
+"""The reported level is this fraction below the smallest unproved level (strict inequality)."""
+NO_BALL = (
+    "the rigorous linearisation proves no ball: the Jacobian enclosure is no contraction in the "
+    "V-norm"
+)
+STATUS_PROVED = "proved"
+STATUS_NOT_PROVED = "not proved"
+
+
+class LevelProof(NamedTuple):
+    """Outcome of :func:`prove_level` (module docstring).
+
+    Attributes
+    ----------
+    rho : float
+        Proved level of ``V = |L^T z|^2`` (0: nothing proved).
+    target : float
+        The level the proof aimed at (the sampled estimate).
+    inner_level : float
+        Level of the inner ball proved by the rigorous linearisation.
+    excluded_level : float
+        ``epsilon^2``: the decrease is proved for ``V > excluded_level`` only (0 when the
+        operating point is an exact fixed point).
+    boxes : int
+        Boxes evaluated.
+    unproved_boxes : int
+        Boxes left unproved at the resolution (or pending when the budget ran out).
+    limited_by : str
+        What set ``rho``: ``target`` (all of the target proved), ``decrease`` (a box whose
+        bound stays non-negative), ``region`` (a box possibly out of the allowed region),
+        ``budget`` (``max_boxes`` or ``max_seconds`` reached) or ``unsupported`` (the model
+        has an operation without an interval rule; ``reason`` names it).
+    resolution : float
+        Relative box size at which a failing box counts as unproved.
+    seconds : float
+    reason : str
+        One line for people.
+    """
+
+    rho: float
+    target: float
+    inner_level: float
+    excluded_level: float
+    boxes: int
+    unproved_boxes: int
+    limited_by: str
+    resolution: float
+    seconds: float
+    reason: str
+
+    @property
+    def proved(self) -> bool:
+        return self.rho > 0.0
+
+    @property
+    def status(self) -> str:
+        return STATUS_PROVED if self.proved else STATUS_NOT_PROVED
+
+
+class _Frame(NamedTuple):
+    """The w-coordinates: ``w = L^T z``, ``z = inverse @ w``, ``error`` >= ||L^T inverse - I||."""
+
+    factor: Tensor  # L (S, S)
+    inverse: Tensor  # L^-T (S, S)
+    operating: Tensor  # a (S,)
+    error: float
+
+
+class _Enclosure(NamedTuple):
+    """Closed loop over boxes: F~ value and Jacobian (in w), and 'possibly out of bounds'."""
+
+    mid: Tensor  # (B, S)
+    rad: Tensor  # (B, S)
+    jac_mid: Tensor | None  # (B, S, S): [i, s] = d F~_i / d w_s
+    jac_rad: Tensor | None
+    outside: Tensor  # (B,) bool
+
+
+def _frame(system: System, P: np.ndarray) -> _Frame:
+    factor = np.linalg.cholesky(P)
+    inverse = np.linalg.inv(factor.T)
+    size = P.shape[0]
+    residual = factor.T @ inverse - np.eye(size)
+    rounding = 2.0 * size * np.finfo(float).eps * np.abs(factor.T) @ np.abs(inverse)
+    error = float(np.linalg.norm(residual, "fro") + np.linalg.norm(rounding, "fro"))
+    return _Frame(
+        torch.as_tensor(factor, dtype=DTYPE),
+        torch.as_tensor(inverse, dtype=DTYPE),
+        torch.as_tensor(system.operating_state, dtype=DTYPE),
+        error,
+    )
+
+
+def _closed_loop_jet(
+    system: System, controller: Controller, repeat: int, states: Jet
+) -> tuple[Jet, Tensor]:
+    """The held closed loop on interval states: (next states, possibly out of bounds)."""
+    outside = system.out_of_bounds(states)
+    action = controller(system.observation.observe(states))
+    if not isinstance(action, Jet):
+        raise UnsupportedOperation(
+            f"controller: returned {type(action).__name__}, not an interval enclosure"
+        )
+    for _ in range(repeat):
+        states = system.step_fn(states, action)
+        outside = outside | system.out_of_bounds(states)
+    return states, outside
+
+
+def _enclose(
+    system: System,
+    controller: Controller,
+    repeat: int,
+    frame: _Frame,
+    centre: Tensor,
+    radius: Tensor | None,
+) -> _Enclosure:
+    """F~ over boxes ``centre +/- radius`` in w (with its Jacobian), or at points (radius None)."""
+    if radius is None:
+        z = point_jet(centre) @ frame.inverse.T
+    else:
+        z = box_jet(centre, radius, frame.inverse)
+    following, outside = _closed_loop_jet(system, controller, repeat, z + frame.operating)
+    image = (following - frame.operating) @ frame.factor
+    finite = torch.isfinite(image.mid).all(-1) & torch.isfinite(image.rad).all(-1)
+    if image.dmid is not None:
+        finite &= torch.isfinite(image.dmid).all((-1, -2)) & torch.isfinite(image.drad).all(
+            (-1, -2)
+        )
+    return _Enclosure(image.mid, image.rad, image.dmid, image.drad, outside | ~finite)
+
+
+def _spectral_upper(matrix: Tensor) -> Tensor:
+    """Upper bound of the spectral norm (B,) of matrices (B, S, S)."""
+    norm = torch.linalg.matrix_norm(matrix, ord=2)
+    return norm * (1.0 + BOUND_SLACK) + BOUND_SLACK
+
+
+def _inner_contraction(
+    system: System, controller: Controller, repeat: int, frame: _Frame, half_width: float
+) -> tuple[bool, float]:
+    """Whether the inner-ball argument holds on [-s, s]^S; and epsilon (module docstring)."""
+    size = frame.factor.shape[0]
+    centre = torch.zeros(1, size, dtype=DTYPE)
+    box = _enclose(
+        system, controller, repeat, frame, centre, torch.full((1, size), half_width, dtype=DTYPE)
+    )
+    point = _enclose(system, controller, repeat, frame, centre, None)
+    if bool(box.outside[0]) or bool(point.outside[0]):
+        return False, math.inf
+    contraction = float(_spectral_upper(box.jac_mid)[0] + _spectral_upper(box.jac_rad)[0])
+    room = 1.0 - frame.error - contraction
+    if room <= 0.0:
+        return False, math.inf
+    offset = float(torch.linalg.vector_norm(point.mid.abs() + point.rad))
+    return True, offset / room
+
+
+def _inner_level(
+    system: System, controller: Controller, repeat: int, frame: _Frame, target_radius: float
+) -> tuple[float, float]:
+    """Largest half-width s (by bisection) of the inner-ball argument, and its epsilon."""
+    low, high, epsilon = 0.0, target_radius, math.inf
+    works, value = _inner_contraction(system, controller, repeat, frame, high)
+    if works:
+        return high, value
+    for _ in range(INNER_BISECTIONS):
+        middle = 0.5 * (low + high)
+        works, value = _inner_contraction(system, controller, repeat, frame, middle)
+        if works:
+            low, epsilon = middle, value
+        else:
+            high = middle
+    return low, epsilon
+
+
+def _box_bound(enclosure: _Enclosure, point: _Enclosure, centre: Tensor, radius: Tensor, error):
+    """Upper bound (B,) of Delta over boxes ``centre +/- radius`` (module docstring)."""
+    jac, spread = enclosure.jac_mid, enclosure.jac_rad
+    f, f_rad = point.mid, point.rad
+    h = radius
+    delta0 = (f * f).sum(-1) - (centre * centre).sum(-1)
+    g = 2.0 * (torch.einsum("bis,bi->bs", jac, f) - centre)
+    jac_abs = jac.abs()
+    error_first = (
+        2.0 * torch.einsum("bi,bis,bs->b", f.abs(), spread, h)
+        + 2.0 * torch.einsum("bi,bis,bs->b", f_rad, jac_abs + spread, h)
+        + 2.0 * (f.abs() * f_rad).sum(-1)
+        + (f_rad * f_rad).sum(-1)
+    )
+    cross = 2.0 * torch.einsum("bis,bit->bst", jac_abs, spread) + torch.einsum(
+        "bis,bit->bst", spread, spread
+    )
+    error_second = torch.einsum("bs,bst,bt->b", h, cross, h)
+    eye = torch.eye(jac.shape[-1], dtype=DTYPE)
+    quadratic = jac.transpose(-1, -2) @ jac - eye
+    eigenvalues, vectors = torch.linalg.eigh(quadratic)
+    largest = eigenvalues[:, -1]
+    h_square = (h * h).sum(-1)
+    linear_bound = delta0 + (g.abs() * h).sum(-1) + torch.clamp(largest, min=0.0) * h_square
+    coefficients = torch.einsum("bsk,bs->bk", vectors, g)
+    negative = largest < 0.0
+    safe = torch.where(negative.unsqueeze(-1), eigenvalues, -torch.ones_like(eigenvalues))
+    peak = -0.25 * (coefficients**2 / safe).sum(-1)
+    stationary = -0.5 * torch.einsum("bsk,bk->bs", vectors, coefficients / safe)
+    distance = torch.clamp(stationary.abs() - h, min=0.0)
+    concave_bound = delta0 + peak + largest * (distance * distance).sum(-1)
+    bound = torch.where(negative, torch.minimum(linear_bound, concave_bound), linear_bound)
+    outer = ((centre.abs() + h) ** 2).sum(-1)
+    magnitude = (
+        (f * f).sum(-1)
+        + outer
+        + (g.abs() * h).sum(-1)
+        + peak.abs() * negative
+        + (jac_abs**2).sum((-1, -2)) * h_square
+    )
+    return bound + error_first + error_second + 2.0 * error * outer + BOUND_SLACK * magnitude
+
+
+def _levels(centre: Tensor, radius: Tensor) -> tuple[Tensor, Tensor]:
+    """Smallest and largest |w|^2 over boxes."""
+    nearest = torch.clamp(centre.abs() - radius, min=0.0)
+    farthest = centre.abs() + radius
+    return (nearest * nearest).sum(-1), (farthest * farthest).sum(-1)
+
+
+def _initial_cover(size: int, radius: float) -> tuple[Tensor, Tensor]:
+    count = INITIAL_BOXES_PER_AXIS.get(size, DEFAULT_INITIAL_BOXES)
+    width = radius / count
+    axis = torch.linspace(-radius + width, radius - width, count, dtype=DTYPE)
+    mesh = torch.stack(torch.meshgrid(*([axis] * size), indexing="ij"), dim=-1).reshape(-1, size)
+    return mesh, torch.full_like(mesh, width)
+
+
+def _split(centre: Tensor, radius: Tensor) -> tuple[Tensor, Tensor]:
+    """Bisect each box along its widest side: (2B, S) children."""
+    widest = radius.argmax(-1, keepdim=True)
+    half = radius.clone()
+    half.scatter_(-1, widest, radius.gather(-1, widest) * 0.5)
+    shift = torch.zeros_like(radius)
+    shift.scatter_(-1, widest, half.gather(-1, widest))
+    return torch.cat([centre - shift, centre + shift]), torch.cat([half, half])
+
+
+class _Search(NamedTuple):
+    level: float  # smallest unproved |w|^2 (inf: none)
+    boxes: int
+    unproved: int
+    limited_by: str
+
+
+def _annulus(
+    system: System,
+    controller: Controller,
+    repeat: int,
+    frame: _Frame,
+    inner: float,
+    cover: float,
+    resolution: float,
+    max_boxes: int,
+    deadline: float,
+) -> _Search:
+    """Best-first adaptive verification of the boxes between the inner ball and the cover."""
+    centre, radius = _initial_cover(frame.factor.shape[0], cover)
+    depth = torch.zeros(centre.shape[0], dtype=torch.long)
+    best, reason, evaluated, unproved = math.inf, "target", 0, 0
+    while centre.shape[0]:
+        nearest, farthest = _levels(centre, radius)
+        keep = (nearest <= cover**2) & (farthest > inner**2) & (nearest < best)
+        centre, radius, depth, nearest = centre[keep], radius[keep], depth[keep], nearest[keep]
+        if not centre.shape[0]:
+            break
+        if evaluated >= max_boxes or time.perf_counter() > deadline:
+            best, reason = min(best, float(nearest.min())), "budget"
+            unproved += int(centre.shape[0])
+            break
+        order = torch.argsort(nearest)
+        take, rest = order[:BATCH], order[BATCH:]
+        c, h, d, near = centre[take], radius[take], depth[take], nearest[take]
+        box = _enclose(system, controller, repeat, frame, c, h)
+        point = _enclose(system, controller, repeat, frame, c, None)
+        outside = box.outside | point.outside
+        bound = _box_bound(box, point, c, h, frame.error)
+        failed = outside | ~(bound < 0.0)
+        evaluated += int(c.shape[0])
+        scale = torch.clamp(near.sqrt(), min=inner)
+        final = failed & ((h.max(-1).values <= resolution * scale) | (d >= MAX_DEPTH))
+        if bool(final.any()):
+            level = float(near[final].min())
+            if level < best:
+                best = level
+                first = int(torch.nonzero(final & (near == level))[0, 0])
+                reason = "region" if bool(outside[first]) else "decrease"
+            unproved += int(final.sum())
+        again = failed & ~final
+        children, halves = _split(c[again], h[again])
+        centre = torch.cat([centre[rest], children])
+        radius = torch.cat([radius[rest], halves])
+        depth = torch.cat([depth[rest], (d[again] + 1).repeat(2)])
+    return _Search(best, evaluated, unproved, reason)
+
+
+def prove_level(
+    system: System,
+    P: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    target: float,
+    resolution: float | None = None,
+    max_boxes: int = MAX_BOXES,
+    max_seconds: float = MAX_SECONDS,
+) -> LevelProof:
+    r"""Prove the decrease of :math:`V = |L^\top z|^2` on the largest level set it can, up to
+    ``target`` (module docstring).
+
+    Parameters
+    ----------
+    system : System
+    P : (S, S) array
+        Symmetric positive definite (checked by the caller).
+    controller : callable
+        Observation -> action; it must run on :class:`~leoc.control.intervals.Jet` inputs
+        (linear controllers, clip, sin and tanh saturations do).
+    repeat : int
+        Control period (simulator steps per decision, action held).
+    target : float
+        Level to prove up to (e.g. the sampled estimate); 0 gives an empty proof.
+    resolution : float, optional
+        Relative size of the smallest boxes (default per state dimension, ``RESOLUTION``).
+    max_boxes : int
+        Evaluation budget.
+    max_seconds : float
+        Wall-clock budget of the box search; past it the pending boxes count as unproved
+        (``limited_by="budget"``: the level reported is still proved, only smaller).
+
+    Returns
+    -------
+    LevelProof
+    """
+    started = time.perf_counter()
+    size = P.shape[0]
+    fine = RESOLUTION.get(size, DEFAULT_RESOLUTION) if resolution is None else float(resolution)
+    if not 0.0 < fine < 1.0:
+        raise ValueError(f"resolution: expected a number in (0, 1), found {resolution!r}")
+
+    def finish(rho: float, inner: float, eps: float, search: _Search, reason: str) -> LevelProof:
+        return LevelProof(
+            rho,
+            target,
+            inner,
+            eps,
+            search.boxes,
+            search.unproved,
+            search.limited_by,
+            fine,
+            time.perf_counter() - started,
+            reason,
+        )
+
+    empty = _Search(math.inf, 0, 0, "target")
+    if not target > 0.0:
+        return finish(0.0, 0.0, 0.0, empty, "no target level (the sampled estimate is 0)")
+    frame = _frame(system, P)
+    shrink = (1.0 - frame.error) ** 2
+    cover = math.sqrt(target) / (1.0 - frame.error)
+    with torch.no_grad():
+        try:
+            half_width, epsilon = _inner_level(system, controller, repeat, frame, cover)
+            inner_level, excluded = min(target, shrink * half_width**2), epsilon**2
+            if half_width <= 0.0:
+                failed = empty._replace(limited_by="decrease")
+                return finish(0.0, 0.0, 0.0, failed, NO_BALL)
+            deadline = started + max_seconds
+            search = _annulus(
+                system, controller, repeat, frame, half_width, cover, fine, max_boxes, deadline
+            )
+        except UnsupportedOperation as error:
+            return finish(0.0, 0.0, 0.0, empty._replace(limited_by="unsupported"), str(error))
+    level = min(search.level, cover**2)
+    # The inner ball is proved on its own; neither claim goes past the target.
+    rho = min(target, max(shrink * level * (1.0 - LEVEL_MARGIN), inner_level))
+    reason = (
+        f"decrease proved on {excluded:.3g} < V <= {rho:.6g} ({search.boxes} boxes); "
+        f"limited by {search.limited_by}"
+    )
+    return finish(rho, inner_level, excluded, search, reason)
