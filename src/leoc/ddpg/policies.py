@@ -354,6 +354,7 @@ class HybridTD3Policy(TD3Policy):
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def make_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
+        """The hybrid actor (SB3 calls this for the actor and its target)."""
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
         return HybridActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
 

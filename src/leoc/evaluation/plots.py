@@ -40,6 +40,7 @@ Y_MARGIN = 0.15
 
 
 def controller_colour(label: str) -> str:
+    """Plot colour of a controller label (grey for labels without one)."""
     return CONTROLLER_COLOURS.get(label, "#7f7f7f")
 
 

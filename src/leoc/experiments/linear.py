@@ -44,6 +44,7 @@ def design_summary(design: LQRDesign) -> dict[str, Any]:
 
 
 def format_settling(metrics: ResponseMetrics) -> str:
+    """Settling time in steps as text, or ``not settled``."""
     return "not settled" if metrics.settling_time is None else str(metrics.settling_time)
 
 

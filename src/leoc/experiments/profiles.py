@@ -144,6 +144,7 @@ class RunSpec(NamedTuple):
 
     @property
     def key(self) -> str:
+        """Run folder path ``system/controller/seedN`` under the output folder's ``runs``."""
         return f"{self.system}/{self.controller}/seed{self.seed}"
 
     @property
@@ -153,6 +154,7 @@ class RunSpec(NamedTuple):
 
     @property
     def hybrid(self) -> bool:
+        """Whether the controller is a hybrid."""
         return "_hybrid" in self.controller
 
     @property

@@ -607,6 +607,7 @@ def _paper_cells(system: str, controller: str) -> str:
 
 
 def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
+    """Markdown rows of the response table of ``test`` (impulse or step), one per controller."""
     lines = [
         "| system | controller | period [steps] | steady-state error | overshoot "
         "| peak deviation | settling time [steps] | settling time [s] | settled | terminated "
@@ -631,6 +632,7 @@ def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
 
 
 def roa_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the region-of-attraction table: certificate and empirical basins."""
     lines = [
         "| system | controller | period | certified rho (LQR at that period) | extent per state "
         "| certified share of the box | basin: box held | basin: certified set held |",
@@ -676,6 +678,7 @@ def robustness_table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def swing_up_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the swing-up table: return and hold test per controller."""
     lines = [
         "| system | controller | swing-up return | episodes holding the operating point "
         "| runs holding in every episode | mean hold step |",
@@ -698,6 +701,7 @@ def _interval(low: float | None, high: float | None, note: str | None) -> str:
 
 
 def seed_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the seed statistics: IQM and 95% bootstrap interval per quantity."""
     lines = [
         "| system | controller | quantity | IQM | 95% CI | seeds used | seeds without a value |",
         "|---|---|---|---|---|---|---|",
@@ -713,6 +717,7 @@ def seed_table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def improvement_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the probability that each hybrid beats its baseline."""
     lines = [
         "| system | framework | P(hybrid's final return > baseline's) | 95% CI |",
         "|---|---|---|---|",
@@ -858,6 +863,7 @@ def render_markdown(
     figures: list[tuple[str, str]],
     run_seconds: float,
 ) -> str:
+    """The whole report as markdown, from the run metadata, evaluations and tables."""
     responses, robustness = tables["responses"], tables["robustness"]
     wall = meta.get("wall_seconds_last_invocation")
     lines = [

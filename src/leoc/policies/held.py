@@ -42,6 +42,7 @@ class HeldPolicy(nn.Module):
 
     @property
     def is_hybrid(self) -> bool:
+        """Whether the wrapped policy is a hybrid (it has a relevance r(x))."""
         return callable(getattr(self.policy, "relevance", None)) and getattr(
             self.policy, "is_hybrid", True
         )

@@ -102,6 +102,8 @@ __all__ = [
     "paper_relevance",
 ]
 
+#: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
+#: the certified set.
 RELEVANCE_KINDS = ("paper", "roa")
 DEFAULT_ROA_WIDTH = 1.0
 """Default band width w: the relevance falls from 1 at :math:`V = \\rho_{in}` to 0 at
@@ -231,14 +233,17 @@ class ObservationDeviation(nn.Module):
 
     @property
     def obs_dim(self) -> int:
+        """Observation dimension D."""
         return len(self.layout)
 
     @property
     def state_dim(self) -> int:
+        """State dimension S."""
         return len(self.plan)
 
     @property
     def angle_indices(self) -> tuple[int, ...]:
+        """State entries observed through cos and sin (wrapped deviations)."""
         return tuple(index for kind, index, _, _ in self.plan if kind == "angle")
 
     def forward(self, obs: Tensor) -> Tensor:

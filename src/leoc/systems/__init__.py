@@ -33,11 +33,13 @@ from leoc.systems.registry import (
 )
 
 # The paper's three benchmark systems (what `leoc reproduce` runs by default).
+#: The paper's three systems, by registry name.
 PAPER_SYSTEMS: dict[str, type[System]] = {
     "pendulum": Pendulum,
     "cartpole": CartPole,
     "mountaincar": MountainCar,
 }
+#: Registry names of the paper's three systems (what ``leoc reproduce`` runs by default).
 SYSTEM_NAMES = tuple(PAPER_SYSTEMS)
 
 for _name, _factory in PAPER_SYSTEMS.items():

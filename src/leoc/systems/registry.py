@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 from leoc.systems.base import DEFAULT_EPISODE_STEPS, PhysicalParams, System
 
+#: Anything that builds a :class:`System` from keyword parameters (usually the class).
 SystemFactory = Callable[..., System]
 _NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 GENERIC_ENTRY_POINT = "leoc.systems.envs:LeocEnv"
