@@ -110,7 +110,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._obs(), {"state": self.state.copy()}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        """One simulator step; returns ``(obs, reward, terminated, truncated, {"state": state})``."""
+        """One simulator step: ``(obs, reward, terminated, truncated, {"state": state})``."""
         if self.state is None:
             raise RuntimeError("step() called before reset()")
         action_arr = np.asarray(action, dtype=float).reshape(-1)
