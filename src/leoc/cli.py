@@ -63,16 +63,25 @@ def cmd_lqr(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_controller(spec: str, system_name: str, method: str = "discrete", action_repeat: int = 1):
-    """``linear`` (the LQR of the system, designed for and run at ``action_repeat``) or a run
-    folder written by ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
-    from leoc.control import design_lqr
-    from leoc.policies import lqr_controller
-    from leoc.systems import make_system
+def load_controller(
+    spec: str,
+    system_name: str,
+    method: str | None = None,
+    action_repeat: int = 1,
+    variant: str = "leoc",
+):
+    """``linear`` (the variant's linear reference of the system, designed for and run at
+    ``action_repeat``; ``method`` overrides its LQR design) or a run folder written by
+    ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
+    import dataclasses
 
+    from leoc.experiments.variants import get_variant
+
+    chosen = get_variant(variant)
     if spec == "linear":
-        system = make_system(system_name)
-        return lqr_controller(design_lqr(system, method=method, action_repeat=action_repeat))
+        if method is not None:
+            chosen = dataclasses.replace(chosen, lqr_method=method)
+        return chosen.linear_controller(chosen.system(system_name), action_repeat)
     from leoc.experiments.controllers import load_trained_controller
 
     return load_trained_controller(Path(spec), system=system_name)
@@ -81,11 +90,20 @@ def load_controller(spec: str, system_name: str, method: str = "discrete", actio
 def cmd_simulate(args: argparse.Namespace) -> int:
     from leoc.evaluation.plots import plot_responses
     from leoc.evaluation.rollout import control_period, response_test
-    from leoc.systems import make_system
+    from leoc.experiments.variants import get_variant
 
-    system = make_system(args.system)
-    controller = load_controller(args.controller, args.system, args.method, args.action_repeat)
-    result = response_test(system, controller, args.test, steps=args.steps, band=args.band)
+    variant = get_variant(args.variant)
+    system = variant.system(args.system)
+    controller = load_controller(
+        args.controller, args.system, args.method, args.action_repeat, args.variant
+    )
+    if args.steps is None:
+        args.steps = variant.steps_for(args.system)
+    if args.band is not None and args.metrics == "authors":
+        raise SystemExit("leoc simulate: error: --band: the authors' metrics fix the band (pi/180)")
+    result = response_test(
+        system, controller, args.test, steps=args.steps, band=args.band, metric_set=args.metrics
+    )
     metrics = result.metrics
     unit = "deg" if system.main_in_degrees else "m"
     settling = (
@@ -106,6 +124,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                     "system": args.system,
                     "controller": args.controller,
                     "test": args.test,
+                    "variant": args.variant,
+                    "metrics_set": args.metrics,
                     "action_repeat": period,
                     "metrics": metrics._asdict(),
                     "deviation": result.deviation.tolist(),
@@ -116,7 +136,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return 0
     print(
         f"{args.test} response of {args.controller} on {args.system} ({args.steps} steps, "
-        f"control period {period} step{'s' if period > 1 else ''})"
+        f"control period {period} step{'s' if period > 1 else ''}; variant {args.variant}, "
+        f"{args.metrics} metrics)"
     )
     print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
     print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")
@@ -391,10 +412,10 @@ def build_parser() -> argparse.ArgumentParser:
     lqr.add_argument("system", choices=systems)
     lqr.add_argument(
         "--method",
-        choices=("discrete", "continuous"),
+        choices=("discrete", "continuous", "authors"),
         default="discrete",
         help="discrete: dlqr on the autodiff linearisation (default); continuous: lqr on the "
-        "paper's analytic model",
+        "paper's analytic model; authors: nrjc/LEOC's lqr on their models (R = 1) times u_max",
     )
     lqr.add_argument("--q", type=float, nargs="+", help="diagonal of Q (default per system)")
     lqr.add_argument("--r", type=float, nargs="+", help="diagonal of R (default 1)")
@@ -425,9 +446,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
     simulate.add_argument(
-        "--steps", type=positive_int, default=200, help="episode length (default 200)"
+        "--steps",
+        type=positive_int,
+        help="episode length (default: the variant's, 200; the authors' cart-pole record: 400)",
     )
-    simulate.add_argument("--method", choices=("discrete", "continuous"), default="discrete")
+    simulate.add_argument(
+        "--method",
+        choices=("discrete", "continuous", "authors"),
+        help="LQR design of the linear controller (default: the variant's; leoc: discrete)",
+    )
+    simulate.add_argument(
+        "--variant",
+        choices=("leoc", "authors"),
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
+        "u_max with a sin squash, their env rules); default leoc",
+    )
+    simulate.add_argument(
+        "--metrics",
+        choices=("leoc", "authors"),
+        default="leoc",
+        help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
+        "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
+    )
     simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
     simulate.add_argument(
         "--json", action="store_true", help="print the metrics and e(t) as JSON instead"

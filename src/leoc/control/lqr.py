@@ -17,7 +17,9 @@ Riccati equation (python-control ``dlqr``)
 
 so that ``u = u_eq - K (x - a)`` minimises ``sum_t x_t^T Q x_t + u_t^T R u_t`` for the
 linearised model. The *continuous* option designs on the paper's analytic ``A, B``
-(appendix B) with ``lqr`` instead; it is offered for comparison only.
+(appendix B) with ``lqr`` instead; it is offered for comparison only. The *authors* option is
+the design the paper's numbers come from (:mod:`leoc.control.authors`): ``lqr`` with ``R = 1`` on
+the authors' own models, its gain scaled by the actuator limit.
 
 The gain acts on the state; the hybrid policy acts on the observation, where every angle is
 seen through its cosine and sine. :func:`observation_gain` maps ``K`` to ``G(o) = W o + b``
@@ -38,10 +40,10 @@ import torch
 
 from leoc.systems.base import DTYPE, System, check_repeat
 
-#: LQR design methods: the discrete LQR on the autodiff linearisation (default) or the continuous
-#: one on the paper's analytic model.
-DESIGN_METHODS = ("discrete", "continuous")
-DesignMethod = Literal["discrete", "continuous"]
+#: LQR design methods: the discrete LQR on the autodiff linearisation (default), the continuous
+#: one on the paper's analytic model, or the authors' (nrjc/LEOC) continuous design.
+DESIGN_METHODS = ("discrete", "continuous", "authors")
+DesignMethod = Literal["discrete", "continuous", "authors"]
 # Tolerances of the matrix checks (relative to the matrix scale).
 SYMMETRY_RTOL = 1e-9
 DEFINITENESS_RTOL = 1e-12
@@ -286,9 +288,13 @@ def design_lqr(
         State weight, symmetric PSD; defaults to ``diag(system.default_q)``.
     R : array (A, A) or (A,), optional
         Action weight, symmetric PD; defaults to ``diag(system.default_r)``.
-    method : {"discrete", "continuous"}
+    method : {"discrete", "continuous", "authors"}
         ``discrete`` (default): ``dlqr`` on the autodiff linearisation of the step map.
         ``continuous``: ``lqr`` on the paper's analytic continuous-time ``A, B``.
+        ``authors``: nrjc/LEOC's design (:func:`leoc.control.authors.authors_gain`): ``lqr``
+        with their ``Q`` and ``R = 1`` on their models, times the actuator limit; ``Q`` and
+        ``R`` are theirs and may not be given. ``P`` is then the discrete Lyapunov matrix of
+        the closed loop at the period, :math:`A_{cl}^T P A_{cl} - P + Q + K^T R K = 0`.
     action_repeat : int
         Control period in simulator steps: the controller decides every ``action_repeat``
         steps and holds its action (PILCO: 3). The discrete design linearises that held map
@@ -309,6 +315,8 @@ def design_lqr(
 
     if method not in DESIGN_METHODS:
         raise ValueError(f"method: expected one of {DESIGN_METHODS}, found {method!r}")
+    if method == "authors":
+        return _authors_design(system, Q, R, action_repeat)
     q_matrix = _weight_matrix(system.default_q if Q is None else Q, system.state_dim, "Q", False)
     r_matrix = _weight_matrix(system.default_r if R is None else R, system.action_dim, "R", True)
     lin = linearise(system, action_repeat=action_repeat)
@@ -321,9 +329,24 @@ def design_lqr(
         check_stabilisable(a_cont, b_cont, discrete=False)
         K, P, _ = control.lqr(a_cont, b_cont, q_matrix, r_matrix)
     K = np.asarray(K, dtype=float)
+    return _design(system, lin, lin_repeat, K, P, q_matrix, r_matrix, method)
+
+
+def _design(
+    system: System,
+    lin: Linearisation,
+    repeat: int,
+    K: np.ndarray,
+    P: np.ndarray,
+    q_matrix: np.ndarray,
+    r_matrix: np.ndarray,
+    method: str,
+) -> LQRDesign:
+    """Assemble an :class:`LQRDesign` from a state gain: eigenvalues and margins on the held
+    map ``lin``, the observation gain ``(W, b)``."""
     eigenvalues = np.linalg.eigvals(lin.A_d - lin.B_d @ K)
     W, b = observation_gain(system, K)
-    margins = loop_margins(lin.A_d, lin.B_d, K, system.dt * lin_repeat)
+    margins = loop_margins(lin.A_d, lin.B_d, K, system.dt * repeat)
     return LQRDesign(
         K,
         np.asarray(P, dtype=float),
@@ -336,5 +359,32 @@ def design_lqr(
         b,
         method,
         margins,
-        lin_repeat,
+        repeat,
     )
+
+
+def _authors_design(
+    system: System, Q: object | None, R: object | None, action_repeat: int
+) -> LQRDesign:
+    """``design_lqr(method="authors")``: the gain of :func:`leoc.control.authors.authors_gain`,
+    evaluated on the exact linearisation of the held map at ``action_repeat``."""
+    from scipy.linalg import solve_discrete_lyapunov
+
+    from leoc.control.authors import AUTHORS_ACTION_WEIGHT, authors_gain, authors_model
+
+    if Q is not None or R is not None:
+        raise ValueError(
+            "Q, R: method 'authors' uses the authors' own weights (their Q, R = 1); "
+            f"found Q={Q!r}, R={R!r}"
+        )
+    K = authors_gain(system)
+    q_matrix = authors_model(system).Q
+    r_matrix = np.full((system.action_dim, system.action_dim), AUTHORS_ACTION_WEIGHT)
+    lin = linearise(system, action_repeat=action_repeat)
+    closed = lin.A_d - lin.B_d @ K
+    # The discrete Lyapunov matrix of the closed loop with the stage cost x^T (Q + K^T R K) x:
+    # the quadratic form a region-of-attraction certificate needs (P of the Riccati equation
+    # exists only for the designs that solve one at this period).
+    P = solve_discrete_lyapunov(closed.T, q_matrix + K.T @ r_matrix @ K)
+    repeat = check_repeat(action_repeat)
+    return _design(system, lin, repeat, K, 0.5 * (P + P.T), q_matrix, r_matrix, "authors")

@@ -40,6 +40,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "AUTHORS_BAND",
+    "AUTHORS_STEADY_TOLERANCE",
+    "AUTHORS_STEADY_WINDOW",
     "DEFAULT_FINAL_WINDOW",
     "DEFAULT_RELATIVE_BAND",
     "MIN_SAMPLES",
@@ -47,6 +50,7 @@ __all__ = [
     "OVERSHOOT_REL_TOLERANCE",
     "MetricsSummary",
     "ResponseMetrics",
+    "authors_response_metrics",
     "overshoot",
     "relative_band",
     "response_metrics",
@@ -62,6 +66,12 @@ DEFAULT_FINAL_WINDOW = 20
 """Number of final samples averaged to estimate the final value (clipped to the record)."""
 
 MIN_SAMPLES = 2
+# The authors' metric set (nrjc/LEOC plotting/plotter.py): an absolute band of pi/180 in the
+# units of e (degrees or metres), and a steady state "reached" when the last 10 samples agree
+# with the last one to 1e-3.
+AUTHORS_BAND = math.pi / 180.0
+AUTHORS_STEADY_WINDOW = 10
+AUTHORS_STEADY_TOLERANCE = 1e-3
 """Shortest record accepted: one sample cannot show a deviation and a final value."""
 
 OVERSHOOT_REL_TOLERANCE = 0.01
@@ -489,4 +499,52 @@ def summarise_metrics(metrics: Sequence[ResponseMetrics]) -> MetricsSummary:
         peak_deviation_mean=peak_mean,
         peak_deviation_std=peak_std,
         n_terminated=sum(bool(run.terminated) for run in runs),
+    )
+
+
+def authors_response_metrics(
+    e: ArrayLike, *, dt: float | None = None, terminated: bool = False
+) -> ResponseMetrics:
+    r"""The authors' transient metrics (nrjc/LEOC ``plotting/plotter.py``), leoc's second set.
+
+    With :math:`T` samples :math:`e[0..T-1]` (``e`` as the authors compute it: the angle as
+    :math:`\arcsin(\sin\theta)` in degrees, the mountain car's position as is; see
+    :mod:`leoc.evaluation.metric_sets`):
+
+    * steady state :math:`e_f = e[T-1]`, the last sample; it counts as reached when the last
+      :data:`AUTHORS_STEADY_WINDOW` samples agree with it to :data:`AUTHORS_STEADY_TOLERANCE`;
+    * "overshoot" :math:`\max_t |e[t] - e_f|`, the peak deviation from that value (for an
+      impulse from the operating point: the peak excursion, not an overshoot past it);
+    * settling time: one plus the last index with :math:`|e[t] - e_f| \ge \pi/180` (an
+      absolute band in the units of ``e``), or :math:`T` when no sample leaves the band (the
+      paper's mountain-car 201 is this case: the response never leaves 0.0175 m);
+      ``None`` when the steady state was not reached.
+
+    Differences from leoc's :func:`response_metrics`: the last sample, not a window mean; an
+    absolute band, not 2 % of the peak; a record that never leaves the band settles at
+    :math:`T` rather than 0.
+
+    Returns
+    -------
+    ResponseMetrics
+        ``band = pi/180``, ``final_window = 10``, ``band_fraction = None``.
+    """
+    signal = _as_signal(e)
+    final = float(signal[-1])
+    window = min(AUTHORS_STEADY_WINDOW, signal.size)
+    reached = bool(np.all(np.abs(signal[-window:] - final) <= AUTHORS_STEADY_TOLERANCE))
+    outside = np.flatnonzero(np.abs(signal - final) >= AUTHORS_BAND)
+    settle = (int(outside[-1]) + 1 if outside.size else int(signal.size)) if reached else None
+    seconds = settle * _check_band_like(dt, "dt") if dt is not None and settle is not None else None
+    return ResponseMetrics(
+        steady_state_error=final,
+        overshoot=float(np.max(np.abs(signal - final))),
+        settling_time=settle,
+        settled=settle is not None,
+        band=AUTHORS_BAND,
+        final_window=window,
+        peak_deviation=float(np.max(np.abs(signal))),
+        settling_seconds=seconds,
+        band_fraction=None,
+        terminated=bool(terminated),
     )

@@ -13,7 +13,8 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from leoc.evaluation.metrics import ResponseMetrics, response_metrics
+from leoc.evaluation.metric_sets import MetricSet, get_metric_set
+from leoc.evaluation.metrics import ResponseMetrics
 from leoc.systems.base import System
 from leoc.systems.rollout import (
     Controller,
@@ -84,6 +85,7 @@ def response_test(
     test: ResponseTest = "impulse",
     steps: int = RESPONSE_STEPS,
     band: float | None = None,
+    metric_set: str | MetricSet = "leoc",
 ) -> ResponseResult:
     """Impulse or step response from the operating point, with its metrics.
 
@@ -91,11 +93,14 @@ def response_test(
     first simulator step, ``step`` adds -0.2 to every action, for ``steps`` simulator steps; the
     controller runs at its own control period. The deviation e(t) is the main coordinate
     (degrees for pendulum and cart-pole, metres for mountain car), ``steps + 1`` samples from
-    t = 0 (fewer if the episode terminated). Metrics: settling band 2 % of the peak error by
-    default, or the absolute ``band`` (e.g. ``system.settling_band``).
+    t = 0 (fewer if the episode terminated), as the ``metric_set`` computes it
+    (:mod:`leoc.evaluation.metric_sets`: leoc's wrapped angle, or the authors'
+    arcsin(sin theta)). Metrics: leoc's, settling band 2 % of the peak error by default or the
+    absolute ``band`` (e.g. ``system.settling_band``); or the authors' (``band`` must be None).
     """
+    measure = get_metric_set(metric_set)
     offsets = response_offsets(test, steps, system.action_dim)
     trajectory = rollout(system, controller, system.operating_state, steps, offsets)
-    deviation = system.main_coordinate(trajectory.states)
-    metrics = response_metrics(deviation, band, dt=system.dt, terminated=trajectory.terminated)
+    deviation = measure.deviation(system, trajectory.states)
+    metrics = measure.metrics(deviation, band, system.dt, trajectory.terminated)
     return ResponseResult(test, trajectory, deviation, metrics)

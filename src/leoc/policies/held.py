@@ -63,10 +63,23 @@ def with_control_period(policy: nn.Module, action_repeat: int) -> nn.Module:
     return policy if check_repeat(action_repeat) == 1 else HeldPolicy(policy, action_repeat)
 
 
-def lqr_controller(design: object) -> nn.Module:
+def lqr_controller(
+    design: object, saturation: str = "none", limit: float | None = None
+) -> nn.Module:
     """The linear controller ``G(o) = W o + b`` of an :class:`~leoc.control.LQRDesign`, run at
-    the control period the design is for (``design.action_repeat``)."""
+    the control period the design is for (``design.action_repeat``).
+
+    ``saturation`` (with the actuator ``limit``) wraps it in :class:`~leoc.policies.saturation.
+    Saturated`: ``"sin"`` gives the authors' PILCO ``LinearController``, u_max sin(W o / u_max);
+    ``"none"`` (default) leaves the clip to the system, exact inside the limits.
+    """
     from leoc.policies.linear import LinearController
+    from leoc.policies.saturation import Saturated, check_saturation_mode
 
     W, b, repeat = design.W, design.b, design.action_repeat  # type: ignore[attr-defined]
-    return with_control_period(LinearController(W, b), repeat)
+    policy: nn.Module = LinearController(W, b)
+    if check_saturation_mode(saturation, "saturation") != "none":
+        if limit is None:
+            raise ValueError(f"limit: expected the actuator limit with saturation={saturation!r}")
+        policy = Saturated(policy, limit, saturation)
+    return with_control_period(policy, repeat)

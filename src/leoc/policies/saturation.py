@@ -25,11 +25,11 @@ How each keeps the hybrid policy's identities :math:`\pi(a) = G(a)` and
 from __future__ import annotations
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from ._checks import check_positive
 
-__all__ = ["SATURATION_MODES", "saturate"]
+__all__ = ["SATURATION_MODES", "Saturated", "saturate"]
 
 SATURATION_MODES: tuple[str, ...] = ("clip", "sin", "tanh", "none")
 """Names accepted by :func:`saturate` and by ``HybridPolicy(saturation=...)``."""
@@ -97,3 +97,39 @@ def apply_saturation(u: Tensor, limit: Tensor, mode: str) -> Tensor:
     if mode == "sin":
         return limit_t * torch.sin(u / limit_t)
     return limit_t * torch.tanh(u / limit_t)
+
+
+class Saturated(nn.Module):
+    r"""``policy`` followed by the actuator saturation: :math:`\text{sat}(\text{policy}(o))`.
+
+    The authors' linear controller is one: :math:`u_{max} \sin(W o / u_{max})` with the
+    physical gain ``W`` of :func:`leoc.control.design_lqr` ``(method="authors")``.
+
+    Parameters
+    ----------
+    policy : nn.Module
+        Observation ``(..., O)`` -> unbounded action ``(..., A)``.
+    limit : float
+        Actuator limit :math:`u_{max} > 0`.
+    mode : {"clip", "sin", "tanh", "none"}
+        See :func:`saturate`.
+    """
+
+    limit: Tensor
+
+    def __init__(self, policy: nn.Module, limit: float, mode: str):
+        super().__init__()
+        if not isinstance(policy, nn.Module):
+            raise TypeError(f"policy: expected an nn.Module, found {type(policy).__name__}")
+        self.policy = policy
+        self.mode = check_saturation_mode(mode)
+        limit_t = torch.as_tensor(float(limit), dtype=torch.float64)
+        check_positive(limit_t, "limit")
+        self.register_buffer("limit", limit_t)
+
+    def forward(self, x: Tensor) -> Tensor:
+        u = self.policy(x)
+        return apply_saturation(u, self.limit.to(u.dtype), self.mode)
+
+    def extra_repr(self) -> str:
+        return f"mode={self.mode!r}, limit={float(self.limit)}"

@@ -11,6 +11,7 @@ from leoc.systems.base import (
     DTYPE,
     START_KINDS,
     PhysicalParams,
+    StepRules,
     System,
     wrap_angle,
 )
@@ -73,6 +74,7 @@ __all__ = [
     "Pendulum",
     "PendulumParams",
     "PhysicalParams",
+    "StepRules",
     "System",
     "angle_entries",
     "cartpole_reward",

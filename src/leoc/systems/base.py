@@ -59,6 +59,7 @@ Shapes: ``B`` batch, ``S`` state dimension, ``O`` observation dimension, ``A`` a
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
@@ -138,6 +139,53 @@ def as_state_tensor(value: Any, dim: int, name: str) -> Tensor:
             f"{name}: expected shape ({dim},) or (B, {dim}), found {tuple(tensor.shape)}"
         )
     return tensor
+
+
+@dataclasses.dataclass(frozen=True)
+class StepRules:
+    """How a step is rewarded, ended and integrated, where implementations of a task differ.
+
+    leoc's defaults are the fields' defaults; the authors' variant (nrjc/LEOC, see
+    :mod:`leoc.experiments.variants`) sets the others. A system built with
+    :meth:`System.with_rules` applies them in its gymnasium environment and in every rollout
+    alike (:meth:`System.step_reward`).
+
+    Attributes
+    ----------
+    exit_penalty : float or None
+        ``None`` (leoc): the step that leaves the allowed region earns
+        :meth:`System.termination_reward`, the worst on-track reward for it and for every step
+        left, so leaving never pays. A number ``p``: that step earns its own reward plus ``p``
+        once (nrjc/LEOC ``dao/envs/cartpole_env.py`` and ``mountaincar_env.py``: -100), which
+        can pay (an immediate exit from the cart-pole's start costs about -143, hanging for 200
+        steps about -987).
+    reward_on_next_state : bool
+        ``False`` (leoc, gym's pendulum): the reward of ``(state, action)`` before the step.
+        ``True``: of ``(next_state, action)`` (nrjc/LEOC's cart-pole and mountain car).
+    legacy_integrator : bool
+        The integrator of the gym release the authors used, where a system's simulator changed
+        since (the system's ``step_fn`` documents it; today the pendulum: gym 0.17's
+        ``sin(theta + pi)`` form and speed clip after the position update).
+    """
+
+    exit_penalty: float | None = None
+    reward_on_next_state: bool = False
+    legacy_integrator: bool = False
+
+    def __post_init__(self) -> None:
+        penalty = self.exit_penalty
+        if penalty is not None and (
+            isinstance(penalty, bool)
+            or not isinstance(penalty, (int, float))
+            or not math.isfinite(penalty)
+        ):
+            raise ValueError(f"exit_penalty: expected None or a finite number, found {penalty!r}")
+        for name in ("reward_on_next_state", "legacy_integrator"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected a bool, found {getattr(self, name)!r}")
+
+
+DEFAULT_RULES = StepRules()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,6 +302,7 @@ class System:
             )
         self.params = params
         self.episode_steps = DEFAULT_EPISODE_STEPS
+        self.rules = DEFAULT_RULES
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.params!r})"
@@ -316,6 +365,33 @@ class System:
     def out_of_bounds(self, state: Tensor) -> Tensor:
         """Boolean ``(B,)``: the state has left the allowed region (ends the episode)."""
         return torch.zeros(state.shape[:-1], dtype=torch.bool)
+
+    def step_reward(
+        self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
+    ) -> Tensor:
+        """Reward ``(B,)`` of one step under :attr:`rules`, the one place the gymnasium
+        environment and every rollout take it from.
+
+        ``leaving`` (bool ``(B,)``) marks the steps that leave the allowed region, ``steps_left``
+        the steps the episode would still have run after this one. leoc's rules: the reward of
+        ``(state, action)``, and :meth:`termination_reward` on an exit. Other rules may take the
+        reward after the step and charge a one-off ``exit_penalty`` (:class:`StepRules`).
+        """
+        rules = self.rules
+        reward = self.reward_fn(next_state if rules.reward_on_next_state else state, action)
+        if rules.exit_penalty is None:
+            exit_reward = torch.as_tensor(self.termination_reward(steps_left), dtype=reward.dtype)
+        else:
+            exit_reward = reward + rules.exit_penalty
+        return torch.where(leaving, exit_reward, reward)
+
+    def with_rules(self, rules: StepRules) -> System:
+        """A copy of this system that steps, rewards and ends episodes under ``rules``."""
+        if not isinstance(rules, StepRules):
+            raise TypeError(f"rules: expected a StepRules, found {type(rules).__name__}")
+        clone = copy.copy(self)
+        clone.rules = rules
+        return clone
 
     def termination_reward(self, steps_left: Any) -> Any:
         """Reward of the step that leaves the allowed region, ``steps_left`` (int or tensor) being
@@ -462,7 +538,7 @@ class System:
 
     def with_params(self, **factors: float) -> System:
         """A copy of this system with scaled parameters (see :meth:`PhysicalParams.scaled`)."""
-        return type(self)(self.params.scaled(**factors))
+        return type(self)(self.params.scaled(**factors)).with_rules(self.rules)
 
     # ------------------------------------------------------------------ validation
     def validate(self) -> None:

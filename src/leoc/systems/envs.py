@@ -122,12 +122,13 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         state_t = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
         action_t = torch.as_tensor(action_arr, dtype=DTYPE).unsqueeze(0)
         with torch.no_grad():
-            reward = float(self.system.reward_fn(state_t, action_t)[0])
             next_state = self.system.step_fn(state_t, action_t)
-            terminated = bool(self.system.out_of_bounds(next_state)[0])
-        if terminated:
+            leaving = self.system.out_of_bounds(next_state)
             left_after = max(0, self.system.episode_steps - self._steps)
-            reward = float(self.system.termination_reward(left_after))
+            reward = float(
+                self.system.step_reward(state_t, action_t, next_state, leaving, left_after)[0]
+            )
+            terminated = bool(leaving[0])
         self.state = next_state[0].numpy()
         return self._obs(), reward, terminated, False, {"state": self.state.copy()}
 

@@ -74,18 +74,30 @@ class PendulumParams(PhysicalParams):
         return self.mass * self.length**2 / 3.0
 
 
-def pendulum_step(state: Tensor, action: Tensor, params: PendulumParams) -> Tensor:
-    """One step ``(B, 2), (B, 1) -> (B, 2)`` of state ``[theta, theta_dot]``."""
+def pendulum_step(
+    state: Tensor, action: Tensor, params: PendulumParams, legacy: bool = False
+) -> Tensor:
+    """One step ``(B, 2), (B, 1) -> (B, 2)`` of state ``[theta, theta_dot]``.
+
+    ``legacy``: gym 0.17's ``Pendulum-v0`` (the authors' base class, nrjc/LEOC
+    ``dao/envs/pendulum_env.py``), which writes the gravity term ``-sin(theta + pi)`` (in floating
+    point not exactly ``sin(theta)``: ``pi`` is rounded, a bias of about 1.2e-16 that sets the
+    last digits of a decayed response) and clips the speed after the position update.
+    """
     theta, theta_dot = state[..., 0], state[..., 1]
     torque = torch.clamp(action[..., 0], -params.max_torque, params.max_torque)
+    gravity_term = -torch.sin(theta + math.pi) if legacy else torch.sin(theta)
     theta_ddot = (
-        3.0 * params.gravity / (2.0 * params.length) * torch.sin(theta)
+        3.0 * params.gravity / (2.0 * params.length) * gravity_term
         + 3.0 / (params.mass * params.length**2) * torque
     )
-    new_theta_dot = torch.clamp(
-        theta_dot + theta_ddot * params.dt, -params.max_speed, params.max_speed
-    )
-    new_theta = theta + new_theta_dot * params.dt
+    new_theta_dot = theta_dot + theta_ddot * params.dt
+    if legacy:
+        new_theta = theta + new_theta_dot * params.dt
+        new_theta_dot = torch.clamp(new_theta_dot, -params.max_speed, params.max_speed)
+    else:
+        new_theta_dot = torch.clamp(new_theta_dot, -params.max_speed, params.max_speed)
+        new_theta = theta + new_theta_dot * params.dt
     return torch.stack([new_theta, new_theta_dot], dim=-1)
 
 
@@ -133,7 +145,7 @@ class Pendulum(System):
         return np.array([[length, 0.0, 0.0], [0.0, length, 0.0]])
 
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
-        return pendulum_step(state, action, self.params)
+        return pendulum_step(state, action, self.params, self.rules.legacy_integrator)
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return pendulum_reward(state, action, self.params)

@@ -198,13 +198,9 @@ def simulate(
                 if relevance_of is not None:
                     held_relevance = torch.as_tensor(relevance_of(obs), dtype=DTYPE).reshape(batch)
             action = system.clip_action(held + offsets[index])
-            reward = system.reward_fn(state, action)
             stepped = system.step_fn(state, action)
             leaving = alive & system.out_of_bounds(stepped)
-            left_after = steps - index - 1
-            reward = torch.where(
-                leaving, torch.as_tensor(system.termination_reward(left_after), dtype=DTYPE), reward
-            )
+            reward = system.step_reward(state, action, stepped, leaving, steps - index - 1)
             rewards.append(torch.where(alive, reward, torch.zeros_like(reward)))
             actions.append(torch.where(alive[:, None], action, torch.zeros_like(action)))
             relevance.append(held_relevance)
