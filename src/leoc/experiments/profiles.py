@@ -75,6 +75,7 @@ class Profile:
         return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
 
+#: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
 PROFILES: dict[str, Profile] = {
     "quick": Profile(
         name="quick",

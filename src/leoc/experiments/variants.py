@@ -16,8 +16,8 @@ field                  leoc (default)                        authors
 ``linear_saturation``  ``none`` (the system clips,           ``sin``: u_max sin(W o / u_max),
                        exact inside the limits)              their PILCO ``LinearController``
                                                              (``pilco/controllers.py``)
-``step_rules``         leoc's :class:`~leoc.systems.         exit -100 once, reward after the
-                       StepRules` (an exit never pays)       step (cart-pole, mountain car);
+``step_rules``         leoc's :class:`StepRules`             exit -100 once, reward after the
+                       (an exit never pays)                  step (cart-pole, mountain car);
                                                              gym 0.17's pendulum integrator
 ``response_steps``     200 simulator steps                   400 on the cart-pole (the length
                                                              of the paper's cart-pole record)
@@ -113,10 +113,12 @@ class Variant:
         }
 
 
+#: leoc's own choices (the default).
 LEOC = Variant(
     "leoc",
     "leoc's defaults: discrete LQR on the exact step map, an exit that never pays",
 )
+#: The authors' choices (nrjc/LEOC), which the paper's numbers come from.
 AUTHORS = Variant(
     "authors",
     "the authors' implementation (nrjc/LEOC): continuous LQR on their models scaled by u_max "
@@ -132,7 +134,9 @@ AUTHORS = Variant(
     ),
     response_steps=MappingProxyType({"cartpole": AUTHORS_CARTPOLE_RESPONSE_STEPS}),
 )
+#: The variants by name (``--variant``).
 VARIANTS: dict[str, Variant] = {variant.name: variant for variant in (LEOC, AUTHORS)}
+#: Names of the variants.
 VARIANT_NAMES = tuple(VARIANTS)
 
 

@@ -69,8 +69,9 @@ def lqr_controller(
     """The linear controller ``G(o) = W o + b`` of an :class:`~leoc.control.LQRDesign`, run at
     the control period the design is for (``design.action_repeat``).
 
-    ``saturation`` (with the actuator ``limit``) wraps it in :class:`~leoc.policies.saturation.
-    Saturated`: ``"sin"`` gives the authors' PILCO ``LinearController``, u_max sin(W o / u_max);
+    ``saturation`` (with the actuator ``limit``) wraps it in
+    :class:`~leoc.policies.saturation.Saturated`: ``"sin"`` gives the authors' PILCO
+    ``LinearController``, u_max sin(W o / u_max);
     ``"none"`` (default) leaves the clip to the system, exact inside the limits.
     """
     from leoc.policies.linear import LinearController

@@ -1,7 +1,7 @@
 """Systems: physics, observation maps, operating points, starts, gymnasium envs, registry.
 
 The built-in systems (the paper's three and the acrobot) are registered here; a user's system
-is added with :func:`register_system` (see ``docs/custom_system.md``).
+is added with :func:`register_system` (see ``docs/user_guide/custom_system.md``).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ Every system is described by
 * a :class:`System` subclass that bundles the step function with the observation map, reward,
   termination test, operating point and start distribution.
 
-Writing a system (``docs/custom_system.md`` has a worked example). A subclass must provide:
+Writing a system (``docs/user_guide/custom_system.md`` has a worked example). A subclass must
+provide:
 
 ============================  =================================================================
 ``name``                      registry name (lower-case identifier)
@@ -369,7 +370,7 @@ class System:
     def step_reward(
         self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
     ) -> Tensor:
-        """Reward ``(B,)`` of one step under :attr:`rules`, the one place the gymnasium
+        """Reward ``(B,)`` of one step under ``self.rules``, the one place the gymnasium
         environment and every rollout take it from.
 
         ``leaving`` (bool ``(B,)``) marks the steps that leave the allowed region, ``steps_left``

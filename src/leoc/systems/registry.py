@@ -1,7 +1,7 @@
 """The system registry: names resolved once, at the edge (CLI, configs, ``gymnasium.make``).
 
 Below the edge every function takes a :class:`~leoc.systems.base.System` object. A user adds a
-plant with :func:`register_system` (see ``docs/custom_system.md``)::
+plant with :func:`register_system` (see ``docs/user_guide/custom_system.md``)::
 
     from leoc.systems import register_system
     register_system("damped_cart", DampedCart)
