@@ -20,6 +20,8 @@ DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS / "_ext"))
 sys.path.insert(0, str(DOCS / "examples"))
 
+import leoc_api  # noqa: E402 - docs/_ext, just put on the path
+
 project = "leoc"
 author = "the leoc authors"
 copyright = "2026, the leoc authors"  # noqa: A001 - Sphinx's name
@@ -93,15 +95,7 @@ nitpick_ignore_regex = [
 ]
 
 # --- API reference -------------------------------------------------------------------------------
-leoc_api_packages = [
-    "leoc.control",
-    "leoc.policies",
-    "leoc.systems",
-    "leoc.pilco",
-    "leoc.ddpg",
-    "leoc.evaluation",
-    "leoc.experiments",
-]
+leoc_api_packages = list(leoc_api.PUBLIC_PACKAGES)  # the seven packages of the library
 # referenced from the packages' docstrings; documented, not held to the docstring check
 leoc_api_extra_modules = ["leoc.training", "leoc.linalg", "leoc.io"]
 autodoc_default_options = {"member-order": "bysource"}

@@ -36,6 +36,16 @@ from sphinx.pycode import ModuleAnalyzer
 from sphinx.util import logging
 
 LOGGER = logging.getLogger(__name__)
+#: The packages whose public names the API reference documents and the docstring check covers.
+PUBLIC_PACKAGES = (
+    "leoc.control",
+    "leoc.policies",
+    "leoc.systems",
+    "leoc.pilco",
+    "leoc.ddpg",
+    "leoc.evaluation",
+    "leoc.experiments",
+)
 API_DIR = "api"
 WARNING_TYPE = "leoc"
 
@@ -395,7 +405,7 @@ def resolve_by_object(app: Sphinx, env: Any, node: Any, contnode: Any) -> Any:
 
 def setup(app: Sphinx) -> dict[str, Any]:
     """Register the configuration values and the two event handlers."""
-    app.add_config_value("leoc_api_packages", [], "env")
+    app.add_config_value("leoc_api_packages", list(PUBLIC_PACKAGES), "env")
     app.add_config_value("leoc_api_extra_modules", [], "env")
     app.add_config_value("leoc_api_check_docstrings", True, "env")
     app.connect("builder-inited", write_pages)
