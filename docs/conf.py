@@ -131,3 +131,8 @@ html_title = f"leoc {release}"
 html_static_path: list[str] = []
 if os.environ.get("LEOC_DOCS_MATHJAX"):
     mathjax_path = os.environ["LEOC_DOCS_MATHJAX"]
+    # MyST marks its pages tex2jax_ignore and re-enables math by class; MathJax 2 (Debian's)
+    # needs that said in its own configuration, MathJax 3 (the CDN default) reads Sphinx's.
+    mathjax2_config = {
+        "tex2jax": {"processClass": "tex2jax_process|mathjax_process|math|output_area"}
+    }
