@@ -1,8 +1,9 @@
 """Accuracy of the hybrid policy's moment matching against Monte Carlo.
 
 Compares, for Gaussian pendulum and cart-pole states, the action mean and standard deviation of
-(a) Gauss-Hermite quadrature over the state (orders 3, 4, 5, 7) and (b) the heuristic that
-treats the relevance r as the constant r(E[o]), against 10^6 Monte Carlo samples. Policies:
+(a) Gauss-Hermite quadrature over the state (orders 3, 4, 5, 7), (b) the heuristic that
+treats the relevance r as the constant r(E[o]) and (c) the authors' mixture heuristic (nrjc/LEOC
+``HybridController.compute_action``), against 10^6 Monte Carlo samples. Policies:
 LQR of the system + random RBF (the initialisation PILCO starts from), Lambda = I, sin squash.
 
 Run: ``python scripts/pilco_hybrid_accuracy.py``
@@ -56,6 +57,7 @@ def main() -> None:
                 obs = observation_moments(mean, cov, layout)
                 methods = {f"quadrature order {k}": ("quadrature", k) for k in ORDERS}
                 methods["constant r at the mean"] = ("constant_relevance", 0)
+                methods["mixture (the authors')"] = ("mixture", 0)
                 for label, (method, order) in methods.items():
                     out = action_moments(policy, mean, cov, obs, layout, method, order)
                     errors.setdefault(label, []).append(

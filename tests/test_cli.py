@@ -49,12 +49,94 @@ def test_simulate_with_a_missing_run_folder_is_a_clear_error(tmp_path, capsys) -
     assert "run folder" in capsys.readouterr().err
 
 
-def test_help_of_every_command() -> None:
-    for command in ["lqr", "simulate", "train", "reproduce"]:
-        result = subprocess.run(
-            [sys.executable, "-m", "leoc.cli", command, "--help"], capture_output=True, text=True
-        )
-        assert result.returncode == 0 and "usage" in result.stdout
+COMMAND_NAMES = ["lqr", "simulate", "roa", "train", "reproduce", "plot", "publish"]
+
+
+def test_help_of_every_command_has_a_description(capsys) -> None:
+    for command in COMMAND_NAMES:
+        with pytest.raises(SystemExit) as stop:
+            main([command, "--help"])
+        text = capsys.readouterr().out
+        assert stop.value.code == 0 and text.startswith(f"usage: leoc {command}")
+        # a description paragraph between the usage and the arguments
+        paragraphs = text.split("\n\n")
+        assert len(paragraphs) >= 3 and not paragraphs[1].lstrip().startswith(
+            ("positional", "options")
+        ), command
+    result = subprocess.run(
+        [sys.executable, "-m", "leoc", "--help"], capture_output=True, text=True, check=True
+    )
+    assert all(command in result.stdout for command in COMMAND_NAMES)
+
+
+def test_version(capsys) -> None:
+    from leoc import __version__
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out.strip() == f"leoc {__version__}"
+
+
+def test_the_parser_imports_nothing_heavy() -> None:
+    """`leoc --help` stays instant: building the parser imports no torch, SB3, matplotlib or
+    Ray (benchmarks/bench_cli_startup.py measures the time)."""
+    script = (
+        "import sys\n"
+        "from leoc.cli import build_parser\n"
+        "build_parser().parse_args(['simulate', 'pendulum', '--steps', '5'])\n"
+        "heavy = ('torch', 'stable_baselines3', 'matplotlib', 'ray', 'scipy', 'control')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
+
+
+def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
+    import gymnasium as gym
+
+    from leoc import names
+    from leoc.experiments.profiles import PROFILES
+    from leoc.systems import SYSTEM_NAMES, envs, system_names
+
+    assert names.PAPER_SYSTEM_NAMES == SYSTEM_NAMES
+    assert system_names()[: len(names.BUILTIN_SYSTEM_NAMES)] == names.BUILTIN_SYSTEM_NAMES
+    assert names.PROFILE_NAMES == tuple(PROFILES)
+    for name, (env_id, entry_point) in names.BUILTIN_ENV_IDS.items():
+        assert gym.registry[env_id].max_episode_steps == make_system(name).episode_steps
+        if name in envs.BUILTIN_ENVS:
+            env_class = envs.BUILTIN_ENVS[name][1]
+            assert (env_id, entry_point) == (
+                envs.BUILTIN_ENVS[name][0],
+                f"{env_class.__module__}:{env_class.__name__}",
+            )
+
+
+def test_simulate_help_states_each_pilco_period(capsys) -> None:
+    from leoc.pilco.config import PilcoConfig
+
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for system in ("pendulum", "cartpole", "mountaincar"):
+        period = PilcoConfig.for_system(system).action_repeat
+        assert f"{period} on {'the ' if system == 'pendulum' else ''}{system}" in text, system
+
+
+def test_simulate_takes_the_system_from_a_run_folder(tmp_path, capsys) -> None:
+    from leoc.cli.simulate import LINEAR, Target, resolve_target
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.zip").write_bytes(b"")
+    (run / "config.json").write_text(json.dumps({"system": "cartpole"}))
+    assert resolve_target(run, LINEAR) == Target("cartpole", str(run))
+    assert resolve_target(None, str(run)) == Target("cartpole", str(run))
+    assert resolve_target("pendulum", str(run)) == Target("pendulum", str(run))
+    with pytest.raises(ValueError, match="expected one controller"):
+        resolve_target(run, str(run))
+    with pytest.raises(ValueError, match="found neither"):
+        resolve_target(None, LINEAR)
 
 
 def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:

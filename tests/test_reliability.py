@@ -30,12 +30,22 @@ BAD_ARGUMENTS = [
     (["reproduce", "--controllers", "lqr"], "invalid choice: 'lqr'"),
     (["reproduce", "--backend", "spark"], "invalid choice: 'spark'"),
     (["simulate", "pendulum", "--steps", "0"], "--steps: expected a positive integer, found 0"),
-    (["simulate", "pendulum", "--steps", "ten"], "--steps: invalid positive_int value: 'ten'"),
+    (
+        ["simulate", "pendulum", "--steps", "ten"],
+        "--steps: expected a positive integer, found 'ten'",
+    ),
+    (
+        ["simulate", "pendulum", "--band", "wide"],
+        "--band: expected a positive number, found 'wide'",
+    ),
+    (["train", "pendulum", "--algo", "ddpg", "--seed", "x"], "--seed: expected a non-negative"),
+    (["simulate"], "system: expected a system name or a run folder"),
     (["simulate", "pendulum", "--band", "-1"], "--band: expected a positive number, found -1"),
     (["simulate", "pendulum", "--action-repeat", "0"], "--action-repeat: expected a positive"),
     (["simulate", "pendulum", "--test", "ramp"], "invalid choice: 'ramp'"),
     (["simulate", "cartpole", "--controller", "/no/such/run"], "does not exist"),
-    (["simulate", "segway"], "invalid choice: 'segway'"),
+    (["simulate", "segway"], "invalid choice: 'segway' (expected a run folder or one of"),
+    (["lqr", "segway"], "invalid choice: 'segway' (expected one of pendulum, cartpole"),
     (["train", "pendulum", "--algo", "ddpg", "--steps", "-5"], "expected a positive integer"),
     (["train", "pendulum", "--algo", "pilco", "--iterations", "0"], "expected a positive"),
     (["train", "pendulum", "--algo", "ddpg", "--seed", "-1"], "expected a non-negative"),
@@ -43,7 +53,7 @@ BAD_ARGUMENTS = [
     (["train", "pendulum"], "the following arguments are required: --algo"),
     (["lqr", "pendulum", "--q", "1"], "Q"),
     (["lqr", "pendulum", "--r", "-1"], "R"),
-    (["plot", "/no/such/folder"], "no meta.json"),
+    (["plot", "/no/such/folder"], "run_dir: the folder '/no/such/folder' does not exist"),
 ]
 
 
@@ -195,6 +205,7 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
         assert status == 0
     else:
         assert status == 2 and len(err) == 1 and str(done) in err[0]
+        assert "rerun the 'leoc reproduce' command of this folder" in err[0]
     messages: list[str] = []
     reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
     if damage != "delete":

@@ -139,3 +139,78 @@ def test_runs_from_several_code_versions_are_said_plainly():
     assert code_line(mixed).startswith("**Code: the runs come from 2 different leoc versions**")
     evaluations["pendulum"]["ddpg_hybrid"][0]["versions"] = {"leoc_commit": "abc"}
     assert code_line(code_versions(evaluations)) == "Code: all 7 runs from leoc commit `abc`."
+
+
+def _cells(line: str) -> list[str]:
+    return line.strip().strip("|").split("|")
+
+
+@pytest.mark.parametrize("test", ["impulse", "step"])
+def test_response_tables_have_as_many_cells_as_headers(test):
+    from leoc.experiments.report import response_table
+
+    evaluations = _evaluations(1.0)
+    evaluations["pendulum"]["linear_pilco"] = [_run("linear_pilco", 0, 1.0, -1500.0, False)]
+    evaluations["pendulum"]["pilco_hybrid"] = [_run("pilco_hybrid", 0, 1.0, -200.0, True)]
+    lines = response_table(response_summary(evaluations), test)
+    header, rule, *rows = [line for line in lines if line.startswith("|")]
+    width = len(_cells(header))
+    assert width == (13 if test == "impulse" else 10)  # the paper gives impulse numbers only
+    assert len(_cells(rule)) == width
+    assert len(rows) == 5 and all(len(_cells(row)) == width for row in rows)
+    assert not any(cell.strip() == "" for row in rows for cell in _cells(row))
+    if test == "impulse":
+        by_controller = {_cells(row)[1].strip(): _cells(row)[-3:] for row in rows}
+        # the paper's single linear row is the LQR at dt's, not repeated for PILCO's period
+        assert [c.strip() for c in by_controller["linear (LQR at dt)"]] == [
+            "-2.95e-13 ± 0",
+            "0.45 ± 0",
+            "26 ± 0",
+        ]
+        assert [c.strip() for c in by_controller["linear (LQR at PILCO's period)"]] == ["-"] * 3
+        # the paper prints a negative std for the PILCO hybrid's steady-state error
+        assert by_controller["PILCO hybrid"][0].strip() == "-3.13e-13 ± 2.33e-16*"
+        assert lines[-1].startswith("* The paper prints this standard deviation with a minus")
+
+
+def test_a_hybrid_that_never_settles_is_flagged_with_a_dash_not_nan():
+    evaluations = _evaluations(1.0)
+    hybrid = evaluations["pendulum"]["ddpg_hybrid"]
+    wobble = 2.0 * np.sin(np.arange(201.0))
+    for run in hybrid:
+        metrics = response_metrics(wobble, dt=0.05)._asdict()
+        run["responses"]["impulse"] = {"metrics": metrics, "deviation": wobble.tolist()}
+    (flag,) = [f for f in response_flags(response_summary(evaluations)) if "(impulse)" in f]
+    assert "settling time - vs " in flag and "nan" not in flag
+
+
+def test_the_end_of_run_summary_names_what_failed_and_the_report(tmp_path):
+    import json
+
+    from leoc.experiments.summary import summary_lines
+
+    (tmp_path / "meta.json").write_text(
+        json.dumps(
+            {
+                "systems": ["pendulum"],
+                "controllers": ["linear", "ddpg_hybrid"],
+                "wall_seconds_last_invocation": 61.2,
+            }
+        )
+    )
+    flags = {
+        "responses": [],
+        "robustness": [],
+        "swing_up": ["**pendulum linear (LQR at dt)** does not swing up and hold: 0% ..."],
+        "roa": [],
+    }
+    responses = [{"system": "pendulum", "controller": "linear", "test": "impulse"}]
+    (tmp_path / "results.json").write_text(json.dumps({"responses": responses, "flags": flags}))
+    lines = summary_lines(tmp_path)
+    assert lines == [
+        "Finished: 1 system/controller pairs in the report, 61 s wall time.",
+        "Without results (failed; see their train.log): pendulum/ddpg_hybrid.",
+        "Failed checks, swing-up: 1 (pendulum linear (LQR at dt)).",
+        f"Report: {tmp_path / 'report.md'} (figures and CSV files beside it).",
+        f"Redraw after a change: leoc plot {tmp_path}",
+    ]

@@ -161,6 +161,10 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
         printed = _simulate_json(system, run_folder)
         assert printed["action_repeat"] == period
         np.testing.assert_array_equal(np.asarray(printed["deviation"]), saved)
+        # `leoc simulate RUN_DIR`: the system is read from the run folder
+        alone = _simulate_json(None, run_folder)
+        assert alone["system"] == system
+        np.testing.assert_array_equal(np.asarray(alone["deviation"]), saved)
     assert {row["controller"] for row in results["responses"]} == set(DEFAULT_CONTROLLERS)
     _damaged_run_folders_are_one_line_errors(out, systems[0])
     report = (out / "report.md").read_text()
@@ -199,18 +203,11 @@ def _damaged_run_folders_are_one_line_errors(out: Path, system: str) -> None:
         assert len(lines) == 1 and str(target) in lines[0], (name, damage, result.stderr)
 
 
-def _simulate_json(system: str, run_folder: Path) -> dict:
+def _simulate_json(system: str | None, run_folder: Path) -> dict:
+    """`leoc simulate SYSTEM --controller RUN_DIR --json`, or `leoc simulate RUN_DIR --json`."""
+    target = [str(run_folder)] if system is None else [system, "--controller", str(run_folder)]
     out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "leoc.cli",
-            "simulate",
-            system,
-            "--controller",
-            str(run_folder),
-            "--json",
-        ],
+        [sys.executable, "-m", "leoc.cli", "simulate", *target, "--json"],
         capture_output=True,
         text=True,
         timeout=RUN_TIMEOUT_S,

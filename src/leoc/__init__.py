@@ -6,6 +6,21 @@ operating point and a learned policy H elsewhere (Zhang & Capel, L4DC 2021).
 
 __version__ = "0.1.0"
 
-# gymnasium convention: importing the package registers its environments (leoc/...-v0); the
-# systems package registers every built-in system (and its env) on import.
-import leoc.systems  # noqa: E402, F401
+import importlib
+from typing import Any
+
+from leoc.names import register_builtin_envs
+
+# gymnasium convention: importing the package registers its environments (leoc/...-v0). The ids
+# are registered by entry point here, so ``import leoc`` (and the ``leoc`` command's start-up)
+# does not import torch; ``leoc.systems`` registers each system in full when first imported.
+register_builtin_envs()
+
+_SUBPACKAGES = ("control", "ddpg", "evaluation", "experiments", "pilco", "policies", "systems")
+
+
+def __getattr__(name: str) -> Any:
+    """``leoc.systems`` and the other subpackages, imported on first access."""
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f"leoc.{name}")
+    raise AttributeError(f"module 'leoc' has no attribute {name!r}")

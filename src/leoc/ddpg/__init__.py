@@ -7,18 +7,27 @@ Use the hybrid in plain SB3::
     model = DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs("pendulum"))
 
 or train with the paper's settings through :func:`train_ddpg` (``leoc train SYSTEM --algo ddpg
---hybrid``).
+--hybrid``). The authors' TF-Agents settings (nrjc/LEOC) are :data:`AUTHORS_DDPG` and
+:func:`authors_ddpg_overrides`, overrides of :class:`DDPGConfig` fields.
 """
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback
-from leoc.ddpg.config import ALGOS, TOTAL_STEPS_BY_SYSTEM, DDPGConfig
+from leoc.ddpg.config import (
+    ALGOS,
+    AUTHORS_DDPG,
+    TOTAL_STEPS_BY_SYSTEM,
+    DDPGConfig,
+    authors_ddpg_overrides,
+)
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import AffineOutput, PhysicalPolicy, physical_policy
 from leoc.ddpg.policies import (
     HybridActor,
     HybridDDPGPolicy,
     HybridTD3Policy,
+    LeocTD3Policy,
+    SplitCritic,
     action_box,
     hybrid_policy_kwargs,
 )
@@ -33,6 +42,7 @@ from leoc.ddpg.train import (
 
 __all__ = [
     "ALGOS",
+    "AUTHORS_DDPG",
     "TOTAL_STEPS_BY_SYSTEM",
     "AffineOutput",
     "DDPGConfig",
@@ -43,9 +53,12 @@ __all__ = [
     "LearningCurveCallback",
     "LeocDDPG",
     "LeocTD3",
+    "LeocTD3Policy",
     "PhysicalPolicy",
     "SeededOUNoise",
+    "SplitCritic",
     "action_box",
+    "authors_ddpg_overrides",
     "build_model",
     "held_and_reached",
     "hybrid_policy_kwargs",

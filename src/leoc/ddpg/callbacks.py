@@ -1,14 +1,22 @@
 """SB3 callback that evaluates on a separate environment, records the learning curve, keeps the
-best model and drives a tqdm progress bar.
+best model, selects the run's controller and drives a tqdm progress bar.
 
 The curve is return against *interaction time*: environment steps and simulated seconds
 (``steps * dt``). Evaluation episodes are those of the trainer contract (:mod:`leoc.training`):
 deterministic swing-up episodes on the pure step function, from the same seeded starts at every
 evaluation, so points are comparable and PILCO's curves are measured the same way.
+
+Model selection (:data:`MODEL_SELECTIONS`): ``"final"`` (leoc's, :mod:`leoc.training`) keeps the
+actor at the end of training; ``"best_last_third"`` restores, at the end of training, the actor
+of the best evaluation (strictly highest mean return, the earliest on ties) among those after
+:func:`last_third_start`, as nrjc/LEOC's ``dao/trainer.py`` does (``DDPGTrainer.train`` saves
+the policy when ``iteration > int(num_iterations / 3 * 2)`` and the evaluation return beats the
+best so far; that saved policy is their controller).
 """
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from typing import Any
 
@@ -18,9 +26,23 @@ from stable_baselines3.common.callbacks import BaseCallback
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
-__all__ = ["LearningCurveCallback"]
+__all__ = ["MODEL_SELECTIONS", "LearningCurveCallback", "last_third_start"]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
+MODEL_SELECTIONS = ("final", "best_last_third")
+SELECTION_FRACTION = 2.0 / 3.0  # the selection window opens after two thirds of the updates
+
+
+def last_third_start(total_steps: int, learning_starts: int) -> int:
+    """Environment step after which evaluations are candidates of ``"best_last_third"``.
+
+    nrjc/LEOC (``dao/trainer.py``) counts ``num_iterations`` updates after its initial collect
+    and keeps evaluations with ``iteration > int(num_iterations / 3 * 2)``; here the updates run
+    from step ``learning_starts`` to ``total_steps``, so the window opens after step
+    ``learning_starts + int((total_steps - learning_starts) * 2 / 3)``.
+    """
+    updates = max(total_steps - learning_starts, 0)
+    return learning_starts + int(updates * SELECTION_FRACTION)
 
 
 class LearningCurveCallback(BaseCallback):
@@ -40,6 +62,10 @@ class LearningCurveCallback(BaseCallback):
         Show a tqdm progress bar over the total steps.
     total_steps : int
         Length of the progress bar.
+    model_selection : {"final", "best_last_third"}
+        Which actor the model holds at the end of training (see the module docstring).
+    selection_start : int
+        Evaluations at steps strictly after this one are ``"best_last_third"`` candidates.
 
     Attributes
     ----------
@@ -48,6 +74,8 @@ class LearningCurveCallback(BaseCallback):
     best_policy : PhysicalPolicy or None
         Physical-units copy of the actor at the best evaluation.
     best_return : float
+    selected_steps : int or None
+        Step of the evaluation whose actor was restored (``"best_last_third"``), else None.
     """
 
     def __init__(
@@ -58,7 +86,13 @@ class LearningCurveCallback(BaseCallback):
         save_best: Callable[[Any], None] | None = None,
         progress: bool = True,
         total_steps: int = 0,
+        model_selection: str = "final",
+        selection_start: int = 0,
     ) -> None:
+        if model_selection not in MODEL_SELECTIONS:
+            raise ValueError(
+                f"model_selection: expected one of {MODEL_SELECTIONS}, found {model_selection!r}"
+            )
         super().__init__(verbose=0)
         self.system = system
         self.eval_starts = np.asarray(eval_starts, dtype=float)
@@ -69,6 +103,11 @@ class LearningCurveCallback(BaseCallback):
         self.curve: list[dict[str, Any]] = []
         self.best_policy: PhysicalPolicy | None = None
         self.best_return = float("-inf")
+        self.model_selection = model_selection
+        self.selection_start = int(selection_start)
+        self.selected_steps: int | None = None
+        self._selected_return = float("-inf")
+        self._selected_actor: dict[str, Any] | None = None
         self._bar: Any = None
         self._bar_position = 0
         self._last_eval_step = -1
@@ -92,6 +131,7 @@ class LearningCurveCallback(BaseCallback):
     def _on_training_end(self) -> None:
         if self._last_eval_step != self.num_timesteps:
             self._evaluate()
+        self.restore_selected()
         if self._bar is not None:
             self._bar.update(self.num_timesteps - self._bar_position)
             self._bar.close()
@@ -108,8 +148,23 @@ class LearningCurveCallback(BaseCallback):
             self.best_policy = policy
             if self.save_best is not None:
                 self.save_best(self.model)
+        self._consider_for_selection(steps, result.mean_return)
         if self._bar is not None:
             self._bar.set_postfix(
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"
             )
         return result
+
+    def restore_selected(self) -> None:
+        """Load the selected actor into the model (``"best_last_third"``; no-op otherwise)."""
+        if self._selected_actor is not None:
+            self.model.actor.load_state_dict(self._selected_actor)
+
+    def _consider_for_selection(self, steps: int, mean_return: float) -> None:
+        """Keep a copy of the actor if this evaluation is the best candidate so far."""
+        if self.model_selection != "best_last_third" or steps <= self.selection_start:
+            return
+        if mean_return > self._selected_return:
+            self._selected_return = mean_return
+            self.selected_steps = steps
+            self._selected_actor = copy.deepcopy(self.model.actor.state_dict())

@@ -14,6 +14,11 @@ Reading of the appendix where it is terse (documented choices, all overridable):
   mountain car, 15k for the cart-pole.
 * Exploration noise is the Ornstein-Uhlenbeck process of Lillicrap et al. (theta 0.15,
   sigma 0.2, unit time step) on the normalised action in [-1, 1].
+
+The authors' code (nrjc/LEOC, TF-Agents' DDPG) made other choices where the appendix is silent
+or differs. Each is a field here whose default keeps leoc's behaviour; :data:`AUTHORS_DDPG`
+and :func:`authors_ddpg_overrides` hold their values (one field each, so they can be switched
+one at a time), each documented with the file it follows.
 """
 
 from __future__ import annotations
@@ -21,7 +26,11 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Literal
 
-from leoc.policies.relevance import DEFAULT_ROA_WIDTH, RELEVANCE_KINDS
+from leoc.policies.relevance import (
+    DEFAULT_ROA_WIDTH,
+    RELEVANCE_KINDS,
+    RELEVANCE_PARAMETRISATIONS,
+)
 
 #: Model-free learners: Stable-Baselines3's DDPG and TD3.
 ALGOS = ("ddpg", "td3")
@@ -34,11 +43,120 @@ TOTAL_STEPS_BY_SYSTEM = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 
 # Hold band of the "reached and held the operating point" test, in the units of
 # ``System.main_coordinate`` (degrees for the pendulum and cart-pole angles, metres for the car).
 PAPER_HIDDEN_SIZES = (400, 300)
+# Choices of the authors' fields (their meaning: DDPGConfig's docstring). Literal copies of the
+# names in leoc.ddpg's modules, which import torch and SB3 (this module stays light).
+NOISE_UNITS = ("normalised", "physical")
+WARMUPS = ("uniform", "policy")
+CRITIC_LOSSES = ("mse", "huber")
+CRITIC_ACTION_UNITS = ("normalised", "physical")
+HIDDEN_INITS = ("torch", "tf_agents")
+MODEL_SELECTIONS = ("final", "best_last_third")
+
+# --------------------------------------------------------------------------- the authors' DDPG
+# nrjc/LEOC files (read with the search tool's read_file): DDPG/ddpg.py at commit
+# ec5aa7af06a218744b124b8a26ef8e84d6f95df2 and at the versions with ``actor_learning_rate``
+# (the gin files bind it); dao/trainer.py (the version that trains: ``self.ddpg.agent.train``
+# in ``DDPGTrainer.train``); data/*DDPG*.gin at commits 60501287f7c133689407034d5f60b2d00b2e82ac
+# and 70dc15f0f0c9f32df25ae90734e3f491fc98fbfc; TF-Agents (tensorflow/agents)
+# tf_agents/utils/common.py (OUProcess), tf_agents/agents/ddpg/{actor,critic}_network.py.
+AUTHORS_INITIAL_COLLECT_STEPS = 1_000  # dao/trainer.py DDPGTrainer.train(initial_collect_steps)
+# data/*DDPG*.gin: DDPGTrainer.num_iterations (one collect step + one update each)
+AUTHORS_ITERATIONS = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
+# data/*DDPG*.gin: DDPGTrainer.eval_interval (iterations)
+AUTHORS_EVAL_INTERVAL = {"pendulum": 200, "cartpole": 300, "mountaincar": 200}
+# data/Cartpole_DDPG_Baseline.gin: DDPG.actor_learning_rate = 1e-4 (every other gin file: 5e-4)
+AUTHORS_CARTPOLE_BASELINE_ACTOR_LR = 1e-4
+
+AUTHORS_DDPG: dict[str, Any] = {
+    # DDPG/ddpg.py, DdpgAgent(ou_stddev=1., ou_damping=.2) (the versions that bind
+    # actor_learning_rate; ec5aa7 has ou_stddev=.5): TF-Agents' OUNoisePolicy adds
+    # OUProcess noise, x <- (1 - damping) x + N(0, stddev^2), to the action in the action
+    # spec's (physical) units, starting at 0 and never reset (tf_agents/utils/common.py).
+    "noise_units": "physical",
+    "ou_theta": 0.2,
+    "ou_sigma": 1.0,
+    "noise_reset": False,
+    # dao/trainer.py: replay_buffer.collect_data(steps=initial_collect_steps=1000) with the
+    # agent's collect_policy (the noisy actor), then num_iterations x (1 step + 1 update).
+    "warmup": "policy",
+    "learning_starts": AUTHORS_INITIAL_COLLECT_STEPS,
+    # DDPG/ddpg.py: td_errors_loss_fn=tf.compat.v1.losses.huber_loss (delta 1, mean).
+    "critic_loss": "huber",
+    # DDPG/ddpg.py: CriticNetwork(observation_fc_layer_params=(400,), action_fc_layer_params=None,
+    # joint_fc_layer_params=(300,)): obs -> 400 -> concat(action) -> 300 -> 1; TF-Agents feeds
+    # the action in the spec's (physical) units.
+    "critic_action_layer": 1,
+    "critic_action_units": "physical",
+    # DDPG/ddpg.py: kernel_initializer=None, last_kernel_initializer=None for both networks:
+    # TF-Agents' defaults, VarianceScaling(1/3, fan_in, uniform) = U(+/- 1/sqrt(fan_in)), zero
+    # biases, last layers RandomUniform(-0.003, 0.003) (tf_agents/agents/ddpg/*_network.py).
+    "hidden_init": "tf_agents",
+    "last_layer_init": 0.003,
+    # DDPG/ddpg.py MyActorNetwork: d = (x - a) diag(S) (x - a)^T, S = tf.Variable(S,
+    # trainable=True) with S = [1.] * D (the gin files do not bind S), no positivity constraint.
+    "relevance_parametrisation": "precision",
+    "lambda_init": 1.0,
+    "learn_lambda": True,
+    # DDPG/ddpg.py MyActorNetwork.call returns scale_to_spec(r g + (1 - r) h) unclipped (only
+    # the policies clip, ActorPolicy(clip=True), OUNoisePolicy(clip=True)); TF-Agents'
+    # DdpgAgent feeds the actor's and target actor's actions to the critics unclipped.
+    "actor_output_clip": False,
+    # dao/trainer.py: the policy saved when iteration > int(num_iterations / 3 * 2) and the
+    # evaluation return beats the best so far; data/*DDPG*.gin: Evaluator.eval_num_episodes = 3.
+    "model_selection": "best_last_third",
+    "eval_episodes": 3,
+    # The same values as leoc's defaults (appendix C), pinned here: DDPG/ddpg.py
+    # critic_learning_rate 1e-3, gamma=0.995, target_update_tau=0.05, target_update_period=5,
+    # fc_layer_params=(400, 300); ReplayBuffer(replay_buffer_capacity=100000);
+    # DDPGTrainer.train(batch_size=64); data/*DDPG*.gin: DDPG.actor_learning_rate = 5e-4.
+    "actor_learning_rate": 5e-4,
+    "critic_learning_rate": 1e-3,
+    "discount": 0.995,
+    "polyak": 0.05,
+    "target_update_interval": 5,
+    "buffer_size": 100_000,
+    "batch_size": 64,
+    "actor_hidden": PAPER_HIDDEN_SIZES,
+    "critic_hidden": PAPER_HIDDEN_SIZES,
+    "train_freq": 1,
+    "gradient_steps": 1,
+}
+"""The authors' DDPG settings (nrjc/LEOC with TF-Agents), as :class:`DDPGConfig` overrides that
+hold for every system; :func:`authors_ddpg_overrides` adds the per-system ones."""
+
+
+def authors_ddpg_overrides(system: str, hybrid: bool) -> dict[str, Any]:
+    """:data:`AUTHORS_DDPG` plus the authors' per-system settings for ``system``.
+
+    Per system (data/*DDPG*.gin): ``eval_interval`` 200 (pendulum, mountain car) or 300
+    (cart-pole) steps; ``total_steps`` = 1000 initial collect steps + ``num_iterations``
+    (10000, 15000 for the cart-pole), one step and one update each; the cart-pole baseline's
+    actor learning rate 1e-4. A system the authors did not run gets the shared settings only.
+
+    Parameters
+    ----------
+    system : str
+        System name.
+    hybrid : bool
+        Whether the run trains the LEOC hybrid (else the plain MLP baseline).
+
+    Returns
+    -------
+    dict
+        Keyword overrides for :meth:`DDPGConfig.for_system` (a fresh dict).
+    """
+    overrides = dict(AUTHORS_DDPG)
+    if system in AUTHORS_ITERATIONS:
+        overrides["total_steps"] = AUTHORS_INITIAL_COLLECT_STEPS + AUTHORS_ITERATIONS[system]
+        overrides["eval_interval"] = AUTHORS_EVAL_INTERVAL[system]
+    if system == "cartpole" and not hybrid:
+        overrides["actor_learning_rate"] = AUTHORS_CARTPOLE_BASELINE_ACTOR_LR
+    return overrides
 
 
 @dataclasses.dataclass(frozen=True)
 class DDPGConfig:
-    """Settings of one DDPG/TD3 training run (baseline or LEOC hybrid).
+    r"""Settings of one DDPG/TD3 training run (baseline or LEOC hybrid).
 
     Attributes
     ----------
@@ -64,19 +182,50 @@ class DDPGConfig:
     target_update_interval : int
         Gradient updates between two soft target updates (appendix C "target update rate": 5).
     learning_starts : int
-        Uniformly random actions before the first update (one episode by default).
+        Environment steps before the first update (one episode by default), acted as ``warmup``
+        says.
+    warmup : {"uniform", "policy"}
+        How the first ``learning_starts`` steps act: uniformly at random (SB3, leoc) or with
+        the noisy policy (TF-Agents' initial collect).
     train_freq, gradient_steps : int
         Update every ``train_freq`` environment steps with ``gradient_steps`` gradient steps.
     actor_hidden, critic_hidden : tuple of int
         Hidden widths of the actor MLP H and of the critic (400-300).
     ou_theta, ou_sigma : float
-        Ornstein-Uhlenbeck mean reversion and scale, on the normalised action in [-1, 1].
+        Ornstein-Uhlenbeck mean reversion and innovation scale per step (TF-Agents' damping
+        and stddev), in ``noise_units``.
+    noise_units : {"normalised", "physical"}
+        Units the OU process runs in: the normalised action in [-1, 1] (leoc) or the physical
+        action (TF-Agents' ``OUNoisePolicy``).
+    noise_reset : bool
+        Restart the OU process at 0 at every episode end (leoc, SB3) or never (TF-Agents).
+    critic_loss : {"mse", "huber"}
+        TD loss of the critic: mean squared error (SB3) or mean Huber loss with delta 1.
+    critic_action_layer : int
+        Critic hidden layers before the action joins (0: at the input, SB3; 1: after the first
+        hidden layer, TF-Agents' ``CriticNetwork`` as the authors configure it).
+    critic_action_units : {"normalised", "physical"}
+        Units of the action fed to the critic.
+    hidden_init : {"torch", "tf_agents"}
+        Initialisation of the actor's and critic's layers (PyTorch's defaults, or TF-Agents':
+        :math:`U(\pm 1/\sqrt{n_{in}})` weights, zero biases).
+    last_layer_init : float or None
+        Output layers' weights :math:`U(\pm v)` with zero bias (TF-Agents: 0.003); None: as
+        ``hidden_init``.
     td3_policy_delay, td3_target_noise, td3_target_noise_clip : float
         TD3's delayed actor updates and target policy smoothing (SB3 defaults; unused by DDPG).
     lambda_init : float
         Initial diagonal of Lambda (the paper: identity).
     learn_lambda : bool
-        Train ``log_lambda`` with the actor (False: frozen buffer).
+        Train Lambda's parameter with the actor (False: frozen buffer).
+    actor_output_clip : bool
+        Clip the hybrid actor's blend and the target actions to the action box inside the
+        training graph (leoc, SB3) or leave them unbounded as TF-Agents' DDPG does (the
+        executed action is clipped either way).
+    relevance_parametrisation : {"log_lambda", "precision"}
+        The paper's relevance trained in :math:`\log\lambda` (positive Lambda, leoc) or in the
+        precision :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 /
+        lambda_init`` (the authors' ``S``).
     lqr_method : {"discrete", "continuous"}
         LQR design used for G (see :func:`leoc.control.design_lqr`).
     relevance : {"paper", "roa"}
@@ -93,6 +242,12 @@ class DDPGConfig:
         Environment steps between two evaluations.
     eval_episodes : int
         Deterministic swing-up episodes per evaluation, on a separate environment instance.
+    model_selection : {"final", "best_last_third"}
+        The run's controller: the actor at the end of training (leoc), or the one of the best
+        evaluation after two thirds of the updates (the authors').
+    step_rules : dict
+        Fields of the :class:`~leoc.systems.StepRules` the training and evaluation environments
+        step under (empty: leoc's rules; the authors' variant sets theirs).
     """
 
     system: str
@@ -107,17 +262,27 @@ class DDPGConfig:
     polyak: float = 0.05
     target_update_interval: int = 5
     learning_starts: int = 200
+    warmup: str = "uniform"
     train_freq: int = 1
     gradient_steps: int = 1
     actor_hidden: tuple[int, ...] = PAPER_HIDDEN_SIZES
     critic_hidden: tuple[int, ...] = PAPER_HIDDEN_SIZES
     ou_theta: float = 0.15
     ou_sigma: float = 0.2
+    noise_units: str = "normalised"
+    noise_reset: bool = True
+    critic_loss: str = "mse"
+    critic_action_layer: int = 0
+    critic_action_units: str = "normalised"
+    hidden_init: str = "torch"
+    last_layer_init: float | None = None
     td3_policy_delay: int = 2
     td3_target_noise: float = 0.2
     td3_target_noise_clip: float = 0.5
     lambda_init: float = 1.0
     learn_lambda: bool = True
+    relevance_parametrisation: str = "log_lambda"
+    actor_output_clip: bool = True
     lqr_method: str = "discrete"
     relevance: str = "paper"
     roa_rho_fraction: float = 1.0
@@ -125,6 +290,8 @@ class DDPGConfig:
     learn_width: bool = True
     eval_interval: int = 1_000
     eval_episodes: int = 5
+    model_selection: str = "final"
+    step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from leoc.systems import system_names
@@ -173,8 +340,57 @@ class DDPGConfig:
             )
         if not isinstance(self.roa_width, (int, float)) or not self.roa_width > 0:
             raise ValueError(f"roa_width: expected a positive number, found {self.roa_width!r}")
+        from leoc.systems import StepRules
+
+        if not isinstance(self.step_rules, dict):
+            raise ValueError(f"step_rules: expected a dict, found {self.step_rules!r}")
+        try:
+            StepRules(**self.step_rules)
+        except TypeError as error:
+            raise ValueError(f"step_rules: {error}") from error
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts: expected >= 0, found {self.learning_starts}")
+        self._check_authors_fields()
+
+    def _check_authors_fields(self) -> None:
+        """Validate the fields whose alternative values follow the authors' code."""
+        choices = {
+            "noise_units": NOISE_UNITS,
+            "warmup": WARMUPS,
+            "critic_loss": CRITIC_LOSSES,
+            "critic_action_units": CRITIC_ACTION_UNITS,
+            "hidden_init": HIDDEN_INITS,
+            "relevance_parametrisation": RELEVANCE_PARAMETRISATIONS,
+            "model_selection": MODEL_SELECTIONS,
+        }
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(
+                    f"{name}: expected one of {allowed}, found {getattr(self, name)!r}"
+                )
+        for name in ("noise_reset", "actor_output_clip"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected a bool, found {getattr(self, name)!r}")
+        if not self.ou_theta > 0 or not self.ou_sigma >= 0:
+            raise ValueError(
+                f"ou_theta, ou_sigma: expected theta > 0 and sigma >= 0, found "
+                f"{self.ou_theta!r}, {self.ou_sigma!r}"
+            )
+        layer = self.critic_action_layer
+        if isinstance(layer, bool) or not isinstance(layer, int):
+            raise ValueError(f"critic_action_layer: expected an int, found {layer!r}")
+        if not 0 <= layer <= len(self.critic_hidden):
+            raise ValueError(
+                f"critic_action_layer: expected 0 <= layer <= {len(self.critic_hidden)} (the "
+                f"critic's hidden layers {list(self.critic_hidden)}), found {layer}"
+            )
+        value = self.last_layer_init
+        if value is not None and (
+            isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0
+        ):
+            raise ValueError(
+                f"last_layer_init: expected a positive number or None, found {value!r}"
+            )
 
     @classmethod
     def for_system(cls, name: str, algo: str = "ddpg", **overrides: Any) -> DDPGConfig:

@@ -25,7 +25,7 @@ from stable_baselines3.td3.policies import Actor
 from torch import Tensor, nn
 
 from leoc.ddpg.policies import HybridActor, action_box, roa_relevance
-from leoc.policies import HybridPolicy, LinearController
+from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance
 
 __all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
 
@@ -119,15 +119,21 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
     high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
     if isinstance(actor, HybridActor):
         mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
-        if actor.hybrid.relevance_module is None:
+        module = actor.hybrid.relevance_module
+        if module is None:
             relevance: dict[str, object] = {
                 "lambda_init": actor.hybrid.lambda_.detach().cpu().to(DTYPE),
                 "learn_lambda": False,
             }
+        elif isinstance(module, PrecisionRelevance):
+            # float64 copy of the learned precision S, frozen (any sign: the authors' S is
+            # unconstrained, so it is copied, not rebuilt through the positive constructor)
+            copy64 = PrecisionRelevance(actor.operating_obs.detach().cpu(), 1.0, False, DTYPE)
+            copy64.precision.copy_(module.precision.detach().cpu().to(DTYPE))
+            relevance = {"relevance": copy64}
         else:
             # Rebuilt in float64 from the actor's float64 constructor data (P, rho_in), with the
             # actor's learned band width, frozen.
-            module = actor.hybrid.relevance_module
             # float32 sigmoid can round w up to w_max itself; the float64 rebuild needs w < w_max
             width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
             roa_kwargs = {**actor.roa_kwargs, "roa_width_init": width, "learn_width": False}

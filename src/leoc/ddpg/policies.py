@@ -56,29 +56,44 @@ T. P. Lillicrap et al., "Continuous control with deep reinforcement learning", I
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import torch
 from gymnasium import spaces
+from stable_baselines3.common.policies import BaseModel
+from stable_baselines3.common.preprocessing import get_action_dim
+from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
-from leoc.policies import HybridPolicy, LinearController, ROARelevance
-from leoc.policies.relevance import DEFAULT_ROA_WIDTH, RELEVANCE_KINDS
+from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance, ROARelevance
+from leoc.policies.relevance import (
+    DEFAULT_ROA_WIDTH,
+    RELEVANCE_KINDS,
+    RELEVANCE_PARAMETRISATIONS,
+)
 
 __all__ = [
+    "CRITIC_ACTION_UNITS",
+    "HIDDEN_INITS",
     "HybridActor",
     "HybridDDPGPolicy",
     "HybridTD3Policy",
+    "LeocTD3Policy",
+    "SplitCritic",
     "action_box",
     "hybrid_policy_kwargs",
+    "initialise_mlp",
     "roa_relevance_kwargs",
 ]
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
 ACTION_DTYPE = torch.float32  # SB3 actors and replay data are float32
+CRITIC_ACTION_UNITS = ("normalised", "physical")
+HIDDEN_INITS = ("torch", "tf_agents")
 
 
 def action_box(action_space: spaces.Box) -> tuple[np.ndarray, np.ndarray]:
@@ -129,6 +144,17 @@ class HybridActor(Actor):
         Initial diagonal of Lambda (> 0).
     learn_lambda : bool
         Whether ``log_lambda`` is an ``nn.Parameter`` (trained by the actor loss) or a buffer.
+    relevance_parametrisation : {"log_lambda", "precision"}
+        How the paper's relevance holds its weights: ``log_lambda`` (positive
+        :math:`\lambda = e^{\ell}`, the default) or ``precision``: the precision
+        :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 / lambda_init``
+        (:class:`~leoc.policies.PrecisionRelevance`, nrjc/LEOC's ``S``); ``learn_lambda`` then
+        says whether :math:`S` is trained.
+    clip_output : bool
+        Whether the actor clips its blend to [-1, 1] (default). False: the blend is returned
+        unbounded, as TF-Agents' actor network returns ``scale_to_spec(r g + (1 - r) h)``
+        (nrjc/LEOC ``DDPG/ddpg.py``), so the actor loss sees the critic beyond the box; the
+        executed action is clipped all the same (SB3's collection, :func:`physical_policy`).
     relevance : {"paper", "roa"}
         ``paper``: :math:`r = (1 + d)^{-2}` with ``lambda_init``/``learn_lambda``. ``roa``:
         :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's certified set
@@ -177,6 +203,8 @@ class HybridActor(Actor):
         lambda_init: float | Sequence[float] = 1.0,
         learn_lambda: bool = True,
         relevance: str = "paper",
+        relevance_parametrisation: str = "log_lambda",
+        clip_output: bool = True,
         roa_obs_layout: Sequence[Sequence[Any]] | None = None,
         roa_operating_state: Sequence[float] | None = None,
         roa_lyapunov_matrix: Sequence[Sequence[float]] | None = None,
@@ -186,6 +214,11 @@ class HybridActor(Actor):
     ) -> None:
         if relevance not in RELEVANCE_KINDS:
             raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
+        if relevance_parametrisation not in RELEVANCE_PARAMETRISATIONS:
+            raise ValueError(
+                f"relevance_parametrisation: expected one of {RELEVANCE_PARAMETRISATIONS}, "
+                f"found {relevance_parametrisation!r}"
+            )
         super().__init__(
             observation_space,
             action_space,
@@ -206,6 +239,8 @@ class HybridActor(Actor):
         self.lambda_init = lambda_init
         self.learn_lambda = learn_lambda
         self.relevance_kind = relevance
+        self.relevance_parametrisation = relevance_parametrisation
+        self.clip_output = bool(clip_output)
         self.roa_kwargs: dict[str, Any] = {}
         self.register_buffer("physical_gain", torch.as_tensor(gain))
         self.register_buffer("physical_bias", torch.as_tensor(bias))
@@ -214,6 +249,22 @@ class HybridActor(Actor):
         linear = LinearController(gain / half[:, None], (bias - centre) / half, dtype=ACTION_DTYPE)
         mlp = self.mu
         del self.mu  # the MLP lives on as hybrid.nonlinear (one copy in the state_dict)
+        if relevance == "paper" and relevance_parametrisation == "precision":
+            precision = PrecisionRelevance(
+                point,
+                1.0 / np.asarray(lambda_init, dtype=np.float64),
+                learn_precision=learn_lambda,
+                dtype=ACTION_DTYPE,
+            )
+            self.hybrid = HybridPolicy(
+                linear,
+                mlp,
+                point,
+                action_limit=NORMALISED_LIMIT,
+                saturation="clip",
+                relevance=precision,
+            )
+            return
         if relevance == "paper":
             self.hybrid = HybridPolicy(
                 linear,
@@ -268,6 +319,8 @@ class HybridActor(Actor):
             lambda_init=self.lambda_init,
             learn_lambda=self.learn_lambda,
             relevance=self.relevance_kind,
+            relevance_parametrisation=self.relevance_parametrisation,
+            clip_output=self.clip_output,
             **self.roa_kwargs,
         )
         return data
@@ -289,10 +342,12 @@ class HybridActor(Actor):
             offset = features - hybrid.operating_point
             distance = offset.square() @ torch.exp(-hybrid.log_lambda)  # (B,)
             relevance = torch.reciprocal(torch.square(distance + 1.0)).unsqueeze(-1)  # (B, 1)
-        else:  # exactly 1 on the flat top, where lerp returns G bit for bit
+        else:  # ROA: exactly 1 on the flat top, where lerp returns G bit for bit; or precision
             relevance = hybrid.relevance_module(features)  # (B, 1)
         linear = torch.addmm(hybrid.linear.b, features, hybrid.linear.W.T)  # (B, F)
         blend = torch.lerp(hybrid.nonlinear(features), linear, relevance)
+        if not self.clip_output:
+            return blend
         return torch.clamp(blend, -NORMALISED_LIMIT, NORMALISED_LIMIT)
 
     def relevance(self, obs: Tensor) -> Tensor:
@@ -301,17 +356,239 @@ class HybridActor(Actor):
         return self.hybrid.relevance(features)
 
 
-class HybridTD3Policy(TD3Policy):
-    """SB3 TD3/DDPG policy whose actor and target actor are :class:`HybridActor`.
+def initialise_mlp(module: nn.Module, hidden_init: str, last_layer_init: float | None) -> None:
+    r"""Re-initialise the ``nn.Linear`` layers of ``module`` in place (the last one is the output).
 
-    Use it as ``DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs(system))`` or
-    with ``TD3``. The critics are SB3's; only the actor changes.
+    ``hidden_init="torch"`` keeps PyTorch's defaults (weights and biases
+    :math:`U(\pm 1/\sqrt{n_{in}})`); ``"tf_agents"`` is TF-Agents' DDPG networks' default
+    (``tf_agents/agents/ddpg/actor_network.py``, ``critic_network.py``: Keras
+    ``VarianceScaling(scale=1/3, mode="fan_in", distribution="uniform")``, whose limit is
+    :math:`\sqrt{3 \cdot \tfrac13 / n_{in}} = 1/\sqrt{n_{in}}`, and Keras' zero biases) for every
+    layer. ``last_layer_init=v`` then sets the output layer's weights to :math:`U(\pm v)` and its
+    bias to 0 (TF-Agents' ``RandomUniform(-0.003, 0.003)`` for ``v = 0.003``); ``None`` leaves
+    it as the hidden layers are.
+    """
+    if hidden_init not in HIDDEN_INITS:
+        raise ValueError(f"hidden_init: expected one of {HIDDEN_INITS}, found {hidden_init!r}")
+    linears = [layer for layer in module.modules() if isinstance(layer, nn.Linear)]
+    with torch.no_grad():
+        if hidden_init == "tf_agents":
+            for layer in linears:
+                bound = 1.0 / math.sqrt(layer.in_features)
+                layer.weight.uniform_(-bound, bound)
+                layer.bias.zero_()
+        if last_layer_init is not None and linears:
+            linears[-1].weight.uniform_(-last_layer_init, last_layer_init)
+            linears[-1].bias.zero_()
+
+
+class _SplitQNetwork(nn.Module):
+    """``tail(cat(head(features), action))``: one Q network of :class:`SplitCritic`."""
+
+    def __init__(self, head: nn.Module, tail: nn.Module) -> None:
+        super().__init__()
+        self.head = head
+        self.tail = tail
+
+    def forward(self, features: Tensor, actions: Tensor) -> Tensor:
+        return self.tail(torch.cat([self.head(features), actions], dim=1))
+
+
+class SplitCritic(BaseModel):
+    r"""Q(s, a) whose action joins after ``action_layer`` hidden layers, in chosen units.
+
+    For ``net_arch = [n_1, ..., n_k]`` and ``action_layer = j``: the features go through
+    :math:`n_1, ..., n_j` (ReLU), the action is concatenated, then :math:`n_{j+1}, ..., n_k`
+    (ReLU) and a linear output. TF-Agents' DDPG critic as nrjc/LEOC configures it
+    (``DDPG/ddpg.py``: ``observation_fc_layer_params=(400,)``, ``joint_fc_layer_params=(300,)``)
+    is ``[400, 300]`` with ``j = 1``: obs -> 400 -> concat(action) -> 300 -> 1. With
+    ``action_units="physical"`` the critic sees :math:`c + h \odot \tilde u` (TF-Agents feeds
+    the action in the action spec's units), else SB3's normalised :math:`\tilde u`.
+    Same interface as SB3's ``ContinuousCritic`` (``forward`` -> tuple of (B, 1), ``q1_forward``).
+    """
+
+    features_extractor: nn.Module
+    action_centre: Tensor
+    action_half_width: Tensor
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        net_arch: list[int],
+        features_extractor: nn.Module,
+        features_dim: int,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        normalize_images: bool = True,
+        n_critics: int = 2,
+        share_features_extractor: bool = True,
+        *,
+        action_layer: int = 1,
+        action_units: str = "physical",
+    ) -> None:
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor=features_extractor,
+            normalize_images=normalize_images,
+        )
+        _check_critic_options(action_layer, action_units, net_arch)
+        action_dim = get_action_dim(action_space)
+        centre, half = action_box(action_space)
+        if action_units == "normalised":  # the identity map
+            centre, half = np.zeros_like(centre), np.ones_like(half)
+        self.register_buffer("action_centre", torch.as_tensor(centre, dtype=ACTION_DTYPE))
+        self.register_buffer("action_half_width", torch.as_tensor(half, dtype=ACTION_DTYPE))
+        self.share_features_extractor = share_features_extractor
+        self.n_critics = n_critics
+        joint_in = net_arch[action_layer - 1] if action_layer > 0 else features_dim
+        self.q_networks: list[nn.Module] = []
+        for index in range(n_critics):
+            head = nn.Sequential(
+                *create_mlp(features_dim, -1, net_arch[:action_layer], activation_fn)
+            )
+            tail = nn.Sequential(
+                *create_mlp(joint_in + action_dim, 1, net_arch[action_layer:], activation_fn)
+            )
+            q_net = _SplitQNetwork(head, tail)
+            self.add_module(f"qf{index}", q_net)
+            self.q_networks.append(q_net)
+
+    def _actions(self, actions: Tensor) -> Tensor:
+        return self.action_centre + self.action_half_width * actions
+
+    def forward(self, obs: Tensor, actions: Tensor) -> tuple[Tensor, ...]:
+        with torch.set_grad_enabled(not self.share_features_extractor):
+            features = self.extract_features(obs, self.features_extractor)
+        units = self._actions(actions)
+        return tuple(q_net(features, units) for q_net in self.q_networks)
+
+    def q1_forward(self, obs: Tensor, actions: Tensor) -> Tensor:
+        """Q-value ``(B, 1)`` of the first critic only, the features without gradient (as SB3's
+        ``q1_forward``, which the actor loss uses)."""
+        with torch.no_grad():
+            features = self.extract_features(obs, self.features_extractor)
+        return self.q_networks[0](features, self._actions(actions))
+
+
+def _check_critic_options(
+    action_layer: object, action_units: object, net_arch: Sequence[int]
+) -> None:
+    if isinstance(action_layer, bool) or not isinstance(action_layer, int):
+        raise ValueError(f"critic_action_layer: expected an int, found {action_layer!r}")
+    if not 0 <= action_layer <= len(net_arch):
+        raise ValueError(
+            f"critic_action_layer: expected 0 <= layer <= {len(net_arch)} (the critic's hidden "
+            f"layers {list(net_arch)}), found {action_layer}"
+        )
+    if action_units not in CRITIC_ACTION_UNITS:
+        raise ValueError(
+            f"critic_action_units: expected one of {CRITIC_ACTION_UNITS}, found {action_units!r}"
+        )
+
+
+class LeocTD3Policy(TD3Policy):
+    r"""SB3's TD3/DDPG policy with the critic layout and network initialisation as options.
+
+    With every option at its default this *is* SB3's ``TD3Policy`` (same modules, same random
+    draws, same numbers).
 
     Parameters
     ----------
     observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
         As for :class:`stable_baselines3.td3.policies.TD3Policy`.
-    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance, roa_*, learn_width
+    critic_action_layer : int
+        Hidden layers of the critic before the action joins: 0 (SB3: concatenated to the
+        observation) or ``j >= 1`` (:class:`SplitCritic`; TF-Agents' DDPG critic: 1).
+    critic_action_units : {"normalised", "physical"}
+        Units of the action the critic sees (SB3: normalised; TF-Agents: physical).
+    hidden_init : {"torch", "tf_agents"}
+        Initialisation of the actor's and critics' layers (:func:`initialise_mlp`).
+    last_layer_init : float, optional
+        Output layers' weights :math:`U(\pm v)`, zero bias (TF-Agents: 0.003); None: as
+        ``hidden_init``.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Any,
+        *args: Any,
+        critic_action_layer: int = 0,
+        critic_action_units: str = "normalised",
+        hidden_init: str = "torch",
+        last_layer_init: float | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if hidden_init not in HIDDEN_INITS:
+            raise ValueError(f"hidden_init: expected one of {HIDDEN_INITS}, found {hidden_init!r}")
+        if last_layer_init is not None and not (
+            isinstance(last_layer_init, (int, float)) and last_layer_init > 0
+        ):
+            raise ValueError(
+                f"last_layer_init: expected a positive number or None, found {last_layer_init!r}"
+            )
+        self.network_options = {
+            "critic_action_layer": critic_action_layer,
+            "critic_action_units": critic_action_units,
+            "hidden_init": hidden_init,
+            "last_layer_init": None if last_layer_init is None else float(last_layer_init),
+        }
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
+
+    def _initialise(self, module: nn.Module) -> None:
+        options = self.network_options
+        if (options["hidden_init"], options["last_layer_init"]) != ("torch", None):
+            initialise_mlp(module, options["hidden_init"], options["last_layer_init"])
+
+    def _new_actor(self, features_extractor: nn.Module | None = None) -> Actor:
+        return super().make_actor(features_extractor)
+
+    def make_actor(self, features_extractor: nn.Module | None = None) -> Actor:
+        """The actor (SB3's, or the hybrid in subclasses), initialised as ``network_options``
+        says; SB3 calls this for the actor and its target."""
+        actor = self._new_actor(features_extractor)
+        self._initialise(actor.nonlinear if isinstance(actor, HybridActor) else actor.mu)
+        return actor
+
+    def make_critic(self, features_extractor: nn.Module | None = None) -> nn.Module:
+        """SB3's critic, or a :class:`SplitCritic` when the action joins later or in physical
+        units (``network_options``), initialised as ``network_options`` says."""
+        layer = self.network_options["critic_action_layer"]
+        units = self.network_options["critic_action_units"]
+        _check_critic_options(layer, units, self.critic_kwargs["net_arch"])
+        if (layer, units) == (0, "normalised"):
+            critic = super().make_critic(features_extractor)
+        else:
+            critic_kwargs = self._update_features_extractor(self.critic_kwargs, features_extractor)
+            critic = SplitCritic(**critic_kwargs, action_layer=layer, action_units=units)
+            critic = critic.to(self.device)
+        for q_net in critic.q_networks:
+            self._initialise(q_net)
+        return critic
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(self.network_options)
+        return data
+
+
+class HybridTD3Policy(LeocTD3Policy):
+    """SB3 TD3/DDPG policy whose actor and target actor are :class:`HybridActor`.
+
+    Use it as ``DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs(system))`` or
+    with ``TD3``. The critics are SB3's (or :class:`SplitCritic`, see :class:`LeocTD3Policy`);
+    only the actor changes.
+
+    Parameters
+    ----------
+    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
+        As for :class:`stable_baselines3.td3.policies.TD3Policy`.
+    critic_action_layer, critic_action_units, hidden_init, last_layer_init
+        See :class:`LeocTD3Policy`.
+    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance,
+    relevance_parametrisation, clip_output, roa_*, learn_width
         Passed to :class:`HybridActor` (see there); :func:`hybrid_policy_kwargs` builds them
         from a system's LQR design (and, for ``relevance="roa"``, its certificate).
     """
@@ -331,6 +608,8 @@ class HybridTD3Policy(TD3Policy):
         lambda_init: float | Sequence[float] = 1.0,
         learn_lambda: bool = True,
         relevance: str = "paper",
+        relevance_parametrisation: str = "log_lambda",
+        clip_output: bool = True,
         **kwargs: Any,
     ) -> None:
         roa_names = (
@@ -349,12 +628,13 @@ class HybridTD3Policy(TD3Policy):
             "lambda_init": lambda_init,
             "learn_lambda": bool(learn_lambda),
             "relevance": relevance,
+            "relevance_parametrisation": relevance_parametrisation,
+            "clip_output": bool(clip_output),
             **roa,
         }
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
-    def make_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
-        """The hybrid actor (SB3 calls this for the actor and its target)."""
+    def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
         return HybridActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
 
@@ -434,6 +714,8 @@ def hybrid_policy_kwargs(
     learn_lambda: bool = True,
     lqr_method: str = "discrete",
     relevance: str = "paper",
+    relevance_parametrisation: str = "log_lambda",
+    clip_output: bool = True,
     rho_in_fraction: float = 1.0,
     width_init: float = DEFAULT_ROA_WIDTH,
     learn_width: bool = True,
@@ -446,9 +728,9 @@ def hybrid_policy_kwargs(
     system : leoc.systems.System or str
         The system (or its name); ``W, b`` come from :func:`leoc.control.design_lqr` and ``a``
         is ``system.operating_obs``.
-    lambda_init, learn_lambda
+    lambda_init, learn_lambda, relevance_parametrisation, clip_output
         See :class:`HybridActor`.
-    lqr_method : {"discrete", "continuous"}
+    lqr_method : {"discrete", "continuous", "authors"}
         LQR design method.
     relevance : {"paper", "roa"}
         The paper's relevance, or the ROA relevance flat on the LQR's certified set
@@ -475,6 +757,8 @@ def hybrid_policy_kwargs(
         "lambda_init": lambda_init,
         "learn_lambda": learn_lambda,
         "relevance": relevance,
+        "relevance_parametrisation": relevance_parametrisation,
+        "clip_output": clip_output,
         **roa,
         **extra,
     }

@@ -4,7 +4,9 @@ Run folder: the trainer contract of :mod:`leoc.training` (every file written ato
 
     config.json         DDPGConfig + seed + library versions
     model.zip           SB3 save of the final model: the run's controller (model selection:
-                        the final policy, as for PILCO)
+                        the final policy, as for PILCO, by default; with
+                        ``model_selection="best_last_third"`` its actor is the one of the best
+                        evaluation in the last third of the updates, the authors' rule)
     best_model.zip      SB3 save of the model with the best evaluation mean return (kept for
                         users who want it; ``load_ddpg_controller(run, which="best")``)
     curve.json          learning curve + summary (held/reached steps, final and best returns)
@@ -27,11 +29,11 @@ import torch
 from stable_baselines3.common.logger import Logger
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import LearningCurveCallback
+from leoc.ddpg.callbacks import LearningCurveCallback, last_third_start
 from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import physical_policy
-from leoc.ddpg.policies import HybridTD3Policy, hybrid_policy_kwargs
+from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, action_box, hybrid_policy_kwargs
 from leoc.io import write_bytes_atomic, write_text_atomic
 from leoc.training import (
     CONFIG_FILE,
@@ -69,17 +71,22 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
     """The SB3 model (:class:`LeocDDPG` or :class:`LeocTD3`) of ``config`` on ``env`` (a
     :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is the one designed for)."""
     system = env.unwrapped.system
-    action_dim = int(np.prod(env.action_space.shape))
     policy_kwargs: dict[str, Any] = {
-        "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)}
+        "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
+        "critic_action_layer": config.critic_action_layer,
+        "critic_action_units": config.critic_action_units,
+        "hidden_init": config.hidden_init,
+        "last_layer_init": config.last_layer_init,
     }
-    policy: Any = "MlpPolicy"
+    policy: Any = LeocTD3Policy  # SB3's TD3Policy when those options are at their defaults
     if config.hybrid:
         policy = HybridTD3Policy
         policy_kwargs = hybrid_policy_kwargs(
             system,
             lambda_init=config.lambda_init,
             learn_lambda=config.learn_lambda,
+            relevance_parametrisation=config.relevance_parametrisation,
+            clip_output=config.actor_output_clip,
             lqr_method=config.lqr_method,
             relevance=config.relevance,
             rho_in_fraction=config.roa_rho_fraction,
@@ -97,10 +104,11 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
         "gamma": config.discount,
         "train_freq": config.train_freq,
         "gradient_steps": config.gradient_steps,
-        "action_noise": SeededOUNoise(
-            action_dim, config.ou_theta, config.ou_sigma, seed + NOISE_SEED_OFFSET
-        ),
+        "action_noise": exploration_noise(config, env.action_space, seed),
         "target_update_interval": config.target_update_interval,
+        "warmup": config.warmup,
+        "critic_loss": config.critic_loss,
+        "target_action_clip": config.actor_output_clip,
         "policy_kwargs": policy_kwargs,
         "seed": seed,
         "device": "cpu",
@@ -116,6 +124,22 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
             **common,
         )
     return LeocDDPG(policy, env, **common)
+
+
+def exploration_noise(config: DDPGConfig, action_space: Any, seed: int) -> SeededOUNoise:
+    """The run's OU exploration noise: ``ou_theta``, ``ou_sigma`` in ``noise_units`` (physical
+    units divide by the action box's half-width h, since SB3 adds it to the normalised action),
+    reset at episode ends if ``noise_reset``, seeded by ``seed + 20000``."""
+    _, half = action_box(action_space)
+    scale = 1.0 / half if config.noise_units == "physical" else np.ones_like(half)
+    return SeededOUNoise(
+        half.size,
+        config.ou_theta,
+        config.ou_sigma,
+        seed + NOISE_SEED_OFFSET,
+        scale=scale,
+        reset_each_episode=config.noise_reset,
+    )
 
 
 def _versions() -> dict[str, str]:
@@ -165,7 +189,7 @@ def train_ddpg(
     -------
     DDPGResult
     """
-    from leoc.systems import make_env, make_system
+    from leoc.systems import StepRules, make_env, make_system
 
     if total_steps is not None:
         overrides["total_steps"] = total_steps
@@ -179,7 +203,8 @@ def train_ddpg(
         json.dumps({**config_dict, "versions": _versions()}, indent=2),
     )
 
-    system_obj = make_system(system)  # the edge: the config's name, resolved once
+    # the edge: the config's name, resolved once, stepping under the config's rules
+    system_obj = make_system(system).with_rules(StepRules(**config.step_rules))
     env = make_env(system_obj)
     model = build_model(config, seed, env)
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger
@@ -191,12 +216,18 @@ def train_ddpg(
         save_best=lambda m: _atomic_save_model(m, run_path / MODEL_FILES["best"]),
         progress=progress,
         total_steps=config.total_steps,
+        model_selection=config.model_selection,
+        selection_start=last_third_start(config.total_steps, config.learning_starts),
     )
     model.learn(total_timesteps=config.total_steps, callback=callback)
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
     env.close()
 
-    summary = curve_summary(callback.curve, system_obj.dt)
+    summary = {
+        **curve_summary(callback.curve, system_obj.dt),
+        "model_selection": config.model_selection,
+        "selected_steps": callback.selected_steps,
+    }
     write_curve(run_path, callback.curve, summary, f"{system} {algo.upper()} {kind} (seed {seed})")
     return TrainResult(
         physical_policy(model.actor), run_path, callback.curve, config_dict, summary, model

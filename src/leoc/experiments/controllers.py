@@ -33,6 +33,15 @@ def trainer_dir(run_dir: str | Path) -> Path:
     )
 
 
+def trained_system(run_dir: str | Path) -> str:
+    """The name of the system the controller in ``run_dir`` was trained for (its config)."""
+    folder = trainer_dir(run_dir)
+    name = read_config(folder).get("system")
+    if not isinstance(name, str):
+        raise ValueError(f"run folder: {folder / 'config.json'} names no system")
+    return name
+
+
 def load_trained_controller(run_dir: str | Path, system: str | None = None) -> torch.nn.Module:
     """The physical-units policy (float64 observations -> actions) saved in ``run_dir``, at the
     control period it was trained at (PILCO: a :class:`~leoc.policies.HeldPolicy`).

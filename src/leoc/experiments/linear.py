@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -140,3 +140,55 @@ def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
     path = out / "linear_report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+# One field of the authors' variant switched back to leoc's value at a time (and the reverse
+# from leoc's defaults), to measure which choice makes each difference in appendix D's Linear
+# row: (label, base variant name, field, value).
+LINEAR_ABLATION = (
+    ("authors' variant (all its choices)", "authors", None, None),
+    ("  with leoc's discrete LQR (gain x1, no u_max)", "authors", "lqr_method", "discrete"),
+    ("  with leoc's clip instead of the sin squash", "authors", "linear_saturation", "none"),
+    ("  with leoc's step rules (gymnasium pendulum)", "authors", "step_rules", {}),
+    ("  with 200-step records", "authors", "response_steps", {}),
+    ("leoc's defaults", "leoc", None, None),
+    ("  with the authors' LQR (u_max K, their models)", "leoc", "lqr_method", "authors"),
+    ("  with the continuous LQR on leoc's models", "leoc", "lqr_method", "continuous"),
+)
+
+
+class AblationRow(NamedTuple):
+    """Impulse metrics of one linear configuration under both metric sets."""
+
+    system: str
+    label: str
+    leoc: ResponseMetrics
+    authors: ResponseMetrics
+
+
+def linear_row_ablation(systems: Sequence[str] = SYSTEM_NAMES) -> list[AblationRow]:
+    """The Linear row of appendix D under every configuration of :data:`LINEAR_ABLATION`:
+    the impulse response of each system's linear reference, measured with leoc's and the
+    authors' metric sets."""
+    import dataclasses
+    from types import MappingProxyType
+
+    from leoc.experiments.variants import get_variant
+
+    rows = []
+    for name in systems:
+        for label, base, field, value in LINEAR_ABLATION:
+            variant = get_variant(base)
+            if field is not None:
+                if isinstance(value, dict):
+                    value = MappingProxyType(value)
+                variant = dataclasses.replace(variant, **{field: value})
+            system = variant.system(name)
+            controller = variant.linear_controller(system)
+            steps = variant.steps_for(name)
+            measured = [
+                response_test(system, controller, "impulse", steps, metric_set=metric_set).metrics
+                for metric_set in ("leoc", "authors")
+            ]
+            rows.append(AblationRow(name, label, *measured))
+    return rows

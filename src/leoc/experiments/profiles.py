@@ -5,21 +5,12 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, NamedTuple
 
+from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS
 from leoc.systems import SYSTEM_NAMES, system_names
 
-CONTROLLERS = (
-    "linear",
-    "linear_pilco",
-    "ddpg_baseline",
-    "ddpg_hybrid",
-    "ddpg_hybrid_roa",
-    "pilco_baseline",
-    "pilco_hybrid",
-    "pilco_hybrid_roa",
-)
-# What `leoc reproduce` runs unless --controllers says otherwise: the paper's controllers and the
-# two linear references (the ROA-relevance hybrids are added on request).
-DEFAULT_CONTROLLERS = tuple(name for name in CONTROLLERS if not name.endswith("_roa"))
+# Every controller, in report order, and the default set (the paper's controllers and the two
+# linear references; the ROA-relevance hybrids are added on request) live in leoc.names, where
+# the command line reads them without importing torch.
 LINEAR_CONTROLLERS = ("linear", "linear_pilco")
 TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in ("linear", "linear_pilco"))
 # The linear reference of each framework: the LQR designed and run at that framework's control

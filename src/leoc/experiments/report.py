@@ -27,6 +27,7 @@ from leoc.evaluation.plots import (
 )
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
+from leoc.experiments.appendix_d import appendix_d_section
 from leoc.experiments.layout import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import (
@@ -73,7 +74,10 @@ def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evalu
         try:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise ValueError(f"{path}: damaged evaluation file ({error})") from error
+            raise ValueError(
+                f"{path}: damaged evaluation file ({error}); rerun the 'leoc reproduce' command "
+                "of this folder: it sets the damaged file aside and redoes that run"
+            ) from error
         spec = data["spec"]
         if meta is not None and not _selected(spec, meta):
             continue
@@ -375,9 +379,7 @@ def response_flags(rows: list[dict[str, Any]]) -> list[str]:
         for metric in COMPARED_METRICS:
             value, ref = row[f"{metric}_mean"], reference[f"{metric}_mean"]
             if _differs(value, ref, reference["peak_deviation_mean"]):
-                problems.append(
-                    f"{metric.replace('_', ' ')} {FMT.format(value)} vs {FMT.format(ref)}"
-                )
+                problems.append(f"{metric.replace('_', ' ')} {_number(value)} vs {_number(ref)}")
         if problems:
             flags.append(
                 f"**{system} {_label(controller)}** ({test}) differs from "
@@ -598,36 +600,81 @@ def _number(value: float) -> str:
     return "-" if math.isnan(value) else FMT.format(value)
 
 
-def _paper_cells(system: str, controller: str) -> str:
+NEGATIVE_STD_MARK = "*"
+NEGATIVE_STD_NOTE = (
+    f"{NEGATIVE_STD_MARK} The paper prints this standard deviation with a minus sign; shown as "
+    "its magnitude."
+)
+PAPER_COLUMNS = 3
+RESPONSE_COLUMNS = (
+    "system",
+    "controller",
+    "period [steps]",
+    "steady-state error",
+    "overshoot",
+    "peak deviation",
+    "settling time [steps]",
+    "settling time [s]",
+    "settled",
+    "terminated",
+)
+PAPER_HEADERS = ("paper: steady-state error", "paper: overshoot", "paper: settling time")
+
+
+def _paper_pm(value: tuple[float, float] | None) -> str:
+    """A paper's mean ± std; a std the paper prints negative is shown as its magnitude, marked."""
+    if value is None:
+        return "-"
+    mean, std = value
+    mark = NEGATIVE_STD_MARK if std < 0 else ""
+    return f"{FMT.format(mean)} ± {FMT.format(abs(std))}{mark}"
+
+
+def paper_cells(system: str, controller: str) -> list[str]:
+    """The paper's appendix D row of a controller (three cells), '-' where it has none. The
+    paper's single linear row belongs to the LQR at dt, not to the LQR at PILCO's period."""
     paper = PAPER_IMPULSE_METRICS.get(system, {}).get(controller)
     if paper is None:
-        return "| | |"
-    overshoot = _pm(*paper.overshoot) if paper.overshoot else "-"
-    return f"| {_pm(*paper.steady_state_error)} | {overshoot} | {_pm(*paper.settling_time)} |"
+        return ["-"] * PAPER_COLUMNS
+    return [
+        _paper_pm(paper.steady_state_error),
+        _paper_pm(paper.overshoot),
+        _paper_pm(paper.settling_time),
+    ]
+
+
+def _table_row(cells: list[str]) -> str:
+    return "| " + " | ".join(cells) + " |"
 
 
 def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
-    """Markdown rows of the response table of ``test`` (impulse or step), one per controller."""
-    lines = [
-        "| system | controller | period [steps] | steady-state error | overshoot "
-        "| peak deviation | settling time [steps] | settling time [s] | settled | terminated "
-        "| paper: steady-state error | paper: overshoot | paper: settling time |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    """The markdown table of one response test; the impulse table carries the paper's appendix
+    D columns beside ours (the paper gives no step-response numbers)."""
+    headers = list(RESPONSE_COLUMNS) + (list(PAPER_HEADERS) if test == "impulse" else [])
+    lines = [_table_row(headers), "|" + "---|" * len(headers)]
+    negative_std = False
     for row in rows:
         if row["test"] != test:
             continue
-        paper_key = "linear" if row["controller"] in LINEAR_CONTROLLERS else row["controller"]
-        paper = _paper_cells(row["system"], paper_key) if test == "impulse" else "| | |"
-        lines.append(
-            f"| {row['system']} | {_label(row['controller'])} | {row['action_repeat']} "
-            f"| {_pm(row['steady_state_error_mean'], row['steady_state_error_std'])} "
-            f"| {_pm(row['overshoot_mean'], row['overshoot_std'])} "
-            f"| {_pm(row['peak_deviation_mean'], row['peak_deviation_std'])} "
-            f"| {_pm(row['settling_time_mean'], row['settling_time_std'])} "
-            f"| {_number(row['settling_seconds_mean'])} "
-            f"| {row['n_settled']}/{row['n_runs']} | {row['n_terminated']}/{row['n_runs']} {paper}"
-        )
+        cells = [
+            row["system"],
+            _label(row["controller"]),
+            str(row["action_repeat"]),
+            _pm(row["steady_state_error_mean"], row["steady_state_error_std"]),
+            _pm(row["overshoot_mean"], row["overshoot_std"]),
+            _pm(row["peak_deviation_mean"], row["peak_deviation_std"]),
+            _pm(row["settling_time_mean"], row["settling_time_std"]),
+            _number(row["settling_seconds_mean"]),
+            f"{row['n_settled']}/{row['n_runs']}",
+            f"{row['n_terminated']}/{row['n_runs']}",
+        ]
+        if test == "impulse":
+            paper = paper_cells(row["system"], row["controller"])
+            negative_std |= any(cell.endswith(NEGATIVE_STD_MARK) for cell in paper)
+            cells += paper
+        lines.append(_table_row(cells))
+    if negative_std:
+        lines += ["", NEGATIVE_STD_NOTE]
     return lines
 
 
@@ -735,9 +782,40 @@ def _flag_block(flags: list[str], none_text: str) -> list[str]:
     return ["**What failed:**", ""] + [f"- {flag}" for flag in flags] + [""]
 
 
+def record_companion(out_dir: str | Path, other: str | Path) -> None:
+    """Record in ``out_dir``'s ``meta.json`` the reproduce folder ``other`` (of the other
+    implementation variant) whose runs the appendix-D table sets beside this folder's; stored
+    relative to ``out_dir`` so that a published pair of folders keeps it.
+
+    Raises
+    ------
+    FileNotFoundError
+        Either folder has no ``meta.json``.
+    ValueError
+        Both folders hold the same variant.
+    """
+    import os
+
+    out, companion = Path(out_dir), Path(other)
+    metas = []
+    for folder, name in ((out, "run_dir"), (companion, "compare")):
+        if not (folder / META_FILE).is_file():
+            raise FileNotFoundError(f"{name}: no {META_FILE} in {str(folder)!r}")
+        metas.append(json.loads((folder / META_FILE).read_text()))
+    variants = [meta.get("variant", "leoc") for meta in metas]
+    if variants[0] == variants[1]:
+        raise ValueError(
+            f"compare: expected a folder of the other variant, found {variants[1]!r} in both"
+        )
+    metas[0]["compare"] = os.path.relpath(companion.resolve(), out.resolve())
+    write_json_atomic(out / META_FILE, metas[0])
+
+
 def write_report(out_dir: str | Path) -> Path:
     """Aggregate the finished runs of ``out_dir`` into numbers, figures and ``report.md``."""
     out = Path(out_dir)
+    if not out.is_dir():
+        raise FileNotFoundError(f"run_dir: the folder {str(out)!r} does not exist")
     meta_path = out / META_FILE
     if not meta_path.is_file():
         raise FileNotFoundError(
@@ -837,6 +915,7 @@ def write_report(out_dir: str | Path) -> Path:
         flags,
         figures,
         run_seconds,
+        appendix_d_section(out, meta, evaluations),
     )
     write_text_atomic(path, document)
     return path
@@ -862,8 +941,10 @@ def render_markdown(
     flags: dict[str, list[str]],
     figures: list[tuple[str, str]],
     run_seconds: float,
+    appendix: list[str] | None = None,
 ) -> str:
-    """The whole report as markdown, from the run metadata, evaluations and tables."""
+    """The markdown of ``report.md``; ``appendix`` (the appendix-D section of
+    :mod:`leoc.experiments.appendix_d`) goes before the response tables."""
     responses, robustness = tables["responses"], tables["robustness"]
     wall = meta.get("wall_seconds_last_invocation")
     lines = [
@@ -938,6 +1019,9 @@ def render_markdown(
         "The paper's numbers (appendix D, typed in) do not state their band; its mountain-car "
         "settling times (~201 steps) exceed the 200-step episode.",
         "",
+    ]
+    lines += appendix or []
+    lines += [
         "## Impulse response",
         "",
     ]

@@ -41,8 +41,9 @@ from leoc.experiments.profiles import (
     run_specs,
 )
 from leoc.experiments.sweep import check_backend, sweep
+from leoc.experiments.variants import LEOC, Variant, get_variant
 from leoc.io import read_json_object, write_json_atomic
-from leoc.systems import SYSTEM_NAMES, make_system
+from leoc.systems import SYSTEM_NAMES
 from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
 
@@ -124,28 +125,35 @@ def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
     }
 
 
-def pilco_action_repeat(profile: Profile, system: str) -> int:
-    """PILCO's control period on ``system`` under ``profile`` (its override, else the system's
-    PILCO default)."""
+def pilco_action_repeat(profile: Profile, system: str, variant: Variant = LEOC) -> int:
+    """The control period PILCO's controllers run at on ``system`` under ``profile`` and
+    ``variant`` (the period they are deployed at: the authors train holding each action 3 steps
+    but deploy every step)."""
     from leoc.pilco.config import PilcoConfig
 
-    return PilcoConfig.for_system(system, **profile.pilco_overrides).action_repeat
+    settings = {**variant.training_settings("pilco", system, True), **profile.pilco_overrides}
+    return PilcoConfig.for_system(system, **settings).controller_action_repeat
 
 
 def train_controller(
-    spec: RunSpec, profile: Profile, train_dir: Path
+    spec: RunSpec, profile: Profile, train_dir: Path, variant: Variant = LEOC
 ) -> tuple[torch.nn.Module, dict[str, list[float]] | None]:
-    """Design (linear) or train one controller; returns it (at its control period) and its
-    learning curve."""
-    system = make_system(spec.system)
+    """Design (linear) or train one controller under ``variant``; returns it (at its control
+    period) and its learning curve."""
+    system = variant.system(spec.system)
     if spec.framework == "linear":
-        from leoc.control import design_lqr
-        from leoc.policies import lqr_controller
-
         repeat = (
-            pilco_action_repeat(profile, spec.system) if spec.controller == "linear_pilco" else 1
+            pilco_action_repeat(profile, spec.system, variant)
+            if spec.controller == "linear_pilco"
+            else 1
         )
-        return lqr_controller(design_lqr(system, action_repeat=repeat)), None
+        return variant.linear_controller(system, repeat), None
+    # the variant's settings, then the profile's budgets and overrides, then the run's relevance
+    settings = {
+        **variant.training_settings(spec.framework, spec.system, spec.hybrid),
+        **(profile.pilco_overrides if spec.framework == "pilco" else profile.ddpg_overrides),
+        "relevance": spec.relevance,
+    }
     if spec.framework == "pilco":
         from leoc.pilco.train import train_pilco
 
@@ -153,11 +161,10 @@ def train_controller(
             spec.system,
             hybrid=spec.hybrid,
             seed=spec.seed,
-            relevance=spec.relevance,
             run_dir=train_dir,
             iterations=profile.pilco_iterations.get(spec.system),
             progress=True,
-            **profile.pilco_overrides,
+            **settings,
         )
     else:
         from leoc.ddpg.train import train_ddpg
@@ -167,16 +174,17 @@ def train_controller(
             algo="ddpg",
             hybrid=spec.hybrid,
             seed=spec.seed,
-            relevance=spec.relevance,
             run_dir=train_dir,
             total_steps=profile.ddpg_steps.get(spec.system),
             progress=False,
-            **profile.ddpg_overrides,
+            **settings,
         )
     return result.policy, _curve(result.curve)
 
 
-def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[str, Any]:
+def region_of_attraction(
+    system: System, controller: torch.nn.Module, lqr_method: str = "discrete"
+) -> dict[str, Any]:
     """The certificate of the LQR designed for the controller's period, and the controller's
     empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
     certified set (1.0 when the controller's basin contains it, on those starts)."""
@@ -190,7 +198,8 @@ def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[st
     )
 
     period = control_period(controller)
-    certificate = certify_lqr(system, design_lqr(system, action_repeat=period))
+    design = design_lqr(system, method=lqr_method, action_repeat=period)  # type: ignore[arg-type]
+    certificate = certify_lqr(system, design)
     box = default_basin_box(system)
     basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
     inside = certified_set_check(system, controller, certificate) if certificate.certified else None
@@ -205,16 +214,25 @@ def region_of_attraction(system: System, controller: torch.nn.Module) -> dict[st
     }
 
 
-def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str, Any]:
-    """Responses, robustness, swing-up and relevance trace of one controller, at its period."""
-    system = make_system(spec.system)
+def evaluate_controller(
+    spec: RunSpec, controller: torch.nn.Module, variant: Variant = LEOC
+) -> dict[str, Any]:
+    """Responses, robustness, swing-up and relevance trace of one controller, at its period,
+    on the system stepping under ``variant``'s rules. Every response is measured with both
+    metric sets: ``metrics`` (leoc's) and ``metrics_authors`` (the authors', on their
+    arcsin(sin theta) deviation, ``deviation_authors``)."""
+    system = variant.system(spec.system)
     responses = {}
     for test in RESPONSE_TESTS:
-        result = response_test(system, controller, test)
+        steps = variant.steps_for(spec.system)
+        result = response_test(system, controller, test, steps)
+        authors = response_test(system, controller, test, steps, metric_set="authors")
         responses[test] = {
             "metrics": result.metrics._asdict(),
             "deviation": result.deviation.tolist(),
             "total_reward": result.trajectory.total_reward,
+            "metrics_authors": authors.metrics._asdict(),
+            "deviation_authors": authors.deviation.tolist(),
         }
     swing = evaluate_episodes(
         system, controller, evaluation_starts(system, spec.seed, SWING_UP_EPISODES)
@@ -222,7 +240,7 @@ def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str,
     trace = relevance_trace(system, controller, spec.seed)
     return {
         "action_repeat": control_period(controller),
-        "roa": region_of_attraction(system, controller),
+        "roa": region_of_attraction(system, controller, variant.lqr_method),
         "responses": responses,
         "robustness": [
             {**point._asdict(), "return_mean": point.return_mean}
@@ -238,7 +256,9 @@ def evaluate_controller(spec: RunSpec, controller: torch.nn.Module) -> dict[str,
     }
 
 
-def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any]:
+def execute_run(
+    spec: RunSpec, profile: Profile, out_dir: Path, variant: Variant = LEOC
+) -> dict[str, Any]:
     """Worker body: train/design, evaluate, write ``evaluation.json``; returns its contents.
 
     The worker's stdout and stderr go to ``train.log`` in the run folder.
@@ -255,13 +275,14 @@ def execute_run(spec: RunSpec, profile: Profile, out_dir: Path) -> dict[str, Any
         contextlib.redirect_stdout(log),
         contextlib.redirect_stderr(log),
     ):
-        print(f"== {spec.key} ({profile.name} profile)", flush=True)
-        controller, curve = train_controller(spec, profile, run_dir / "train")
+        print(f"== {spec.key} ({profile.name} profile, {variant.name} variant)", flush=True)
+        controller, curve = train_controller(spec, profile, run_dir / "train", variant)
         trained = time.perf_counter() - started
         print(f"trained in {trained:.1f} s; evaluating", flush=True)
-        evaluation = evaluate_controller(spec, controller)
+        evaluation = evaluate_controller(spec, controller, variant)
     evaluation.update(
         spec=spec._asdict(),
+        variant=variant.name,
         curve=curve,
         train_wall_seconds=trained,
         wall_seconds=time.perf_counter() - started,
@@ -283,9 +304,10 @@ class ProfileRunner:
     :func:`execute_run` (a picklable callable for worker processes and Ray tasks)."""
 
     profile: Profile
+    variant: str = "leoc"
 
     def __call__(self, spec: RunSpec, out_dir: Path) -> dict[str, Any]:
-        return execute_run(spec, self.profile, out_dir)
+        return execute_run(spec, self.profile, out_dir, get_variant(self.variant))
 
 
 def reproduce(
@@ -298,8 +320,12 @@ def reproduce(
     echo: Callable[[str], None] = print,
     backend: str = "local",
     address: str | None = None,
+    variant: str = "leoc",
 ) -> Path:
     """Run (or resume) a profile and write the report; returns the path of ``report.md``.
+
+    ``variant``: leoc's implementation or the authors' (:mod:`leoc.experiments.variants`); one
+    folder holds runs of one variant.
 
     ``jobs`` runs at a time (default: the CPU count locally, the cluster's CPUs on Ray);
     ``backend`` ``"local"`` (worker processes) or ``"ray"``, ``address`` the Ray cluster to join
@@ -310,6 +336,7 @@ def reproduce(
 
     out = Path(out_dir)
     profile = get_profile(profile_name, seeds)
+    chosen = get_variant(variant)
     if jobs is not None and (int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
     check_backend(backend, address)  # before anything is written
@@ -320,12 +347,19 @@ def reproduce(
             f"out: {out} holds a {meta.get('profile')!r} run; use another folder for "
             f"the {profile.name!r} profile"
         )
+    if meta and meta.get("variant", LEOC.name) != chosen.name:
+        raise ValueError(
+            f"out: {out} holds runs of the {meta.get('variant', LEOC.name)!r} variant; use "
+            f"another folder for the {chosen.name!r} variant"
+        )
     specs = run_specs(profile, tuple(systems), tuple(controllers))
     started = time.perf_counter()
     # a rerun with other seeds, systems or controllers extends the folder: earlier runs stay on
     # disk, and the report aggregates exactly the runs of this invocation (and lists them)
     meta.update(
         profile=profile.name,
+        variant=chosen.name,
+        variant_settings=chosen.summary(),
         description=profile.description,
         seeds=list(profile.seeds),
         settings={
@@ -347,7 +381,7 @@ def reproduce(
     write_json_atomic(meta_path, meta)
     result = sweep(
         specs,
-        ProfileRunner(profile),
+        ProfileRunner(profile, chosen.name),
         out,
         backend=backend,
         jobs=jobs,

@@ -688,8 +688,9 @@ def sweep(
         )
         driver.run(pending, progress_interval_s)
     except KeyboardInterrupt:
+        # the caller says it was interrupted (the leoc command prints one line with how to
+        # resume); a second line here would repeat it
         engine.stop()
-        echo("interrupted: finished runs are kept; run the same command again to resume")
         raise
     finally:
         engine.close()

@@ -21,6 +21,13 @@ field                  leoc (default)                        authors
                                                              gym 0.17's pendulum integrator
 ``response_steps``     200 simulator steps                   400 on the cart-pole (the length
                                                              of the paper's cart-pole record)
+``ddpg``               none (DDPGConfig's defaults)          :func:`leoc.ddpg.
+                                                             authors_ddpg_overrides` (TF-Agents
+                                                             DDPG as ``DDPG/ddpg.py`` and the
+                                                             gin files configure it)
+``pilco``              none (PilcoConfig's defaults)         :func:`leoc.pilco.
+                                                             authors_pilco_overrides`
+                                                             (``dao/trainer.py``, the gin files)
 =====================  ====================================  ===================================
 
 The metric set (leoc's or the authors', :mod:`leoc.evaluation.metric_sets`) is chosen apart
@@ -30,17 +37,21 @@ from the variant: ``leoc reproduce`` reports both for every run.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from types import MappingProxyType
+from typing import Any
 
 from torch import nn
 
+from leoc.ddpg.config import authors_ddpg_overrides
 from leoc.evaluation.rollout import RESPONSE_STEPS
+from leoc.pilco.config import authors_pilco_overrides
 from leoc.systems import StepRules, System, make_system
 from leoc.systems.base import DEFAULT_RULES
 
 __all__ = ["AUTHORS", "LEOC", "VARIANTS", "VARIANT_NAMES", "Variant", "get_variant"]
 
+LEOC_LQR_METHOD = "discrete"
 # nrjc/LEOC dao/envs/cartpole_env.py and mountaincar_env.py: ``reward -= 100`` on the step that
 # leaves the track, the reward computed on the state after the step.
 AUTHORS_EXIT_PENALTY = -100.0
@@ -67,6 +78,10 @@ class Variant:
         Rules of each system's steps; a system not listed steps under leoc's.
     response_steps : mapping of system name -> int
         Length of the impulse and step records; a system not listed gets 200.
+    ddpg, pilco : callable or None
+        ``settings(system, hybrid) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` or
+        :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none). The variant's
+        ``lqr_method`` and step rules are added by :meth:`training_settings`.
     """
 
     name: str
@@ -79,6 +94,23 @@ class Variant:
     response_steps: Mapping[str, int] = dataclasses.field(
         default_factory=lambda: MappingProxyType({})
     )
+    ddpg: Callable[[str, bool], dict[str, Any]] | None = None
+    pilco: Callable[[str, bool], dict[str, Any]] | None = None
+
+    def training_settings(self, framework: str, system: str, hybrid: bool) -> dict[str, Any]:
+        """Config fields of a ``framework`` (``"ddpg"`` or ``"pilco"``) run under this variant:
+        its framework settings, its LQR design (where it is not leoc's) and its step rules
+        (where they are not leoc's), so that leoc's own configs stay as they were."""
+        if framework not in ("ddpg", "pilco"):
+            raise ValueError(f"framework: expected 'ddpg' or 'pilco', found {framework!r}")
+        settings_of = self.ddpg if framework == "ddpg" else self.pilco
+        settings = dict(settings_of(system, hybrid)) if settings_of is not None else {}
+        if self.lqr_method != LEOC_LQR_METHOD:
+            settings["lqr_method"] = self.lqr_method
+        rules = self.rules_for(system)
+        if rules != DEFAULT_RULES:
+            settings["step_rules"] = dataclasses.asdict(rules)
+        return settings
 
     def rules_for(self, system: str) -> StepRules:
         """The step rules of the system called ``system``."""
@@ -110,6 +142,8 @@ class Variant:
             "linear_saturation": self.linear_saturation,
             "step_rules": {k: dataclasses.asdict(v) for k, v in self.step_rules.items()},
             "response_steps": dict(self.response_steps),
+            "ddpg": None if self.ddpg is None else self.ddpg.__qualname__,
+            "pilco": None if self.pilco is None else self.pilco.__qualname__,
         }
 
 
@@ -133,6 +167,8 @@ AUTHORS = Variant(
         }
     ),
     response_steps=MappingProxyType({"cartpole": AUTHORS_CARTPOLE_RESPONSE_STEPS}),
+    ddpg=authors_ddpg_overrides,
+    pilco=authors_pilco_overrides,
 )
 #: The variants by name (``--variant``).
 VARIANTS: dict[str, Variant] = {variant.name: variant for variant in (LEOC, AUTHORS)}

@@ -9,7 +9,8 @@
 - :mod:`~leoc.pilco.cost`: saturating cost and its expectation;
 - :mod:`~leoc.pilco.propagate`: long-term prediction over the horizon;
 - :mod:`~leoc.pilco.rollout`: real rollouts and the hold test;
-- :mod:`~leoc.pilco.config`: the validated settings and per-system defaults;
+- :mod:`~leoc.pilco.config`: the validated settings, per-system defaults and the authors'
+  (nrjc/LEOC) settings, :func:`authors_pilco_overrides`;
 - :mod:`~leoc.pilco.policy`: the RBF baseline and the hybrid, built from the initial data;
 - :mod:`~leoc.pilco.objective`: the predicted horizon cost and its L-BFGS minimisation;
 - :mod:`~leoc.pilco.checkpoint`: resumable checkpoint and saved controller;
@@ -17,7 +18,7 @@
 """
 
 from leoc.pilco.checkpoint import load_pilco_controller
-from leoc.pilco.config import PilcoConfig
+from leoc.pilco.config import PilcoConfig, authors_pilco_overrides
 from leoc.pilco.cost import expected_saturating_cost, saturating_cost
 from leoc.pilco.gp import CholeskyError, GPPosterior, GPSettings, fit_gp, gp_predict
 from leoc.pilco.moments import (
@@ -41,6 +42,7 @@ __all__ = [
     "PilcoResult",
     "SaturatedPolicy",
     "action_moments",
+    "authors_pilco_overrides",
     "expected_saturating_cost",
     "fit_gp",
     "gp_moments",

@@ -27,6 +27,15 @@ CHECKPOINT_NAME = "checkpoint.pt"
 CONTROLLER_NAME = "controller.pt"
 
 
+class BestPolicy(NamedTuple):
+    """The policy kept by ``PilcoConfig.select_best_from``: its iteration, mean evaluation
+    return and parameters."""
+
+    iteration: int
+    mean_return: float
+    policy_state: dict[str, torch.Tensor]
+
+
 class RunState(NamedTuple):
     iteration: int
     inputs: np.ndarray
@@ -35,6 +44,7 @@ class RunState(NamedTuple):
     log: list[dict[str, Any]]
     rng_state: dict[str, Any]
     hyper: GPHyper | None
+    best: BestPolicy | None = None
 
 
 def save_checkpoint(
@@ -58,13 +68,24 @@ def save_checkpoint(
             "hyper": None if state.hyper is None else state.hyper._asdict(),
             "policy_state": policy.state_dict(),
             "model": None if model is None else model._asdict(),
+            "best": None if state.best is None else state.best._asdict(),
         },
         run_dir / CHECKPOINT_NAME,
     )
+    save_controller(run_dir, config, policy.state_dict(), model)
+
+
+def save_controller(
+    run_dir: Path,
+    config: PilcoConfig,
+    policy_state: dict[str, torch.Tensor],
+    model: GPPosterior | None,
+) -> None:
+    """Write ``controller.pt``: the run's controller (policy parameters), GP posterior, config."""
     save_torch_atomic(
         {
             "config": config.to_dict(),
-            "policy_state": policy.state_dict(),
+            "policy_state": policy_state,
             "model": None if model is None else model._asdict(),
         },
         run_dir / CONTROLLER_NAME,
@@ -106,6 +127,7 @@ def resume_checkpoint(
         saved["log"],
         saved["rng_state"],
         hyper,
+        None if saved.get("best") is None else BestPolicy(**saved["best"]),
     )
     return state, policy, model
 
@@ -126,4 +148,4 @@ def load_pilco_controller(run_dir: str | Path) -> nn.Module:
         ) from error
     policy = build_policy(make_system(config.system), config, torch.Generator().manual_seed(0))
     policy.load_state_dict(saved["policy_state"])
-    return HeldPolicy(policy.eval(), config.action_repeat).eval()
+    return HeldPolicy(policy.eval(), config.controller_action_repeat).eval()

@@ -72,6 +72,9 @@ class GPSettings:
         Power p of the smooth barrier ``((log l - log std) / log ratio)^p``.
     noise_floor : float
         Lower bound on the noise standard deviation, relative to the target's standard deviation.
+    fixed_noise_var : float or None
+        If set, every output's noise variance is this value (absolute, in squared target units)
+        and is not fitted (``noise_floor`` is then unused); None: fitted above the floor.
     """
 
     max_full_points: int = 300
@@ -81,6 +84,18 @@ class GPSettings:
     max_snr: float = 500.0
     penalty_power: int = 30
     noise_floor: float = 1e-4
+    fixed_noise_var: float | None = None
+
+    def __post_init__(self) -> None:
+        value = self.fixed_noise_var
+        if value is not None and (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not 0.0 < value < math.inf
+        ):
+            raise ValueError(
+                f"fixed_noise_var: expected None or a positive finite number, found {value!r}"
+            )
 
 
 class GPHyper(NamedTuple):
@@ -293,6 +308,13 @@ def fit_gp(
             f"inputs, targets: expected (N, D) and (N, E), found {tuple(x.shape)}, {tuple(y.shape)}"
         )
     floor_var = (settings.noise_floor * y.std(0).clamp(min=MIN_INPUT_STD)) ** 2
+    fixed_log_noise = None
+    if settings.fixed_noise_var is not None:
+        # A fixed noise: no floor, and log sigma a constant that the objective below uses in
+        # place of the optimised one (whose gradient is then zero, so L-BFGS never moves it).
+        floor_var = torch.zeros_like(floor_var)
+        log_noise = 0.5 * math.log(settings.fixed_noise_var)
+        fixed_log_noise = torch.full((y.shape[1],), log_noise, dtype=DTYPE)
     log_input_std = torch.log(x.std(0).clamp(min=MIN_INPUT_STD))
     sparse = x.shape[0] > settings.max_full_points
     inducing = None
@@ -303,6 +325,7 @@ def fit_gp(
         )
 
     def objective(hyper: GPHyper) -> Tensor:
+        hyper = _with_noise(hyper, fixed_log_noise)
         if inducing is None:
             nll = exact_nll(hyper, x, y, floor_var)
         else:
@@ -312,7 +335,12 @@ def fit_gp(
     hyper = _optimise_hyper(objective, init or initial_hyper(x, y), settings.train_iterations)
     if not all(bool(torch.isfinite(p).all()) for p in hyper):
         hyper = initial_hyper(x, y)  # a diverged line search: fall back to the data's spread
-    return posterior(hyper, x, y, floor_var, inducing)
+    return posterior(_with_noise(hyper, fixed_log_noise), x, y, floor_var, inducing)
+
+
+def _with_noise(hyper: GPHyper, log_noise: Tensor | None) -> GPHyper:
+    """``hyper`` with its log noise replaced by ``log_noise`` (None: unchanged)."""
+    return hyper if log_noise is None else hyper._replace(log_noise=log_noise)
 
 
 @functools.cache

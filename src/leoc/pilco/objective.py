@@ -4,6 +4,7 @@ and its minimisation by L-BFGS."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -27,11 +28,21 @@ class CostSpec(NamedTuple):
     factor: torch.Tensor
 
 
-def cost_spec(system: System, width: float) -> CostSpec:
+def cost_spec(system: System, width: float, weights: Sequence[float] | None = None) -> CostSpec:
     """The saturating cost of ``system`` on the observation, divided by ``width``: target o(a)
     and the factor ``System.cost_factor()`` (e.g. the pendulum's rod tip, the cart-pole's pole
-    tip over the track centre, the mountain car's position)."""
+    tip over the track centre, the mountain car's position), or, with ``weights`` (one per
+    observation entry, >= 0), the diagonal factor ``diag(sqrt(weights))``, i.e.
+    ``W = diag(weights)`` on the observation."""
     target = torch.as_tensor(system.operating_obs, dtype=DTYPE)
+    if weights is not None:
+        weight = torch.as_tensor(np.asarray(weights, dtype=float), dtype=DTYPE)
+        if weight.shape != (system.obs_dim,):
+            raise ValueError(
+                f"cost_weights: expected {system.obs_dim} weights (one per observation entry of "
+                f"{type(system).__name__}), found {len(weight)}"
+            )
+        return CostSpec(target, torch.diag(weight.sqrt()) / width)
     factor = torch.as_tensor(np.asarray(system.cost_factor(), dtype=float), dtype=DTYPE)
     if factor.ndim != 2 or factor.shape[1] != system.obs_dim:
         raise ValueError(
@@ -41,19 +52,37 @@ def cost_spec(system: System, width: float) -> CostSpec:
     return CostSpec(target, factor / width)
 
 
-def start_distribution(system: System) -> tuple[torch.Tensor, torch.Tensor]:
-    """Mean and covariance of the uniform swing-up start (variance a^2 / 3 per entry)."""
-    mean = torch.as_tensor(system.swing_up_centre, dtype=DTYPE)
-    spread = torch.as_tensor(system.start_spread, dtype=DTYPE)
-    return mean, torch.diag(UNIFORM_VARIANCE_FACTOR * spread.square())
+def start_distribution(
+    system: System,
+    mean: Sequence[float] | None = None,
+    variance: Sequence[float] | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and covariance of the predicted rollout's Gaussian start, in state coordinates.
+
+    Defaults: the centre of the uniform swing-up start and its variance a^2 / 3 per entry;
+    ``mean`` (S,) and ``variance`` (S,) (a diagonal covariance) replace them.
+    """
+    start_mean = torch.as_tensor(system.swing_up_centre if mean is None else mean, dtype=DTYPE)
+    if variance is None:
+        spread = torch.as_tensor(system.start_spread, dtype=DTYPE)
+        start_var = UNIFORM_VARIANCE_FACTOR * spread.square()
+    else:
+        start_var = torch.as_tensor(variance, dtype=DTYPE)
+    for name, value in (("start_mean", start_mean), ("start_variance", start_var)):
+        if value.shape != (system.state_dim,):
+            raise ValueError(
+                f"{name}: expected {system.state_dim} entries (the state of "
+                f"{type(system).__name__}), found {tuple(value.shape)}"
+            )
+    return start_mean, torch.diag(start_var)
 
 
 def predict_policy(
     policy: nn.Module, model: GPPosterior, system: System, config: PilcoConfig
 ) -> Prediction:
     """Predicted trajectory and costs of ``policy`` from the swing-up start."""
-    mean, cov = start_distribution(system)
-    spec = cost_spec(system, config.cost_width)
+    mean, cov = start_distribution(system, config.start_mean, config.start_variance)
+    spec = cost_spec(system, config.cost_width, config.cost_weights)
     return predict(
         policy,
         model,

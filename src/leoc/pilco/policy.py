@@ -40,26 +40,12 @@ def build_policy(
     weights ``0.1 u_max N(0, 1)``.
     """
     limit = system.action_limit
-    centres, scales = None, 1.0
-    if observations is not None and len(observations) > 0:
-        picks = torch.randint(len(observations), (config.num_basis,), generator=generator)
-        centres = observations[picks.numpy()].copy()
-        _spread_angle_centres(system, centres, generator)
-        scales = np.maximum(observations.std(axis=0), MIN_POLICY_LENGTHSCALE)
-    rbf = RBFNetwork(
-        system.obs_dim,
-        system.action_dim,
-        config.num_basis,
-        centres=centres,
-        lengthscales=scales,
-        generator=generator,
-        weight_std=WEIGHT_STD_FRACTION * limit,
-    )
+    rbf = _draw_rbf(system, config, generator, observations)
     if not config.hybrid:
         return SaturatedPolicy(rbf, limit, "sin")
     from leoc.control.lqr import design_lqr
 
-    design = design_lqr(system, action_repeat=config.action_repeat)
+    design = design_lqr(system, method=config.lqr_method, action_repeat=config.action_repeat)
     if config.relevance == "roa":
         return roa_hybrid(system, design, rbf, learn_width=config.learn_lambda, saturation="sin")
     return HybridPolicy(
@@ -71,6 +57,49 @@ def build_policy(
         action_limit=limit,
         saturation="sin",
     )
+
+
+def _draw_rbf(
+    system: System,
+    config: PilcoConfig,
+    generator: torch.Generator,
+    observations: np.ndarray | None,
+) -> RBFNetwork:
+    """A fresh RBF part (the draw :func:`build_policy` documents)."""
+    centres, scales = None, 1.0
+    if observations is not None and len(observations) > 0:
+        picks = torch.randint(len(observations), (config.num_basis,), generator=generator)
+        centres = observations[picks.numpy()].copy()
+        _spread_angle_centres(system, centres, generator)
+        scales = np.maximum(observations.std(axis=0), MIN_POLICY_LENGTHSCALE)
+    return RBFNetwork(
+        system.obs_dim,
+        system.action_dim,
+        config.num_basis,
+        centres=centres,
+        lengthscales=scales,
+        generator=generator,
+        weight_std=WEIGHT_STD_FRACTION * system.action_limit,
+    )
+
+
+def redraw_rbf(
+    policy: nn.Module,
+    system: System,
+    config: PilcoConfig,
+    generator: torch.Generator,
+    observations: np.ndarray,
+) -> None:
+    """Replace, in place, the RBF part of a :func:`build_policy` policy by a fresh draw from
+    ``observations`` (a policy-optimisation restart); a hybrid keeps its linear part and
+    relevance."""
+    rbf = policy.inner if isinstance(policy, SaturatedPolicy) else policy.nonlinear
+    if not isinstance(rbf, RBFNetwork):
+        raise TypeError(f"policy: expected an RBF part, found {type(rbf).__name__}")
+    fresh = _draw_rbf(system, config, generator, observations)
+    with torch.no_grad():
+        for name, value in fresh.state_dict().items():
+            rbf.state_dict()[name].copy_(value)
 
 
 def _spread_angle_centres(system: System, centres: np.ndarray, generator: torch.Generator) -> None:

@@ -47,7 +47,7 @@ from leoc.pilco.moments import (
 from leoc.policies import HybridPolicy, LinearController, RBFNetwork, saturate
 from leoc.systems.observation import as_observation_map
 
-HYBRID_METHODS = ("quadrature", "constant_relevance")
+HYBRID_METHODS = ("quadrature", "constant_relevance", "mixture")
 DEFAULT_QUADRATURE_ORDER = 5
 # Eigenvalue floor of the predicted state covariance: relative to its trace, plus an absolute
 # floor for a collapsed covariance.
@@ -165,6 +165,36 @@ def constant_relevance_moments(
     return _chain(obs, cross_xo, blend, _squash(blend, policy.action_limit, policy.saturation))
 
 
+def mixture_relevance_moments(
+    policy: HybridPolicy, obs: MomentMatch, cross_xo: Tensor
+) -> ActionMoments:
+    r"""Another heuristic with :math:`\bar r = r(E[o])` frozen: the pre-saturation action as
+    the two-component mixture "G with probability :math:`\bar r`, else H".
+
+    .. math::
+
+        m = \bar r m_G + (1 - \bar r) m_H, \qquad
+        S = \bar r \big(S_G + (m_G - m)(m_G - m)^\top\big)
+          + (1 - \bar r) \big(S_H + (m_H - m)(m_H - m)^\top\big),
+
+    input-output coefficients blended as :math:`\bar r C_G + (1 - \bar r) C_H`, then the sin
+    squash. Unlike :func:`constant_relevance_moments` it ignores :math:`\operatorname{Cov}[G,
+    H]` and weighs each variance by :math:`\bar r` instead of :math:`\bar r^2`. It is the
+    hybrid's moment approximation of nrjc/LEOC (``pilco/controllers.py``,
+    ``HybridController.compute_action``), offered to reproduce it, not as a better method.
+    """
+    rel = policy.relevance(obs.mean)[0]
+    lin = linear_moments(obs.mean, obs.cov, policy.linear.W, policy.linear.b)
+    non = inner_moments(policy.nonlinear, obs.mean, obs.cov)
+    mean = rel * lin.mean + (1.0 - rel) * non.mean
+    lin_gap, non_gap = lin.mean - mean, non.mean - mean
+    cov = rel * (lin.cov + torch.outer(lin_gap, lin_gap)) + (1.0 - rel) * (
+        non.cov + torch.outer(non_gap, non_gap)
+    )
+    blend = MomentMatch(mean, symmetrise(cov), rel * lin.io + (1.0 - rel) * non.io)
+    return _chain(obs, cross_xo, blend, _squash(blend, policy.action_limit, policy.saturation))
+
+
 def hybrid_quadrature_moments(
     policy: nn.Module,
     state_mean: Tensor,
@@ -208,7 +238,8 @@ def action_moments(
     policy_constants: RBFConstants | None = None,
 ) -> ActionMoments:
     """Moments of the action for :class:`SaturatedPolicy` (exact) or :class:`HybridPolicy`
-    (``hybrid_method``: ``"quadrature"`` or the ``"constant_relevance"`` heuristic).
+    (``hybrid_method``: ``"quadrature"``, or the ``"constant_relevance"`` or ``"mixture"``
+    heuristic).
     ``policy_constants``: :func:`policy_moment_constants` of ``policy`` (computed here if not
     given)."""
     cross_xo = state_cov @ obs.io  # Cov[x, o] (S, O)
@@ -217,6 +248,8 @@ def action_moments(
             return hybrid_quadrature_moments(policy, state_mean, state_cov, layout, order)
         if hybrid_method == "constant_relevance":
             return constant_relevance_moments(policy, obs, cross_xo)
+        if hybrid_method == "mixture":
+            return mixture_relevance_moments(policy, obs, cross_xo)
         raise ValueError(
             f"hybrid_method: expected one of {HYBRID_METHODS}, found {hybrid_method!r}"
         )

@@ -10,7 +10,12 @@ Timing choice (documented in :mod:`leoc.pilco.rollout`): the policy decides ever
 period wherever it runs: it is returned, saved and loaded as a
 :class:`~leoc.policies.HeldPolicy`, and the LQR part of the hybrid is designed by discrete LQR
 on the ``action_repeat``-step held map, so pi(a) = G(a) and dpi/dx(a) = W hold for the closed
-loop actually run.
+loop actually run. ``deploy_action_repeat`` (the authors' choice: 1) evaluates, returns and saves
+it at another period instead.
+
+Model selection: the final policy (:mod:`leoc.training`), or with ``select_best_from = k`` the
+best-evaluated policy of iterations >= k (the authors' rule), written as ``controller.pt`` and
+returned at the end; the checkpoint keeps the latest policy, so a resumed run goes on from it.
 
 Learning curve and run folder: the trainer contract of :mod:`leoc.training` (evaluation
 episodes from fixed starts after every iteration, ``config.json``, ``curve.json``/``curve.csv``
@@ -31,18 +36,20 @@ from torch import nn
 
 from leoc.io import write_text_atomic
 from leoc.pilco.checkpoint import (
+    BestPolicy,
     RunState,
     load_pilco_controller,
     resume_checkpoint,
     save_checkpoint,
+    save_controller,
 )
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.gp import GPPosterior, fit_gp
 from leoc.pilco.objective import PolicyOptimisation, optimise_policy
-from leoc.pilco.policy import build_policy
+from leoc.pilco.policy import build_policy, redraw_rbf
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
-from leoc.systems import make_system
+from leoc.systems import StepRules, make_system
 from leoc.systems.base import System
 from leoc.systems.rollout import RandomController
 from leoc.training import (
@@ -100,7 +107,7 @@ def _random_rollouts(
             system,
             controller,
             system.sample_start(rng, "swing_up"),
-            config.episode_steps,
+            config.training_rollout_steps,
             config.action_repeat,
         )
         for _ in range(config.initial_rollouts)
@@ -126,7 +133,7 @@ def _progress_line(row: dict[str, Any], total: int) -> str:
 
 def _evaluate(system: System, config: PilcoConfig, policy: nn.Module, starts: np.ndarray) -> Any:
     """The policy's evaluation episodes, at its control period (leoc.training)."""
-    return evaluate_episodes(system, HeldPolicy(policy, config.action_repeat), starts)
+    return evaluate_episodes(system, HeldPolicy(policy, config.controller_action_repeat), starts)
 
 
 def _first_state(
@@ -148,23 +155,56 @@ def _first_state(
     return state, policy
 
 
+def _restart_policy(
+    best: PolicyOptimisation,
+    policy: nn.Module,
+    model: GPPosterior,
+    system: System,
+    config: PilcoConfig,
+    generator: torch.Generator,
+    observations: np.ndarray,
+) -> PolicyOptimisation:
+    """One policy-optimisation restart from a freshly drawn RBF part: keep whichever of it and
+    ``best`` (the policy's current parameters) predicts the lower cost. The figures returned
+    add up both optimisations."""
+    kept = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+    redraw_rbf(policy, system, config, generator, observations)
+    fresh = optimise_policy(policy, model, system, config)
+    if not fresh.cost < best.cost:
+        policy.load_state_dict(kept)
+    return PolicyOptimisation(
+        min(best.cost, fresh.cost),
+        best.iterations + fresh.iterations,
+        best.evaluations + fresh.evaluations,
+        best.restarts + fresh.restarts + 1,
+    )
+
+
 def _iterate(
     system: System,
     config: PilcoConfig,
     state: RunState,
     policy: nn.Module,
     rng: np.random.Generator,
+    generator: torch.Generator,
     starts: np.ndarray,
 ) -> tuple[RunState, GPPosterior]:
     """One PILCO iteration: fit GP, optimise policy, run it, add its data, evaluate it."""
     start_time = time.perf_counter()
     model = fit_gp(state.inputs, state.targets, config.gp, rng, init=state.hyper)
     optimisation = optimise_policy(policy, model, system, config)
+    restarts = config.policy_restarts
+    if state.iteration < len(restarts) and restarts[state.iteration] > 0:
+        observations = state.inputs[:, : system.obs_dim]
+        for _ in range(restarts[state.iteration]):
+            optimisation = _restart_policy(
+                optimisation, policy, model, system, config, generator, observations
+            )
     rollout = run_rollout(
         system,
         HeldPolicy(policy, config.action_repeat),
         system.sample_start(rng, "swing_up"),
-        config.episode_steps,
+        config.training_rollout_steps,
         config.action_repeat,
     )
     steps = state.interaction_steps + rollout.steps
@@ -192,6 +232,20 @@ def _iterate(
         model.hyper,
     )
     return new_state, model
+
+
+def _best_policy(
+    config: PilcoConfig, state: RunState, policy: nn.Module, kept: BestPolicy | None
+) -> BestPolicy | None:
+    """The policy kept so far (``kept``), replaced by the iteration just run (``state``) if it
+    is eligible (``PilcoConfig.select_best_from``) and its mean evaluation return is higher."""
+    if config.select_best_from < 1 or state.iteration < config.select_best_from:
+        return kept
+    mean_return = float(state.log[-1]["mean_return"])
+    if kept is not None and not mean_return > kept.mean_return:
+        return kept
+    parameters = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+    return BestPolicy(state.iteration, mean_return, parameters)
 
 
 def held_long_enough(log: list[dict[str, Any]], count: int) -> bool:
@@ -240,7 +294,8 @@ def train_pilco(
     Returns
     -------
     TrainResult
-        The final policy as a :class:`~leoc.policies.HeldPolicy` at ``action_repeat``, the
+        The run's controller (the final policy, or the ``select_best_from`` one) as a
+        :class:`~leoc.policies.HeldPolicy` at ``controller_action_repeat``, the
         learning curve (one row per iteration, iteration 0 = the random rollouts), the config,
         its summary and the last GP posterior.
     """
@@ -251,7 +306,7 @@ def train_pilco(
         torch.set_num_threads(config.num_threads)
     run_path = Path(run_dir) if run_dir is not None else _default_run_dir(config)
     run_path.mkdir(parents=True, exist_ok=True)
-    plant = make_system(system)
+    plant = make_system(system).with_rules(StepRules(**config.step_rules))
     plant.episode_steps = config.episode_steps
     rng = np.random.default_rng(seed)
     generator = torch.Generator().manual_seed(seed)
@@ -270,13 +325,22 @@ def train_pilco(
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
     ):
-        state, model = _iterate(plant, config, state, policy, rng, starts)
+        kept = state.best
+        state, model = _iterate(plant, config, state, policy, rng, generator, starts)
+        state = state._replace(best=_best_policy(config, state, policy, kept))
         save_checkpoint(run_path, config, state, policy, model, generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
         if progress:
             print(_progress_line(state.log[-1], config.iterations), flush=True)
     summary = curve_summary(state.log, plant.dt)
+    if state.best is not None:
+        policy.load_state_dict(state.best.policy_state)
+        save_controller(run_path, config, state.best.policy_state, model)
+        summary["model_selection"] = (
+            f"best evaluation of iterations >= {config.select_best_from} "
+            f"(iteration {state.best.iteration})"
+        )
     write_curve(run_path, state.log, summary, _title(config))
     policy.eval()
-    held = HeldPolicy(policy, config.action_repeat).eval()
+    held = HeldPolicy(policy, config.controller_action_repeat).eval()
     return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)

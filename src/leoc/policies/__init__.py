@@ -14,8 +14,10 @@ from .rbf import RBFNetwork
 from .relevance import (
     DEFAULT_ROA_WIDTH,
     RELEVANCE_KINDS,
+    RELEVANCE_PARAMETRISATIONS,
     ObservationDeviation,
     PaperRelevance,
+    PrecisionRelevance,
     ROARelevance,
     paper_relevance,
 )
@@ -25,6 +27,7 @@ __all__ = [
     "DEFAULT_HIDDEN_SIZES",
     "DEFAULT_ROA_WIDTH",
     "RELEVANCE_KINDS",
+    "RELEVANCE_PARAMETRISATIONS",
     "SATURATION_MODES",
     "SMOOTH_SATURATION_ATOL",
     "HeldPolicy",
@@ -34,6 +37,7 @@ __all__ = [
     "MLPActor",
     "ObservationDeviation",
     "PaperRelevance",
+    "PrecisionRelevance",
     "ROARelevance",
     "RBFNetwork",
     "lqr_controller",

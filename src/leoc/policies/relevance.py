@@ -98,6 +98,8 @@ __all__ = [
     "RELEVANCE_KINDS",
     "ObservationDeviation",
     "PaperRelevance",
+    "PrecisionRelevance",
+    "RELEVANCE_PARAMETRISATIONS",
     "ROARelevance",
     "paper_relevance",
 ]
@@ -105,6 +107,10 @@ __all__ = [
 #: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
 #: the certified set.
 RELEVANCE_KINDS = ("paper", "roa")
+RELEVANCE_PARAMETRISATIONS = ("log_lambda", "precision")
+r"""How the paper's relevance keeps its weights: ``log_lambda`` (:math:`\lambda = e^{\ell}`,
+positive; :class:`PaperRelevance`) or ``precision`` (:math:`S = \Lambda^{-1}` itself,
+unconstrained; :class:`PrecisionRelevance`)."""
 DEFAULT_ROA_WIDTH = 1.0
 """Default band width w: the relevance falls from 1 at :math:`V = \\rho_{in}` to 0 at
 :math:`V = 2 \\rho_{in}` (a radius :math:`\\sqrt 2` times the flat top's)."""
@@ -176,6 +182,75 @@ class PaperRelevance(nn.Module):
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
         return paper_relevance(x, self.operating_point, self.log_lambda)
+
+
+class PrecisionRelevance(nn.Module):
+    r"""The paper's relevance with the precision :math:`S = \Lambda^{-1}` as its parameter.
+
+    .. math::
+
+        r(x) = \frac{1}{(1 + d(x))^2}, \qquad d(x) = \sum_{i=1}^{D} S_i (x_i - a_i)^2,
+
+    the same function as :class:`PaperRelevance` for :math:`S_i = 1 / \lambda_i`, but trained
+    in :math:`S` directly and **unconstrained**: a gradient step may make some :math:`S_i`
+    negative, and then :math:`d` can be negative and :math:`r` may exceed 1 (or diverge where
+    :math:`d = -1`). This is the parametrisation of nrjc/LEOC's DDPG hybrid actor
+    (``DDPG/ddpg.py``, ``MyActorNetwork``: ``S = tf.Variable(S, trainable=True)``, its
+    positivity constraint commented out). Whatever :math:`S`, :math:`d(a) = 0` and
+    :math:`\nabla d(a) = 0`, so :math:`r(a) = 1` exactly and :math:`\nabla r(a) = 0`: the
+    hybrid's identities :math:`\pi(a) = G(a)`, :math:`\partial\pi/\partial x(a) = W` hold.
+
+    Parameters
+    ----------
+    operating_point : array-like, shape (D,)
+        :math:`a` in observation coordinates (buffer ``operating_point``).
+    precision_init : float or array-like (D,)
+        Initial :math:`S > 0` (the authors': 1).
+    learn_precision : bool
+        ``precision`` (D,) is an ``nn.Parameter`` if True, else a buffer.
+    dtype : torch.dtype
+    """
+
+    operating_point: Tensor
+    precision: Tensor
+
+    def __init__(
+        self,
+        operating_point: object,
+        precision_init: float | object = 1.0,
+        learn_precision: bool = True,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__()
+        from ._checks import positive_scalar_or_vector
+
+        if not isinstance(learn_precision, bool):
+            raise TypeError(
+                f"learn_precision must be a bool, found {type(learn_precision).__name__}"
+            )
+        point = as_float_tensor(operating_point, "operating_point", dtype)
+        if point.ndim != 1:
+            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
+        check_finite(point, "operating_point")
+        self.register_buffer("operating_point", point)
+        size = point.shape[0]
+        start = positive_scalar_or_vector(precision_init, "precision_init", size, "D", dtype)
+        precision = start.expand(size).clone()
+        if learn_precision:
+            self.precision = nn.Parameter(precision)
+        else:
+            self.register_buffer("precision", precision)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Relevance (..., 1) of observations ``x`` (..., D)."""
+        check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
+        distance = ((x - self.operating_point).square() * self.precision).sum(dim=-1, keepdim=True)
+        return (1.0 + distance).square().reciprocal()
+
+    def extra_repr(self) -> str:
+        return (
+            f"D={self.operating_point.shape[0]}, learn={isinstance(self.precision, nn.Parameter)}"
+        )
 
 
 def _layout_plan(

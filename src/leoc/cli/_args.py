@@ -1,0 +1,85 @@
+"""Argument types and the parser class shared by the commands (no heavy imports here)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from leoc.names import BUILTIN_SYSTEM_NAMES
+
+SYSTEM_HELP = (
+    f"system name: {', '.join(BUILTIN_SYSTEM_NAMES)}, or a system registered by a module "
+    "imported first (docs/custom_system.md)"
+)
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _integer(text: str, expected: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}") from None
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    value = _integer(text, "a positive integer")
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, found {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    value = _integer(text, "a non-negative integer")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a non-negative integer, found {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, found {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, found {text}")
+    return value
+
+
+def registered_names() -> tuple[str, ...]:
+    """Every registered system name (imports the systems, hence torch: only when needed)."""
+    from leoc.systems import system_names
+
+    return system_names()
+
+
+def system_name(text: str) -> str:
+    """argparse type: a registered system name; built-in names resolve without importing the
+    systems (so parsing stays instant), others look the registry up."""
+    if text in BUILTIN_SYSTEM_NAMES or text in registered_names():
+        return text
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (expected one of {', '.join(registered_names())})"
+    )
+
+
+def system_or_run_dir(text: str) -> str | Path:
+    """argparse type: a registered system name, or an existing run folder (a :class:`Path`)."""
+    if text in BUILTIN_SYSTEM_NAMES:
+        return text
+    if Path(text).is_dir():
+        return Path(text)
+    if text in registered_names():
+        return text
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (expected a run folder or one of "
+        f"{', '.join(registered_names())})"
+    )

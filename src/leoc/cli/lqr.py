@@ -1,0 +1,79 @@
+"""``leoc lqr``: design the LQR of a system and print it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from leoc.cli._args import SYSTEM_HELP, system_name
+
+METHODS = ("discrete", "continuous", "authors")
+
+
+def add_parser(commands: Any) -> None:
+    """Add the ``lqr`` command to the subparsers ``commands``."""
+    lqr = commands.add_parser(
+        "lqr",
+        help="design the LQR of a system and print it",
+        description="Design the LQR of a system about its operating point and print A_d, B_d, "
+        "Q, R, the gain K, the observation-space form G(o) = W o + b, the closed-loop "
+        "eigenvalues and the stability margins.",
+    )
+    lqr.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
+    lqr.add_argument(
+        "--method",
+        choices=METHODS,
+        default="discrete",
+        help="discrete: dlqr on the autodiff linearisation (default); continuous: lqr on the "
+        "paper's analytic model; authors: nrjc/LEOC's lqr on their models (R = 1) times u_max",
+    )
+    lqr.add_argument("--q", type=float, nargs="+", help="diagonal of Q (default per system)")
+    lqr.add_argument("--r", type=float, nargs="+", help="diagonal of R (default 1)")
+    lqr.add_argument("--json", action="store_true", help="print the design as JSON")
+    lqr.set_defaults(run=run)
+
+
+def print_matrix(name: str, matrix: Any) -> None:
+    """Print ``name =`` and the matrix, 6 digits."""
+    import numpy as np
+
+    text = np.array2string(np.atleast_2d(matrix), precision=6, suppress_small=True)
+    print(f"{name} =\n{text}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from leoc.control import design_lqr
+    from leoc.experiments.linear import design_summary
+    from leoc.systems import make_system
+
+    system = make_system(args.system)
+    design = design_lqr(system, Q=args.q, R=args.r, method=args.method)
+    if args.json:
+        print(json.dumps(design_summary(design), indent=1))
+        return 0
+    print(f"LQR design for {args.system} ({args.method}), dt = {system.dt} s")
+    print(f"state: {', '.join(system.state_names)}")
+    observed = system.observation.labels(system.state_names)
+    print(f"observation: {', '.join(observed)}")
+    print_matrix("A_d", design.A_d)
+    print_matrix("B_d", design.B_d)
+    print_matrix("Q", design.Q)
+    print_matrix("R", design.R)
+    print_matrix("K (u = u_eq - K (x - a))", design.K)
+    print_matrix("W (G(o) = W o + b)", design.W)
+    print_matrix("b", design.b)
+    eig = ", ".join(f"{z:.4f}" for z in design.closed_loop_eigenvalues)
+    print(f"closed-loop eigenvalues: {eig}")
+    print(f"spectral radius: {design.spectral_radius:.6f} (stable: {design.spectral_radius < 1})")
+    margins = design.margins
+    low, high = margins.gain_interval
+    print(
+        f"gain margin: {margins.gain_margin:.4f} (lower margin; loop stable for gain factors in "
+        f"[{low:.4f}, {high:.4f}])"
+    )
+    print(
+        f"phase margin: {margins.phase_margin:.2f} deg at "
+        f"{margins.gain_crossover_frequency:.3f} rad/s"
+    )
+    return 0

@@ -1,0 +1,230 @@
+"""``leoc simulate``: impulse or step response of a controller from the operating point."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from leoc.cli._args import SYSTEM_HELP, positive_float, positive_int, system_or_run_dir
+from leoc.cli.lqr import METHODS
+
+LINEAR = "linear"
+VARIANT_CHOICES = ("leoc", "authors")
+
+
+def add_parser(commands: Any) -> None:
+    """Add the ``simulate`` command to the subparsers ``commands``."""
+    simulate = commands.add_parser(
+        "simulate",
+        help="impulse or step response of a controller from the operating point",
+        description="Run the impulse or step test of a controller from the operating point and "
+        "print its steady-state error, overshoot, peak deviation and settling time. "
+        "'leoc simulate RUN_DIR' simulates the controller of a run folder on the system it "
+        "was trained for.",
+    )
+    simulate.add_argument(
+        "target",
+        nargs="?",
+        type=system_or_run_dir,
+        metavar="SYSTEM|RUN_DIR",
+        help=f"{SYSTEM_HELP}; or a run folder (its system is read from it). Optional with "
+        "--controller RUN_DIR",
+    )
+    simulate.add_argument(
+        "--controller",
+        default=LINEAR,
+        help="'linear' (the LQR) or a run folder written by 'leoc train' or printed by "
+        "'leoc reproduce' (default: linear); a trained controller runs at its trained period",
+    )
+    simulate.add_argument(
+        "--action-repeat",
+        type=positive_int,
+        default=1,
+        help="control period of the linear controller in simulator steps (its LQR is designed "
+        "for it; PILCO's period is 2 on the pendulum, 3 on cartpole and 3 on mountaincar); "
+        "default 1",
+    )
+    simulate.add_argument(
+        "--band",
+        type=positive_float,
+        help="absolute settling band (deg or m); default 2%% of the peak error",
+    )
+    simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
+    simulate.add_argument(
+        "--steps",
+        type=positive_int,
+        help="episode length (default: the variant's, 200; the authors' cart-pole record: 400)",
+    )
+    simulate.add_argument(
+        "--method",
+        choices=METHODS,
+        help="LQR design of 'linear' (default: the variant's; leoc: discrete)",
+    )
+    simulate.add_argument(
+        "--variant",
+        choices=VARIANT_CHOICES,
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
+        "u_max with a sin squash, their env rules); default leoc",
+    )
+    simulate.add_argument(
+        "--metrics",
+        choices=VARIANT_CHOICES,
+        default="leoc",
+        help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
+        "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
+    )
+    simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    simulate.add_argument(
+        "--json", action="store_true", help="print the metrics and e(t) as JSON instead"
+    )
+    simulate.set_defaults(run=run)
+
+
+class Target(NamedTuple):
+    """What to simulate: the system's name and the controller ('linear' or a run folder)."""
+
+    system: str
+    controller: str
+
+
+def resolve_target(target: str | Path | None, controller: str) -> Target:
+    """The system and controller of ``leoc simulate [SYSTEM|RUN_DIR] [--controller C]``.
+
+    Raises
+    ------
+    ValueError
+        No system given and none to read from a run folder, or two controllers given.
+    """
+    from leoc.experiments.controllers import trained_system
+
+    if isinstance(target, Path):
+        if controller != LINEAR:
+            raise ValueError(
+                f"controller: expected one controller, found the run folder {str(target)!r} "
+                f"and --controller {controller!r}"
+            )
+        return Target(trained_system(target), str(target))
+    if target is None:
+        if controller == LINEAR:
+            raise ValueError(
+                "system: expected a system name or a run folder (e.g. 'leoc simulate pendulum' "
+                "or 'leoc simulate runs/pendulum_ddpg_hybrid_seed0'), found neither"
+            )
+        return Target(trained_system(controller), controller)
+    return Target(target, controller)
+
+
+def load_controller(
+    spec: str,
+    system_name: str,
+    method: str | None = None,
+    action_repeat: int = 1,
+    variant: str = "leoc",
+):
+    """``linear`` (the variant's linear reference of the system, designed for and run at
+    ``action_repeat``; ``method`` overrides its LQR design) or a run folder written by
+    ``leoc train`` or printed by ``leoc reproduce`` (at its trained period)."""
+    import dataclasses
+
+    from leoc.experiments.variants import get_variant
+
+    if spec == LINEAR:
+        chosen = get_variant(variant)
+        if method is not None:
+            chosen = dataclasses.replace(chosen, lqr_method=method)
+        return chosen.linear_controller(chosen.system(system_name), action_repeat)
+    from leoc.experiments.controllers import load_trained_controller
+
+    return load_trained_controller(Path(spec), system=system_name)
+
+
+def controller_label(spec: str, period: int) -> str:
+    """The legend label of a simulated controller: the LQR and its period, or the run folder
+    as ``SYSTEM/CONTROLLER/seedN`` (a reproduce run) or its folder name."""
+    if spec == LINEAR:
+        return f"LQR (period {period} step{'s' if period > 1 else ''})"
+    parts = Path(spec).resolve().parts
+    if len(parts) >= 3 and parts[-1].startswith("seed"):
+        return "/".join(parts[-3:])
+    return parts[-1]
+
+
+def run(args: argparse.Namespace) -> int:
+    from leoc.evaluation.rollout import control_period, response_test
+    from leoc.experiments.variants import get_variant
+
+    target = resolve_target(args.target, args.controller)
+    variant = get_variant(args.variant)
+    system = variant.system(target.system)
+    controller = load_controller(
+        target.controller, target.system, args.method, args.action_repeat, args.variant
+    )
+    if args.steps is None:
+        args.steps = variant.steps_for(target.system)
+    if args.band is not None and args.metrics == "authors":
+        raise ValueError(f"band: the authors' metrics fix the band (pi/180), found {args.band}")
+    result = response_test(
+        system, controller, args.test, steps=args.steps, band=args.band, metric_set=args.metrics
+    )
+    period = control_period(controller)
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "system": target.system,
+                    "controller": target.controller,
+                    "test": args.test,
+                    "variant": args.variant,
+                    "metrics_set": args.metrics,
+                    "action_repeat": period,
+                    "metrics": result.metrics._asdict(),
+                    "deviation": result.deviation.tolist(),
+                    "total_reward": result.trajectory.total_reward,
+                }
+            )
+        )
+        return 0
+    _print_metrics(args, target, system, result, period)
+    if args.plot:
+        from leoc.evaluation.plots import plot_responses
+
+        label = controller_label(target.controller, period)
+        record = {
+            "deviation": result.deviation,
+            "terminated": result.metrics.terminated,
+            "settled": result.metrics.settled,
+        }
+        path = plot_responses(
+            {target.system: {args.test: {label: [record]}}}, args.plot, labels={label: label}
+        )
+        print(f"figure written to {path}")
+    return 0
+
+
+def _print_metrics(args: argparse.Namespace, target: Target, system, result, period: int) -> None:
+    metrics = result.metrics
+    unit = "deg" if system.main_in_degrees else "m"
+    settling = (
+        "not settled"
+        if metrics.settling_time is None
+        else f"{metrics.settling_time} steps ({metrics.settling_seconds:.3g} s)"
+    )
+    band = (
+        f"{metrics.band:.3g} {unit}, absolute"
+        if metrics.band_fraction is None
+        else f"{metrics.band:.3g} {unit} = {metrics.band_fraction:.0%} of the peak error"
+    )
+    print(
+        f"{args.test} response of {target.controller} on {target.system} ({args.steps} steps, "
+        f"control period {period} step{'s' if period > 1 else ''}; variant {args.variant}, "
+        f"{args.metrics} metrics)"
+    )
+    print(f"  steady-state error: {metrics.steady_state_error:.6g} {unit}")
+    print(f"  overshoot:          {metrics.overshoot:.6g} {unit}")
+    print(f"  peak deviation:     {metrics.peak_deviation:.6g} {unit}")
+    print(f"  settling time:      {settling} (band {band})")
+    print(f"  terminated:         {'yes' if metrics.terminated else 'no'}")
+    print(f"  return:             {result.trajectory.total_reward:.4f}")

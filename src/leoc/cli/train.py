@@ -1,0 +1,67 @@
+"""``leoc train``: train a baseline or hybrid controller with PILCO, DDPG or TD3."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from leoc.cli._args import SYSTEM_HELP, non_negative_int, positive_int, system_name
+
+ALGO_CHOICES = ("pilco", "ddpg", "td3")
+DEFAULT_RUNS_DIR = Path("runs")
+
+
+def add_parser(commands: Any) -> None:
+    """Add the ``train`` command to the subparsers ``commands``."""
+    train = commands.add_parser(
+        "train",
+        help="train a baseline or hybrid controller",
+        description="Train a baseline (the learned policy alone) or the LEOC hybrid (LQR near "
+        "the operating point, the learned policy elsewhere) with PILCO, DDPG or TD3. The run "
+        "folder keeps the weights, config, learning curve and checkpoints; rerunning the same "
+        "command resumes an interrupted PILCO run.",
+    )
+    train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
+    train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
+    train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
+    train.add_argument("--seed", type=non_negative_int, default=0, help="seed (default 0)")
+    train.add_argument("--out", type=Path, help="run folder (default runs/SYSTEM_ALGO_KIND_seedN)")
+    train.add_argument(
+        "--iterations", type=positive_int, help="PILCO iterations (default per system)"
+    )
+    train.add_argument(
+        "--steps", type=positive_int, help="DDPG/TD3 environment steps (default per system)"
+    )
+    train.add_argument("--quiet", action="store_true", help="no progress output")
+    train.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    kind = "hybrid" if args.hybrid else "baseline"
+    run_dir = args.out or DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}_seed{args.seed}"
+    if args.algo == "pilco":
+        from leoc.pilco.train import train_pilco
+
+        result = train_pilco(
+            args.system,
+            hybrid=args.hybrid,
+            seed=args.seed,
+            run_dir=run_dir,
+            iterations=args.iterations,
+            progress=not args.quiet,
+        )
+    else:
+        from leoc.ddpg.train import train_ddpg
+
+        result = train_ddpg(
+            args.system,
+            algo=args.algo,
+            hybrid=args.hybrid,
+            seed=args.seed,
+            run_dir=run_dir,
+            total_steps=args.steps,
+            progress=not args.quiet,
+        )
+    print(f"run folder: {result.run_dir}")
+    return 0
