@@ -29,6 +29,7 @@ from leoc.training import Evaluation, curve_row, evaluate_episodes
 __all__ = ["MODEL_SELECTIONS", "LearningCurveCallback", "last_third_start"]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
+#: Which model a run keeps: the final one (leoc) or the best evaluated in the last third (authors).
 MODEL_SELECTIONS = ("final", "best_last_third")
 SELECTION_FRACTION = 2.0 / 3.0  # the selection window opens after two thirds of the updates
 

@@ -21,12 +21,11 @@ field                  leoc (default)                        authors
                                                              gym 0.17's pendulum integrator
 ``response_steps``     200 simulator steps                   400 on the cart-pole (the length
                                                              of the paper's cart-pole record)
-``ddpg``               none (DDPGConfig's defaults)          :func:`leoc.ddpg.
-                                                             authors_ddpg_overrides` (TF-Agents
-                                                             DDPG as ``DDPG/ddpg.py`` and the
-                                                             gin files configure it)
-``pilco``              none (PilcoConfig's defaults)         :func:`leoc.pilco.
-                                                             authors_pilco_overrides`
+``ddpg``               none (DDPGConfig's defaults)          :func:`authors_ddpg_overrides`
+                                                             (TF-Agents DDPG as
+                                                             ``DDPG/ddpg.py`` and the gin
+                                                             files configure it)
+``pilco``              none (PilcoConfig's defaults)         :func:`authors_pilco_overrides`
                                                              (``dao/trainer.py``, the gin files)
 =====================  ====================================  ===================================
 
