@@ -385,7 +385,18 @@ def _resolved_path(app: Sphinx, env: Any, node: Any) -> str | None:
         if path is not None:
             return path
     # a bare name used inside the module that defines it, rendered under the package's path
-    return _unique_suffix_match(env, target)
+    path = _unique_suffix_match(env, target)
+    if path is not None or "." not in target:
+        return path
+    # a NamedTuple field (its accessor is not documented on its own): link to the class
+    owner, field_name = target.rsplit(".", 1)
+    owner_node = {"py:module": node.get("py:module"), "py:class": node.get("py:class")}
+    owner_node["reftarget"] = owner
+    owner_path = _resolved_path(app, env, owner_node)
+    owner_obj = _import_path(owner_path) if owner_path else None
+    if owner_obj is not None and field_name in getattr(owner_obj, "_fields", ()):
+        return owner_path
+    return None
 
 
 def resolve_by_object(app: Sphinx, env: Any, node: Any, contnode: Any) -> Any:
@@ -403,11 +414,20 @@ def resolve_by_object(app: Sphinx, env: Any, node: Any, contnode: Any) -> Any:
     return None
 
 
+def skip_namedtuple_fields(app: Sphinx, what: str, name: str, obj: Any, skip: bool, options: Any):
+    """Leave out a NamedTuple's field accessors ("Alias for field number N"): the class's
+    Attributes section already documents every field, with its meaning."""
+    if (getattr(obj, "__doc__", None) or "").startswith("Alias for field number"):
+        return True
+    return None
+
+
 def setup(app: Sphinx) -> dict[str, Any]:
-    """Register the configuration values and the two event handlers."""
+    """Register the configuration values and the event handlers."""
     app.add_config_value("leoc_api_packages", list(PUBLIC_PACKAGES), "env")
     app.add_config_value("leoc_api_extra_modules", [], "env")
     app.add_config_value("leoc_api_check_docstrings", True, "env")
     app.connect("builder-inited", write_pages)
     app.connect("missing-reference", resolve_by_object)
+    app.connect("autodoc-skip-member", skip_namedtuple_fields)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
