@@ -1,6 +1,7 @@
 r"""A cart on a rail with a viscous damper and an unstable spring: a user's system in one file.
 
-This file is the worked example of ``docs/custom_system.md`` (a test runs it, so it cannot rot).
+This file is the worked example of ``docs/user_guide/custom_system.md`` (a test runs it, so it
+cannot rot).
 
 Equations of motion: a cart of mass m on a rail, pushed by a force F, slowed by a damper of
 coefficient c and pushed away from the centre by a negative-stiffness spring k (a magnet, an

@@ -179,6 +179,7 @@ class WeightedExpBilinear(torch.autograd.Function):
         row_offset: Tensor | None = None,
         col_offset: Tensor | None = None,
     ) -> Tensor:
+        """The value ``(B,)``; saves the extended factors and their gradients for backward."""
         gradients = any(ctx.needs_input_grad[i] for i in (0, 1, 3, 4))
         left_ext, right_ext = _extend(left, right, row_offset, col_offset)
         result = _blockwise(left_ext, right_ext, weights, gradients)
@@ -187,6 +188,7 @@ class WeightedExpBilinear(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad: Tensor):
+        """Gradients of the five inputs from the saved factors (None where none is needed)."""
         left_ext, right_ext, grad_ext_left, grad_ext_right = ctx.saved_tensors
         scale = grad[:, None, None]
         grads = [None] * 5  # left, right, weights, row_offset, col_offset

@@ -50,6 +50,7 @@ CONFIG_FILE = "config.json"
 CURVE_JSON = "curve.json"
 CURVE_CSV = "curve.csv"
 CURVE_PNG = "learning_curve.png"
+#: Columns of every learning-curve row (``curve.csv``).
 CURVE_COLUMNS = ("steps", "interaction_seconds", "mean_return", "std_return", "held_fraction")
 MODEL_SELECTION = "final"
 MODEL_SELECTION_TEXT = (
@@ -163,18 +164,23 @@ class TrainResult(NamedTuple):
 
     @property
     def held_steps(self) -> int | None:
+        """Interaction steps until the first evaluation that held in every episode (None: never)."""
         return self.summary["held_steps"]
 
     @property
     def reached_steps(self) -> int | None:
+        """Interaction steps until the first evaluation that reached the operating point (None:
+        never)."""
         return self.summary["reached_steps"]
 
     @property
     def final_return(self) -> float:
+        """Mean return of the last evaluation."""
         return self.summary["final_return"]
 
     @property
     def best_return(self) -> float:
+        """Best mean return over the evaluations."""
         return self.summary["best_return"]
 
 

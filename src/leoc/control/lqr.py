@@ -40,6 +40,8 @@ import torch
 
 from leoc.systems.base import DTYPE, System, check_repeat
 
+#: LQR design methods: the discrete LQR on the autodiff linearisation (default), the continuous
+#: one on the paper's analytic model, or the authors' (nrjc/LEOC) continuous design.
 DESIGN_METHODS = ("discrete", "continuous", "authors")
 DesignMethod = Literal["discrete", "continuous", "authors"]
 # Tolerances of the matrix checks (relative to the matrix scale).
@@ -101,6 +103,7 @@ class LQRDesign(NamedTuple):
 
     @property
     def spectral_radius(self) -> float:
+        """Largest closed-loop eigenvalue modulus of ``A_d - B_d K`` (< 1: stable)."""
         return float(np.max(np.abs(self.closed_loop_eigenvalues)))
 
 

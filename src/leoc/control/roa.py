@@ -182,6 +182,7 @@ class LyapunovCertificate(NamedTuple):
 
     @property
     def certified(self) -> bool:
+        """Whether a non-empty set was certified (``rho > 0``)."""
         return self.rho > 0.0
 
     @property
@@ -599,10 +600,12 @@ class Basin(NamedTuple):
 
     @property
     def count(self) -> int:
+        """Number of starts brought to the operating point and held."""
         return int(self.held.sum())
 
     @property
     def fraction(self) -> float:
+        """Share of the starts held (NaN when there are none)."""
         return float(self.held.mean()) if self.held.size else float("nan")
 
 

@@ -9,7 +9,7 @@ original DDPG experiments (Lillicrap et al., 2016), explored with Ornstein-Uhlen
 Reading of the appendix where it is terse (documented choices, all overridable):
 
 * "Target update factor 0.05" is the Polyak coefficient and "target update rate 5" the number
-  of gradient updates between two soft target updates (:attr:`DDPGConfig.target_update_interval`).
+  of gradient updates between two soft target updates (``DDPGConfig.target_update_interval``).
 * "Number of iterations 10000-15000" are environment steps: 10k for the pendulum and the
   mountain car, 15k for the cart-pole.
 * Exploration noise is the Ornstein-Uhlenbeck process of Lillicrap et al. (theta 0.15,
@@ -32,11 +32,13 @@ from leoc.policies.relevance import (
     RELEVANCE_PARAMETRISATIONS,
 )
 
+#: Model-free learners: Stable-Baselines3's DDPG and TD3.
 ALGOS = ("ddpg", "td3")
 Algo = Literal["ddpg", "td3"]
 
 # Environment steps per run (appendix C: 10000-15000 iterations).
 DEFAULT_TOTAL_STEPS = 10_000
+#: Environment steps per run for each of the paper's systems (appendix C).
 TOTAL_STEPS_BY_SYSTEM = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
 # Hold band of the "reached and held the operating point" test, in the units of
 # ``System.main_coordinate`` (degrees for the pendulum and cart-pole angles, metres for the car).

@@ -85,6 +85,7 @@ class PhysicalPolicy(nn.Module):
 
     @property
     def is_hybrid(self) -> bool:
+        """Whether the actor is a hybrid (it has a relevance r(x))."""
         return self.hybrid is not None
 
     def forward(self, x: Tensor) -> Tensor:

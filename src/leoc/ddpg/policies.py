@@ -463,6 +463,8 @@ class SplitCritic(BaseModel):
         return tuple(q_net(features, units) for q_net in self.q_networks)
 
     def q1_forward(self, obs: Tensor, actions: Tensor) -> Tensor:
+        """Q-value ``(B, 1)`` of the first critic only, the features without gradient (as SB3's
+        ``q1_forward``, which the actor loss uses)."""
         with torch.no_grad():
             features = self.extract_features(obs, self.features_extractor)
         return self.q_networks[0](features, self._actions(actions))
@@ -543,11 +545,15 @@ class LeocTD3Policy(TD3Policy):
         return super().make_actor(features_extractor)
 
     def make_actor(self, features_extractor: nn.Module | None = None) -> Actor:
+        """The actor (SB3's, or the hybrid in subclasses), initialised as ``network_options``
+        says; SB3 calls this for the actor and its target."""
         actor = self._new_actor(features_extractor)
         self._initialise(actor.nonlinear if isinstance(actor, HybridActor) else actor.mu)
         return actor
 
     def make_critic(self, features_extractor: nn.Module | None = None) -> nn.Module:
+        """SB3's critic, or a :class:`SplitCritic` when the action joins later or in physical
+        units (``network_options``), initialised as ``network_options`` says."""
         layer = self.network_options["critic_action_layer"]
         units = self.network_options["critic_action_units"]
         _check_critic_options(layer, units, self.critic_kwargs["net_arch"])

@@ -74,6 +74,7 @@ class MetricSet(NamedTuple):
     description: str
 
 
+#: The metric sets by name (``--metrics``): leoc's and the authors'.
 METRIC_SETS: dict[str, MetricSet] = {
     "leoc": MetricSet(
         "leoc",

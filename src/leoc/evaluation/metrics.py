@@ -66,13 +66,16 @@ DEFAULT_FINAL_WINDOW = 20
 """Number of final samples averaged to estimate the final value (clipped to the record)."""
 
 MIN_SAMPLES = 2
+"""Shortest record accepted: one sample cannot show a deviation and a final value."""
 # The authors' metric set (nrjc/LEOC plotting/plotter.py): an absolute band of pi/180 in the
 # units of e (degrees or metres), and a steady state "reached" when the last 10 samples agree
 # with the last one to 1e-3.
+#: The authors' absolute settling band, pi/180 in the units of e (degrees or metres).
 AUTHORS_BAND = math.pi / 180.0
+#: The authors' steady state is reached when this many final samples agree with the last one.
 AUTHORS_STEADY_WINDOW = 10
+#: ... to this tolerance (in the units of e).
 AUTHORS_STEADY_TOLERANCE = 1e-3
-"""Shortest record accepted: one sample cannot show a deviation and a final value."""
 
 OVERSHOOT_REL_TOLERANCE = 0.01
 """Fraction of :math:`\\max_t |e[t] - e_f|` a sample must exceed to fix the initial direction."""

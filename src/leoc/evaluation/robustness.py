@@ -56,14 +56,17 @@ class RobustnessPoint(NamedTuple):
 
     @property
     def return_mean(self) -> float:
+        """Mean episode return at this scale."""
         return float(np.mean(self.returns))
 
     @property
     def return_std(self) -> float:
+        """Standard deviation of the episode returns at this scale."""
         return float(np.std(self.returns))
 
     @property
     def fraction_stabilised(self) -> float:
+        """Share of the episodes that held the operating point at the end."""
         return float(np.mean(self.stabilised))
 
 

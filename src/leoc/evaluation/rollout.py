@@ -45,10 +45,14 @@ __all__ = [
     "simulate",
 ]
 
+#: The response tests: an impulse or a step on the action.
 RESPONSE_TESTS = ("impulse", "step")
 ResponseTest = Literal["impulse", "step"]
-IMPULSE_MAGNITUDE = -1.0  # added to the first simulator step's action only
-STEP_MAGNITUDE = -0.2  # added to every action
+#: Impulse test: added to the action of the first simulator step only.
+IMPULSE_MAGNITUDE = -1.0
+#: Step test: added to every action.
+STEP_MAGNITUDE = -0.2
+#: Length of a response test in simulator steps.
 RESPONSE_STEPS = 200
 
 

@@ -44,6 +44,7 @@ def design_summary(design: LQRDesign) -> dict[str, Any]:
 
 
 def format_settling(metrics: ResponseMetrics) -> str:
+    """Settling time in steps as text, or ``not settled``."""
     return "not settled" if metrics.settling_time is None else str(metrics.settling_time)
 
 
@@ -144,6 +145,8 @@ def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
 # One field of the authors' variant switched back to leoc's value at a time (and the reverse
 # from leoc's defaults), to measure which choice makes each difference in appendix D's Linear
 # row: (label, base variant name, field, value).
+#: The configurations of :func:`linear_row_ablation`: ``(label, base variant, field, value)``,
+#: one field of a variant switched at a time.
 LINEAR_ABLATION = (
     ("authors' variant (all its choices)", "authors", None, None),
     ("  with leoc's discrete LQR (gain x1, no u_max)", "authors", "lqr_method", "discrete"),

@@ -151,6 +151,7 @@ QUICK_RUN_SECONDS = {
     "mountaincar/pilco_hybrid_roa": 102.0,
 }
 
+#: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
 PROFILES: dict[str, Profile] = {
     "quick": Profile(
         name="quick",
@@ -222,6 +223,7 @@ class RunSpec(NamedTuple):
 
     @property
     def key(self) -> str:
+        """Run folder path ``system/controller/seedN`` under the output folder's ``runs``."""
         return f"{self.system}/{self.controller}/seed{self.seed}"
 
     @property
@@ -231,6 +233,7 @@ class RunSpec(NamedTuple):
 
     @property
     def hybrid(self) -> bool:
+        """Whether the controller is a hybrid."""
         return "_hybrid" in self.controller
 
     @property

@@ -553,6 +553,7 @@ def response_table(rows: list[dict[str, Any]], test: str) -> list[str]:
 
 
 def roa_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the region-of-attraction table: certificate and empirical basins."""
     lines = [
         "| system | controller | period | certified rho (LQR at that period) | extent per state "
         "| certified share of the box | basin: box held | basin: certified set held |",
@@ -598,6 +599,7 @@ def robustness_table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def swing_up_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the swing-up table: return and hold test per controller."""
     lines = [
         "| system | controller | swing-up return | episodes holding the operating point "
         "| runs holding in every episode | mean hold step |",
@@ -620,6 +622,7 @@ def _interval(low: float | None, high: float | None, note: str | None) -> str:
 
 
 def seed_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the seed statistics: IQM and 95% bootstrap interval per quantity."""
     lines = [
         "| system | controller | quantity | IQM | 95% CI | seeds used | seeds without a value |",
         "|---|---|---|---|---|---|---|",
@@ -635,6 +638,7 @@ def seed_table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def improvement_table(rows: list[dict[str, Any]]) -> list[str]:
+    """Markdown rows of the probability that each hybrid beats its baseline."""
     lines = [
         "| system | framework | P(hybrid's final return > baseline's) | 95% CI |",
         "|---|---|---|---|",

@@ -1,7 +1,7 @@
 """Seed statistics researchers trust: interquartile mean, stratified-bootstrap confidence
 intervals, probability of improvement and bootstrap bands for learning curves.
 
-Everything follows Agarwal et al. (2021) and reproduces the numbers of their reference package
+Everything follows Agarwal et al. (2021) [1]_ and reproduces the numbers of their reference package
 ``rliable`` (tested against it on synthetic data), without depending on it. Shapes: a score array
 is ``(N,)`` (N runs, i.e. seeds, of one task) or ``(N, M)`` (N runs of each of M tasks); a set of
 learning curves is ``(N, T)`` (T evaluation points). Every bootstrap takes a seed (default

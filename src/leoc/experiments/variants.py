@@ -16,17 +16,16 @@ field                  leoc (default)                        authors
 ``linear_saturation``  ``none`` (the system clips,           ``sin``: u_max sin(W o / u_max),
                        exact inside the limits)              their PILCO ``LinearController``
                                                              (``pilco/controllers.py``)
-``step_rules``         leoc's :class:`~leoc.systems.         exit -100 once, reward after the
-                       StepRules` (an exit never pays)       step (cart-pole, mountain car);
+``step_rules``         leoc's :class:`StepRules`             exit -100 once, reward after the
+                       (an exit never pays)                  step (cart-pole, mountain car);
                                                              gym 0.17's pendulum integrator
 ``response_steps``     200 simulator steps                   400 on the cart-pole (the length
                                                              of the paper's cart-pole record)
-``ddpg``               none (DDPGConfig's defaults)          :func:`leoc.ddpg.
-                                                             authors_ddpg_overrides` (TF-Agents
-                                                             DDPG as ``DDPG/ddpg.py`` and the
-                                                             gin files configure it)
-``pilco``              none (PilcoConfig's defaults)         :func:`leoc.pilco.
-                                                             authors_pilco_overrides`
+``ddpg``               none (DDPGConfig's defaults)          :func:`authors_ddpg_overrides`
+                                                             (TF-Agents DDPG as
+                                                             ``DDPG/ddpg.py`` and the gin
+                                                             files configure it)
+``pilco``              none (PilcoConfig's defaults)         :func:`authors_pilco_overrides`
                                                              (``dao/trainer.py``, the gin files)
 =====================  ====================================  ===================================
 
@@ -147,10 +146,12 @@ class Variant:
         }
 
 
+#: leoc's own choices (the default).
 LEOC = Variant(
     "leoc",
     "leoc's defaults: discrete LQR on the exact step map, an exit that never pays",
 )
+#: The authors' choices (nrjc/LEOC), which the paper's numbers come from.
 AUTHORS = Variant(
     "authors",
     "the authors' implementation (nrjc/LEOC): continuous LQR on their models scaled by u_max "
@@ -168,7 +169,9 @@ AUTHORS = Variant(
     ddpg=authors_ddpg_overrides,
     pilco=authors_pilco_overrides,
 )
+#: The variants by name (``--variant``).
 VARIANTS: dict[str, Variant] = {variant.name: variant for variant in (LEOC, AUTHORS)}
+#: Names of the variants.
 VARIANT_NAMES = tuple(VARIANTS)
 
 

@@ -42,6 +42,7 @@ class HeldPolicy(nn.Module):
 
     @property
     def is_hybrid(self) -> bool:
+        """Whether the wrapped policy is a hybrid (it has a relevance r(x))."""
         return callable(getattr(self.policy, "relevance", None)) and getattr(
             self.policy, "is_hybrid", True
         )
@@ -68,8 +69,9 @@ def lqr_controller(
     """The linear controller ``G(o) = W o + b`` of an :class:`~leoc.control.LQRDesign`, run at
     the control period the design is for (``design.action_repeat``).
 
-    ``saturation`` (with the actuator ``limit``) wraps it in :class:`~leoc.policies.saturation.
-    Saturated`: ``"sin"`` gives the authors' PILCO ``LinearController``, u_max sin(W o / u_max);
+    ``saturation`` (with the actuator ``limit``) wraps it in
+    :class:`~leoc.policies.saturation.Saturated`: ``"sin"`` gives the authors' PILCO
+    ``LinearController``, u_max sin(W o / u_max);
     ``"none"`` (default) leaves the clip to the system, exact inside the limits.
     """
     from leoc.policies.linear import LinearController

@@ -104,6 +104,8 @@ __all__ = [
     "paper_relevance",
 ]
 
+#: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
+#: the certified set.
 RELEVANCE_KINDS = ("paper", "roa")
 RELEVANCE_PARAMETRISATIONS = ("log_lambda", "precision")
 r"""How the paper's relevance keeps its weights: ``log_lambda`` (:math:`\lambda = e^{\ell}`,
@@ -306,14 +308,17 @@ class ObservationDeviation(nn.Module):
 
     @property
     def obs_dim(self) -> int:
+        """Observation dimension D."""
         return len(self.layout)
 
     @property
     def state_dim(self) -> int:
+        """State dimension S."""
         return len(self.plan)
 
     @property
     def angle_indices(self) -> tuple[int, ...]:
+        """State entries observed through cos and sin (wrapped deviations)."""
         return tuple(index for kind, index, _, _ in self.plan if kind == "angle")
 
     def forward(self, obs: Tensor) -> Tensor:

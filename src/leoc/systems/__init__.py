@@ -1,7 +1,7 @@
 """Systems: physics, observation maps, operating points, starts, gymnasium envs, registry.
 
 The built-in systems (the paper's three and the acrobot) are registered here; a user's system
-is added with :func:`register_system` (see ``docs/custom_system.md``).
+is added with :func:`register_system` (see ``docs/user_guide/custom_system.md``).
 """
 
 from __future__ import annotations
@@ -34,11 +34,13 @@ from leoc.systems.registry import (
 )
 
 # The paper's three benchmark systems (what `leoc reproduce` runs by default).
+#: The paper's three systems, by registry name.
 PAPER_SYSTEMS: dict[str, type[System]] = {
     "pendulum": Pendulum,
     "cartpole": CartPole,
     "mountaincar": MountainCar,
 }
+#: Registry names of the paper's three systems (what ``leoc reproduce`` runs by default).
 SYSTEM_NAMES = tuple(PAPER_SYSTEMS)
 
 for _name, _factory in PAPER_SYSTEMS.items():

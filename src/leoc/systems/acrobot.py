@@ -202,7 +202,7 @@ class Acrobot(System):
     ``Acrobot-v1``).
 
     ==============  ===========================================================
-    Action          elbow torque tau in N m, |tau| <= 5 (clipped)
+    Action          elbow torque tau in N m, ``|tau|`` <= 5 (clipped)
     Dynamics        module docstring; RK4, dt = 0.05 s
     Reward          :func:`acrobot_reward`
     Start           swing_up: both links hanging, theta1 = pi +/- 10 deg,

@@ -9,31 +9,32 @@ Every system is described by
 * a :class:`System` subclass that bundles the step function with the observation map, reward,
   termination test, operating point and start distribution.
 
-Writing a system (``docs/custom_system.md`` has a worked example). A subclass must provide:
+Writing a system (``docs/user_guide/custom_system.md`` has a worked example). A subclass must
+provide:
 
-==========================  =================================================================
-``name``                    registry name (lower-case identifier)
-``params_type``             its :class:`PhysicalParams` dataclass; it must have a field ``dt``
-                            (time step, s) or the subclass overrides :attr:`System.dt`
-``state_names``             names of the S state entries
-``obs_layout``              the observation (see :mod:`leoc.systems.observation`): every
-                            state entry as itself (``state_entry(i)``) or, for an angle,
-                            through cos and sin (``*angle_entries(i)``)
-``action_limit``            property: the actuator limit ``|u| <= action_limit`` (> 0)
-``step_fn(state, action)``  batched step ``(B, S), (B, A) -> (B, S)``, torch float64,
-                            differentiable, clipping the action to the limit inside
+============================  =================================================================
+``name``                      registry name (lower-case identifier)
+``params_type``               its :class:`PhysicalParams` dataclass; it must have a field ``dt``
+                              (time step, s) or the subclass overrides :attr:`System.dt`
+``state_names``               names of the S state entries
+``obs_layout``                the observation (see :mod:`leoc.systems.observation`): every
+                              state entry as itself (``state_entry(i)``) or, for an angle,
+                              through cos and sin (``*angle_entries(i)``)
+``action_limit``              property: the actuator limit ``|u| <= action_limit`` (> 0)
+``step_fn(state, action)``    batched step ``(B, S), (B, A) -> (B, S)``, torch float64,
+                              differentiable, clipping the action to the limit inside
 ``reward_fn(state, action)``  reward ``(B,)`` of the step (before it)
-``swing_up_centre``,        the swing-up start: uniform in centre +/- spread (S each)
+``swing_up_centre``,          the swing-up start: uniform in centre +/- spread (S each)
 ``start_spread``
-``operating_region``        half-widths (S) of the box robustness episodes start from
-``default_q``,              diagonals of the default LQR weights (S and A entries)
+``operating_region``          half-widths (S) of the box robustness episodes start from
+``default_q``,                diagonals of the default LQR weights (S and A entries)
 ``default_r``
-``main_label``,             the response's main coordinate (``main_index``, default 0) and
-``main_in_degrees``         whether it is an angle reported in degrees
-``settling_band``,          settling band of the metrics, hold band and minimum hold
-``hold_band``,              duration (steps) of the "reached and held" test, in the units of
-``hold_min_steps``          the main coordinate
-==========================  =================================================================
+``main_label``,               the response's main coordinate (``main_index``, default 0) and
+``main_in_degrees``           whether it is an angle reported in degrees
+``settling_band``,            settling band of the metrics, hold band and minimum hold
+``hold_band``,                duration (steps) of the "reached and held" test, in the units of
+``hold_min_steps``            the main coordinate
+============================  =================================================================
 
 and may override, with these defaults:
 
@@ -72,7 +73,9 @@ from torch import Tensor
 
 from leoc.systems.observation import ObsComponent, ObservationMap
 
+#: The dtype of every state, action and parameter tensor.
 DTYPE = torch.float64
+#: Episode length (steps) of every built-in system.
 DEFAULT_EPISODE_STEPS = 200
 # validate(): largest |f(a, u_eq) - a| (state units, angles wrapped) accepted as an equilibrium.
 # Float64 round-off of one step is ~1e-16 times the state's size; 1e-9 leaves room for it and
@@ -96,6 +99,7 @@ REQUIRED_ATTRIBUTES = (
     "hold_band",
     "hold_min_steps",
 )
+#: Start distributions: the swing-up start and the operating point (responses, robustness).
 START_KINDS = ("swing_up", "operating_point")
 StartKind = Literal["swing_up", "operating_point"]
 
@@ -312,14 +316,17 @@ class System:
 
     @property
     def state_dim(self) -> int:
+        """State dimension S."""
         return len(self.state_names)
 
     @property
     def obs_dim(self) -> int:
+        """Observation dimension D."""
         return len(self.obs_layout)
 
     @property
     def action_dim(self) -> int:
+        """Action dimension A (1 for the built-in systems)."""
         return 1
 
     @property
@@ -329,7 +336,7 @@ class System:
 
     @property
     def action_limit(self) -> float:
-        """Actuator limit |u| <= action_limit (N or N m)."""
+        """Actuator limit ``|u| <= action_limit`` (N or N m)."""
         raise NotImplementedError
 
     @property
@@ -363,7 +370,7 @@ class System:
     def step_reward(
         self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
     ) -> Tensor:
-        """Reward ``(B,)`` of one step under :attr:`rules`, the one place the gymnasium
+        """Reward ``(B,)`` of one step under ``self.rules``, the one place the gymnasium
         environment and every rollout take it from.
 
         ``leaving`` (bool ``(B,)``) marks the steps that leave the allowed region, ``steps_left``
@@ -418,6 +425,7 @@ class System:
         return np.asarray(rows)
 
     def clip_action(self, action: Tensor) -> Tensor:
+        """``action`` clipped to ``[-action_limit, action_limit]`` (any shape)."""
         return torch.clamp(action, -self.action_limit, self.action_limit)
 
     def step_held(self, state: Tensor, action: Tensor, repeat: int) -> Tensor:
@@ -435,7 +443,7 @@ class System:
 
     @cached_property
     def observation(self) -> ObservationMap:
-        """The map of :attr:`obs_layout` (observe, invert, bounds, moments, Jacobian)."""
+        """The map of ``obs_layout`` (observe, invert, bounds, moments, Jacobian)."""
         return ObservationMap(self.obs_layout, self.state_dim)
 
     def observe(self, state: Tensor) -> Tensor:

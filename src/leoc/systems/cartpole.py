@@ -58,9 +58,9 @@ class CartPoleParams(PhysicalParams):
     dt : float
         Time step in s.
     max_force : float
-        Actuator limit |F| in N.
+        Actuator limit ``|F|`` in N.
     x_limit : float
-        The episode ends when |x| exceeds this, in m.
+        The episode ends when ``|x|`` exceeds this, in m.
     """
 
     MASS_FIELDS: ClassVar[tuple[str, ...]] = ("cart_mass", "pole_mass")

@@ -83,6 +83,11 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode; ``options={"start": "operating_point", "offset": [...]}`` starts at
+        the operating point (plus an offset), the default is the swing-up start.
+
+        Returns the observation and ``{"state": state}``.
+        """
         super().reset(seed=seed)
         self._steps = 0
         options = dict(options or {})
@@ -105,6 +110,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._obs(), {"state": self.state.copy()}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """One simulator step: ``(obs, reward, terminated, truncated, {"state": state})``."""
         if self.state is None:
             raise RuntimeError("step() called before reset()")
         action_arr = np.asarray(action, dtype=float).reshape(-1)
@@ -133,9 +139,9 @@ class PendulumSwingUpEnv(LeocEnv):
     ==============  ===========================================================
     State           theta (rad, 0 upright, unwrapped), theta_dot (rad/s)
     Observation     [cos theta, sin theta, theta_dot], float64
-    Action          torque u in N m, |u| <= 2 (clipped)
+    Action          torque u in N m, ``|u|`` <= 2 (clipped)
     Dynamics        theta_ddot = 3 g / (2 l) sin theta + 3 / (m l^2) u,
-                    semi-implicit Euler, dt = 0.05 s, |theta_dot| <= 8 rad/s
+                    semi-implicit Euler, dt = 0.05 s, ``|theta_dot|`` <= 8 rad/s
     Reward          -(theta^2 + 0.1 theta_dot^2 + 0.001 u^2), theta wrapped to [-pi, pi)
     Start           swing_up: theta = pi +/- 10 deg, theta_dot = 0 +/- 0.1 (uniform);
                     operating_point: [0, 0] (+ offset)
@@ -153,17 +159,18 @@ class CartPoleSwingUpEnv(LeocEnv):
     ==============  ===========================================================
     State           x (m), x_dot (m/s), theta (rad, 0 upright), theta_dot (rad/s)
     Observation     [x, x_dot, cos theta, sin theta, theta_dot], float64
-    Action          force F in N on the cart, |F| <= 2.5 (clipped)
+    Action          force F in N on the cart, ``|F|`` <= 2.5 (clipped)
     Dynamics        tmp = (F + m_p l theta_dot^2 sin theta) / (m_c + m_p),
                     theta_ddot = (g sin theta - cos theta tmp)
-                                 / (l (4/3 - m_p cos^2 theta / (m_c + m_p))),
+                    / (l (4/3 - m_p cos^2 theta / (m_c + m_p))),
                     x_ddot = tmp - m_p l theta_ddot cos theta / (m_c + m_p),
                     explicit Euler, dt = 0.02 s
     Reward          -0.1 (5 theta^2 + x^2 + 0.005 F^2), theta wrapped;
-                    -100 on the step that leaves |x| <= 2.4
+                    leaving ``|x|`` <= 2.4 earns the worst on-track reward for that step
+                    and every step left (:meth:`System.termination_reward`)
     Start           swing_up: [0, 0, pi, 0] +/- [0.1, 0.1, 10 deg, 0.1] (uniform);
                     operating_point: [0, 0, 0, 0] (+ offset)
-    Termination     |x| > 2.4; truncation after 200 steps
+    Termination     ``|x|`` > 2.4; truncation after 200 steps
     Parameters      m_c = 0.05 kg, m_p = 0.005 kg, l = 0.5 m (half-length), g = 9.8 m/s^2
     ==============  ===========================================================
     """
@@ -177,11 +184,11 @@ class MountainCarHilltopEnv(LeocEnv):
     ==============  ===========================================================
     State           x (m, hilltop at 0, valley at -pi), x_dot (m/s)
     Observation     [x, x_dot], float64
-    Action          force F in N, |F| <= 3 (clipped)
+    Action          force F in N, ``|F|`` <= 3 (clipped)
     Dynamics        x_ddot = F / m - g h'(x), h(x) = 1.35 cos x + 1.65,
                     semi-implicit Euler, dt = 0.02 s
-    Reward          -0.1 (5 x^2 + x_dot^2 + 0.005 F^2); -100 on the step that leaves
-                    [-3.6 - pi/2, 2.2 - pi/2]
+    Reward          -0.1 (5 x^2 + x_dot^2 + 0.005 F^2); leaving [-3.6 - pi/2, 2.2 - pi/2]
+                    earns the worst on-track reward for that step and every step left
     Start           swing_up: x = -pi +/- 10 deg, x_dot = 0 +/- 0.1 (uniform);
                     operating_point: [0, 0] (+ offset)
     Termination     leaving the track; truncation after 200 steps

@@ -56,7 +56,7 @@ class MountainCarParams(PhysicalParams):
     dt : float
         Time step in s.
     max_force : float
-        Actuator limit |F| in N.
+        Actuator limit ``|F|`` in N.
     """
 
     MASS_FIELDS: ClassVar[tuple[str, ...]] = ("mass",)

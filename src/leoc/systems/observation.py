@@ -29,6 +29,7 @@ from torch import Tensor
 STATE = "state"
 COS = "cos"
 SIN = "sin"
+#: How an observation entry is made from a state entry: itself, its cosine or its sine.
 OBS_KINDS: tuple[str, ...] = (STATE, COS, SIN)
 HALF_PI = 0.5 * math.pi
 TRIG_BOUND = 1.0  # |cos|, |sin| <= 1: the gymnasium bound of a trigonometric entry

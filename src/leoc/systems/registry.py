@@ -1,7 +1,7 @@
 """The system registry: names resolved once, at the edge (CLI, configs, ``gymnasium.make``).
 
 Below the edge every function takes a :class:`~leoc.systems.base.System` object. A user adds a
-plant with :func:`register_system` (see ``docs/custom_system.md``)::
+plant with :func:`register_system` (see ``docs/user_guide/custom_system.md``)::
 
     from leoc.systems import register_system
     register_system("damped_cart", DampedCart)
@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 from leoc.systems.base import DEFAULT_EPISODE_STEPS, PhysicalParams, System
 
+#: Anything that builds a :class:`System` from keyword parameters (usually the class).
 SystemFactory = Callable[..., System]
 _NAME_PATTERN = re.compile(r"^[a-z][a-z0-9_]*$")
 GENERIC_ENTRY_POINT = "leoc.systems.envs:LeocEnv"

@@ -30,6 +30,7 @@ from torch import Tensor
 
 from leoc.systems.base import DTYPE, System, check_repeat
 
+#: A controller: batched observations ``(B, D)`` to actions ``(B, A)``.
 Controller = Callable[[Tensor], Tensor]
 
 
@@ -58,10 +59,12 @@ class Trajectory(NamedTuple):
 
     @property
     def total_reward(self) -> float:
+        """Sum of the rewards of the episode."""
         return float(np.sum(self.rewards))
 
     @property
     def steps(self) -> int:
+        """Number of steps the episode ran."""
         return int(self.actions.shape[0])
 
 
