@@ -230,6 +230,24 @@ def test_variant_names_are_checked() -> None:
         StepRules(exit_penalty=float("nan"))
 
 
+def test_a_profile_budget_replaces_the_variants_and_its_selection_follows() -> None:
+    # the authors' own budgets where the profile sets none (their gin files: 1000 + 15000 DDPG
+    # steps on the cart-pole, 8 PILCO rollouts on the pendulum, selection after 8 // 2 + 2)
+    ddpg = AUTHORS.training_settings("ddpg", "cartpole", True)
+    assert ddpg["total_steps"] == 16_000
+    pilco = AUTHORS.training_settings("pilco", "pendulum", True)
+    assert (pilco["iterations"], pilco["select_best_from"]) == (8, 6)
+    # a profile's budget replaces them, and the selection window follows it
+    assert AUTHORS.training_settings("ddpg", "cartpole", True, 400)["total_steps"] == 400
+    small = AUTHORS.training_settings("pilco", "pendulum", True, 4)
+    assert (small["iterations"], small["select_best_from"]) == (4, 4)
+    # leoc's variant sets only the budget
+    assert LEOC.training_settings("pilco", "pendulum", True, 3) == {"iterations": 3}
+    assert LEOC.training_settings("ddpg", "pendulum", False) == {}
+    with pytest.raises(ValueError, match="budget"):
+        AUTHORS.training_settings("ddpg", "pendulum", True, 0)
+
+
 @pytest.mark.slow
 def test_reproduce_variants_side_by_side_in_appendix_d(tmp_path) -> None:
     """Linear-only reproduce folders of both variants; the report of one, compared with the

@@ -125,7 +125,7 @@ AUTHORS_DDPG: dict[str, Any] = {
 hold for every system; :func:`authors_ddpg_overrides` adds the per-system ones."""
 
 
-def authors_ddpg_overrides(system: str, hybrid: bool) -> dict[str, Any]:
+def authors_ddpg_overrides(system: str, hybrid: bool, budget: int | None = None) -> dict[str, Any]:
     """:data:`AUTHORS_DDPG` plus the authors' per-system settings for ``system``.
 
     Per system (data/*DDPG*.gin): ``eval_interval`` 200 (pendulum, mountain car) or 300
@@ -139,6 +139,9 @@ def authors_ddpg_overrides(system: str, hybrid: bool) -> dict[str, Any]:
         System name.
     hybrid : bool
         Whether the run trains the LEOC hybrid (else the plain MLP baseline).
+    budget : int, optional
+        Environment steps in all (initial collect included) in place of the authors'; their
+        model selection window (the last third) follows it.
 
     Returns
     -------
@@ -149,6 +152,8 @@ def authors_ddpg_overrides(system: str, hybrid: bool) -> dict[str, Any]:
     if system in AUTHORS_ITERATIONS:
         overrides["total_steps"] = AUTHORS_INITIAL_COLLECT_STEPS + AUTHORS_ITERATIONS[system]
         overrides["eval_interval"] = AUTHORS_EVAL_INTERVAL[system]
+    if budget is not None:
+        overrides["total_steps"] = budget
     if system == "cartpole" and not hybrid:
         overrides["actor_learning_rate"] = AUTHORS_CARTPOLE_BASELINE_ACTOR_LR
     return overrides

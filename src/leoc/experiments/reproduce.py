@@ -150,8 +150,11 @@ def train_controller(
         )
         return variant.linear_controller(system, repeat), None
     # the variant's settings, then the profile's budgets and overrides, then the run's relevance
+    budget = (profile.pilco_iterations if spec.framework == "pilco" else profile.ddpg_steps).get(
+        spec.system
+    )
     settings = {
-        **variant.training_settings(spec.framework, spec.system, spec.hybrid),
+        **variant.training_settings(spec.framework, spec.system, spec.hybrid, budget),
         **(profile.pilco_overrides if spec.framework == "pilco" else profile.ddpg_overrides),
         "relevance": spec.relevance,
     }
@@ -163,7 +166,6 @@ def train_controller(
             hybrid=spec.hybrid,
             seed=spec.seed,
             run_dir=train_dir,
-            iterations=profile.pilco_iterations.get(spec.system),
             progress=True,
             **settings,
         )
@@ -176,7 +178,6 @@ def train_controller(
             hybrid=spec.hybrid,
             seed=spec.seed,
             run_dir=train_dir,
-            total_steps=profile.ddpg_steps.get(spec.system),
             progress="lines",
             **settings,
         )

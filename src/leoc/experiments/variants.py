@@ -78,9 +78,11 @@ class Variant:
     response_steps : mapping of system name -> int
         Length of the impulse and step records; a system not listed gets 200.
     ddpg, pilco : callable or None
-        ``settings(system, hybrid) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` or
-        :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none). The variant's
-        ``lqr_method`` and step rules are added by :meth:`training_settings`.
+        ``settings(system, hybrid, budget) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` or
+        :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none); ``budget`` is
+        the run's training budget (DDPG steps, PILCO iterations) where a profile sets one, else
+        None (the variant's own). The variant's ``lqr_method`` and step rules are added by
+        :meth:`training_settings`.
     """
 
     name: str
@@ -93,17 +95,28 @@ class Variant:
     response_steps: Mapping[str, int] = dataclasses.field(
         default_factory=lambda: MappingProxyType({})
     )
-    ddpg: Callable[[str, bool], dict[str, Any]] | None = None
-    pilco: Callable[[str, bool], dict[str, Any]] | None = None
+    ddpg: Callable[[str, bool, int | None], dict[str, Any]] | None = None
+    pilco: Callable[[str, bool, int | None], dict[str, Any]] | None = None
 
-    def training_settings(self, framework: str, system: str, hybrid: bool) -> dict[str, Any]:
+    def training_settings(
+        self, framework: str, system: str, hybrid: bool, budget: int | None = None
+    ) -> dict[str, Any]:
         """Config fields of a ``framework`` (``"ddpg"`` or ``"pilco"``) run under this variant:
         its framework settings, its LQR design (where it is not leoc's) and its step rules
-        (where they are not leoc's), so that leoc's own configs stay as they were."""
+        (where they are not leoc's), so that leoc's own configs stay as they were.
+
+        ``budget`` (DDPG environment steps or PILCO iterations; None: the variant's or the
+        config's own) is the run's training budget; it is set as ``total_steps`` or
+        ``iterations`` and the variant's settings that depend on it follow it (the authors'
+        PILCO model selection starts after half of the iterations)."""
         if framework not in ("ddpg", "pilco"):
             raise ValueError(f"framework: expected 'ddpg' or 'pilco', found {framework!r}")
+        if budget is not None and (isinstance(budget, bool) or int(budget) != budget or budget < 1):
+            raise ValueError(f"budget: expected a positive integer or None, found {budget!r}")
         settings_of = self.ddpg if framework == "ddpg" else self.pilco
-        settings = dict(settings_of(system, hybrid)) if settings_of is not None else {}
+        settings = dict(settings_of(system, hybrid, budget)) if settings_of is not None else {}
+        if budget is not None:
+            settings["total_steps" if framework == "ddpg" else "iterations"] = int(budget)
         if self.lqr_method != LEOC_LQR_METHOD:
             settings["lqr_method"] = self.lqr_method
         rules = self.rules_for(system)

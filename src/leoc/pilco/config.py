@@ -377,7 +377,7 @@ AUTHORS_NOT_REPLICATED = {
 """The authors' PILCO choices that :func:`authors_pilco_overrides` does not set, and why."""
 
 
-def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
+def authors_pilco_overrides(system: str, hybrid: bool, budget: int | None = None) -> dict[str, Any]:
     """:class:`PilcoConfig` overrides that reproduce the authors' PILCO on ``system``.
 
     Parameters
@@ -386,6 +386,9 @@ def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
         One of the paper's systems (the authors ran no other).
     hybrid : bool
         Add the hybrid's settings (its linear design and moment approximation).
+    budget : int, optional
+        Policy-learning iterations in place of the authors' ``num_rollouts``; their model
+        selection (from after half of the iterations) follows it.
 
     Returns
     -------
@@ -403,7 +406,9 @@ def authors_pilco_overrides(system: str, hybrid: bool) -> dict[str, Any]:
             f"system: the authors' PILCO settings exist for {sorted(AUTHORS_SYSTEM_SETTINGS)}, "
             f"found {system!r}"
         )
-    settings = AUTHORS_SYSTEM_SETTINGS[system]
+    settings = dict(AUTHORS_SYSTEM_SETTINGS[system])
+    if budget is not None:
+        settings["iterations"] = budget
     overrides: dict[str, Any] = {
         "action_repeat": AUTHORS_SUBS,
         "horizon": AUTHORS_HORIZON,
