@@ -33,9 +33,11 @@ print(
 )
 
 # %%
-# The empirical basin on the (theta, theta_dot) slice, and the certified set over it.
+# The empirical basin on the (theta, theta_dot) slice, and the proved set over it. The grid
+# covers the set's extent (10 % beyond it), so that every part of the ellipse has starts.
 points = 41
-starts = slice_grid(system, (0, 1), points=points)
+box = 1.1 * certificate.extent
+starts = slice_grid(system, (0, 1), box=box, points=points)
 basin = empirical_basin(system, LinearController(design.W, design.b), starts)
 print(f"LQR brings {basin.fraction:.0%} of the slice's starts to the top and holds")
-fig = draw_basin_slices(system, certificate, {"LQR": basin}, (0, 1), points)
+fig = draw_basin_slices(system, certificate, {"LQR": basin}, (0, 1), points, box)
