@@ -79,13 +79,17 @@ from leoc.policies.relevance import (
 
 __all__ = [
     "CRITIC_ACTION_UNITS",
+    "ROA_KWARG_NAMES",
     "HIDDEN_INITS",
     "HybridActor",
+    "HybridActorMixin",
     "HybridDDPGPolicy",
     "HybridTD3Policy",
     "LeocTD3Policy",
     "SplitCritic",
     "action_box",
+    "check_hybrid_options",
+    "hybrid_actor_kwargs",
     "hybrid_policy_kwargs",
     "initialise_mlp",
     "roa_relevance_kwargs",
@@ -120,7 +124,189 @@ def _as_matrix(value: object, name: str, shape: tuple[int, ...]) -> np.ndarray:
     return array
 
 
-class HybridActor(Actor):
+def check_hybrid_options(relevance: object, relevance_parametrisation: object) -> None:
+    """Check a hybrid actor's ``relevance`` and ``relevance_parametrisation`` names.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument, with the expected and found values.
+    """
+    if relevance not in RELEVANCE_KINDS:
+        raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
+    if relevance_parametrisation not in RELEVANCE_PARAMETRISATIONS:
+        raise ValueError(
+            f"relevance_parametrisation: expected one of {RELEVANCE_PARAMETRISATIONS}, "
+            f"found {relevance_parametrisation!r}"
+        )
+
+
+class HybridActorMixin:
+    r"""The LEOC blend in SB3's normalised action units, shared by the DDPG/TD3 and SAC actors.
+
+    A hybrid actor class derives from this mixin and from an SB3 actor class, builds the SB3
+    actor, takes its network :math:`\tilde H` (normalised units, bounded by tanh) out of it and
+    calls :meth:`_init_hybrid`, which holds, for every hybrid actor alike, the linear part
+    :math:`\tilde G(x) = (W x + b - c) / h`, the relevance (the paper's, its precision
+    parametrisation, or the ROA relevance) and the blend :class:`~leoc.policies.HybridPolicy`
+    (clip saturation to :math:`[-1, 1]`). See the module docstring for the units and the
+    identities; :class:`HybridActor` (DDPG/TD3) and :class:`leoc.ddpg.sac.HybridSACActor` (SAC)
+    differ only in what they do with the blend.
+
+    Attributes
+    ----------
+    hybrid : HybridPolicy
+        The blend in normalised units; its ``nonlinear`` is :math:`\tilde H`.
+    physical_gain, physical_bias, operating_obs : Tensor
+        float64 buffers with ``W``, ``b`` and ``a`` in physical units (for exact float64
+        evaluation, see :func:`leoc.ddpg.physical_policy`).
+    relevance_kind : {"paper", "roa"}
+    roa_kwargs : dict
+        The ``roa_*`` constructor data of an ROA relevance (empty otherwise).
+    """
+
+    hybrid: HybridPolicy
+    physical_gain: Tensor
+    physical_bias: Tensor
+    operating_obs: Tensor
+    action_space: spaces.Box
+    features_extractor: nn.Module
+
+    def _init_hybrid(
+        self,
+        nonlinear: nn.Module,
+        features_dim: int,
+        *,
+        lqr_gain: object,
+        lqr_bias: object,
+        operating_obs: object,
+        lambda_init: float | Sequence[float],
+        learn_lambda: bool,
+        relevance: str,
+        relevance_parametrisation: str,
+        roa_obs_layout: Sequence[Sequence[Any]] | None,
+        roa_operating_state: Sequence[float] | None,
+        roa_lyapunov_matrix: Sequence[Sequence[float]] | None,
+        roa_rho_in: float | None,
+        roa_width_init: float,
+        learn_width: bool,
+    ) -> None:
+        """Build ``self.hybrid`` around ``nonlinear`` (:math:`\tilde H`, (B, D) -> (B, F)) and
+        register the physical-units buffers (arguments: see :class:`HybridActor`)."""
+        check_hybrid_options(relevance, relevance_parametrisation)
+        act_dim = int(np.prod(self.action_space.shape))
+        gain = _as_matrix(lqr_gain, "lqr_gain", (act_dim, features_dim))
+        bias = _as_matrix(lqr_bias, "lqr_bias", (act_dim,))
+        point = _as_matrix(operating_obs, "operating_obs", (features_dim,))
+        centre, half = action_box(self.action_space)
+        self.lqr_gain = gain.tolist()
+        self.lqr_bias = bias.tolist()
+        self.operating_obs_init = point.tolist()
+        self.lambda_init = lambda_init
+        self.learn_lambda = learn_lambda
+        self.relevance_kind = relevance
+        self.relevance_parametrisation = relevance_parametrisation
+        self.roa_kwargs: dict[str, Any] = {}
+        self.register_buffer("physical_gain", torch.as_tensor(gain))  # type: ignore[attr-defined]
+        self.register_buffer("physical_bias", torch.as_tensor(bias))  # type: ignore[attr-defined]
+        self.register_buffer("operating_obs", torch.as_tensor(point))  # type: ignore[attr-defined]
+        # G in normalised units: (W x + b - c) / h.
+        linear = LinearController(gain / half[:, None], (bias - centre) / half, dtype=ACTION_DTYPE)
+        if relevance == "paper" and relevance_parametrisation == "precision":
+            precision = PrecisionRelevance(
+                point,
+                1.0 / np.asarray(lambda_init, dtype=np.float64),
+                learn_precision=learn_lambda,
+                dtype=ACTION_DTYPE,
+            )
+            self.hybrid = HybridPolicy(
+                linear,
+                nonlinear,
+                point,
+                action_limit=NORMALISED_LIMIT,
+                saturation="clip",
+                relevance=precision,
+            )
+            return
+        if relevance == "paper":
+            self.hybrid = HybridPolicy(
+                linear,
+                nonlinear,
+                point,
+                lambda_init=lambda_init,
+                learn_lambda=learn_lambda,
+                action_limit=NORMALISED_LIMIT,
+                saturation="clip",
+            )
+            return
+        missing = [
+            name
+            for name, value in (
+                ("roa_obs_layout", roa_obs_layout),
+                ("roa_operating_state", roa_operating_state),
+                ("roa_lyapunov_matrix", roa_lyapunov_matrix),
+                ("roa_rho_in", roa_rho_in),
+            )
+            if value is None
+        ]
+        if missing:
+            raise ValueError(f"relevance='roa' needs {', '.join(missing)}; found None")
+        self.roa_kwargs = {
+            "roa_obs_layout": [[str(kind), int(index)] for kind, index in roa_obs_layout],  # type: ignore[union-attr]
+            "roa_operating_state": np.asarray(roa_operating_state, dtype=np.float64).tolist(),
+            "roa_lyapunov_matrix": np.asarray(roa_lyapunov_matrix, dtype=np.float64).tolist(),
+            "roa_rho_in": float(roa_rho_in),  # type: ignore[arg-type]
+            "roa_width_init": float(roa_width_init),
+            "learn_width": bool(learn_width),
+        }
+        self.hybrid = HybridPolicy(
+            linear,
+            nonlinear,
+            point,
+            action_limit=NORMALISED_LIMIT,
+            saturation="clip",
+            relevance=roa_relevance(self.roa_kwargs, ACTION_DTYPE),
+        )
+
+    def hybrid_constructor_parameters(self) -> dict[str, Any]:
+        """The hybrid's constructor arguments (what SB3 saves to rebuild the actor)."""
+        return {
+            "lqr_gain": self.lqr_gain,
+            "lqr_bias": self.lqr_bias,
+            "operating_obs": self.operating_obs_init,
+            "lambda_init": self.lambda_init,
+            "learn_lambda": self.learn_lambda,
+            "relevance": self.relevance_kind,
+            "relevance_parametrisation": self.relevance_parametrisation,
+            **self.roa_kwargs,
+        }
+
+    def fused_relevance_and_linear(self, features: Tensor) -> tuple[Tensor, Tensor]:
+        r"""Relevance :math:`r` (B, 1) and normalised linear part :math:`\tilde G` (B, F).
+
+        The same values as ``self.hybrid.relevance`` and ``self.hybrid.linear``, evaluated with
+        fused kernels because SB3 calls the actor for every environment step (batch 1) and
+        several times per gradient step, where per-op overhead dominates: one matrix-vector
+        product for :math:`d = (x - a)^2 \cdot \lambda^{-1}` and ``addmm`` for
+        :math:`\tilde G`. An ROA relevance is exactly 1 on its flat top.
+        """
+        hybrid = self.hybrid
+        if hybrid.relevance_module is None:
+            offset = features - hybrid.operating_point
+            distance = offset.square() @ torch.exp(-hybrid.log_lambda)  # (B,)
+            relevance = torch.reciprocal(torch.square(distance + 1.0)).unsqueeze(-1)  # (B, 1)
+        else:  # ROA: exactly 1 on the flat top, where lerp returns G bit for bit; or precision
+            relevance = hybrid.relevance_module(features)  # (B, 1)
+        linear = torch.addmm(hybrid.linear.b, features, hybrid.linear.W.T)  # (B, F)
+        return relevance, linear
+
+    def relevance(self, obs: Tensor) -> Tensor:
+        """Relevance :math:`r(x)` of the linear part, shape (B, 1)."""
+        features = self.extract_features(obs, self.features_extractor)  # type: ignore[attr-defined]
+        return self.hybrid.relevance(features)
+
+
+class HybridActor(HybridActorMixin, Actor):
     r"""SB3 TD3/DDPG actor whose output is the LEOC blend of an LQR controller and SB3's MLP.
 
     Output (normalised units, see the module docstring):
@@ -211,13 +397,7 @@ class HybridActor(Actor):
         roa_width_init: float = DEFAULT_ROA_WIDTH,
         learn_width: bool = True,
     ) -> None:
-        if relevance not in RELEVANCE_KINDS:
-            raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
-        if relevance_parametrisation not in RELEVANCE_PARAMETRISATIONS:
-            raise ValueError(
-                f"relevance_parametrisation: expected one of {RELEVANCE_PARAMETRISATIONS}, "
-                f"found {relevance_parametrisation!r}"
-            )
+        check_hybrid_options(relevance, relevance_parametrisation)
         super().__init__(
             observation_space,
             action_space,
@@ -227,82 +407,26 @@ class HybridActor(Actor):
             activation_fn,
             normalize_images,
         )
-        act_dim = int(np.prod(action_space.shape))
-        gain = _as_matrix(lqr_gain, "lqr_gain", (act_dim, features_dim))
-        bias = _as_matrix(lqr_bias, "lqr_bias", (act_dim,))
-        point = _as_matrix(operating_obs, "operating_obs", (features_dim,))
-        centre, half = action_box(action_space)
-        self.lqr_gain = gain.tolist()
-        self.lqr_bias = bias.tolist()
-        self.operating_obs_init = point.tolist()
-        self.lambda_init = lambda_init
-        self.learn_lambda = learn_lambda
-        self.relevance_kind = relevance
-        self.relevance_parametrisation = relevance_parametrisation
-        self.clip_output = bool(clip_output)
-        self.roa_kwargs: dict[str, Any] = {}
-        self.register_buffer("physical_gain", torch.as_tensor(gain))
-        self.register_buffer("physical_bias", torch.as_tensor(bias))
-        self.register_buffer("operating_obs", torch.as_tensor(point))
-        # G in normalised units: (W x + b - c) / h.
-        linear = LinearController(gain / half[:, None], (bias - centre) / half, dtype=ACTION_DTYPE)
         mlp = self.mu
         del self.mu  # the MLP lives on as hybrid.nonlinear (one copy in the state_dict)
-        if relevance == "paper" and relevance_parametrisation == "precision":
-            precision = PrecisionRelevance(
-                point,
-                1.0 / np.asarray(lambda_init, dtype=np.float64),
-                learn_precision=learn_lambda,
-                dtype=ACTION_DTYPE,
-            )
-            self.hybrid = HybridPolicy(
-                linear,
-                mlp,
-                point,
-                action_limit=NORMALISED_LIMIT,
-                saturation="clip",
-                relevance=precision,
-            )
-            return
-        if relevance == "paper":
-            self.hybrid = HybridPolicy(
-                linear,
-                mlp,
-                point,
-                lambda_init=lambda_init,
-                learn_lambda=learn_lambda,
-                action_limit=NORMALISED_LIMIT,
-                saturation="clip",
-            )
-            return
-        missing = [
-            name
-            for name, value in (
-                ("roa_obs_layout", roa_obs_layout),
-                ("roa_operating_state", roa_operating_state),
-                ("roa_lyapunov_matrix", roa_lyapunov_matrix),
-                ("roa_rho_in", roa_rho_in),
-            )
-            if value is None
-        ]
-        if missing:
-            raise ValueError(f"relevance='roa' needs {', '.join(missing)}; found None")
-        self.roa_kwargs = {
-            "roa_obs_layout": [[str(kind), int(index)] for kind, index in roa_obs_layout],  # type: ignore[union-attr]
-            "roa_operating_state": np.asarray(roa_operating_state, dtype=np.float64).tolist(),
-            "roa_lyapunov_matrix": np.asarray(roa_lyapunov_matrix, dtype=np.float64).tolist(),
-            "roa_rho_in": float(roa_rho_in),  # type: ignore[arg-type]
-            "roa_width_init": float(roa_width_init),
-            "learn_width": bool(learn_width),
-        }
-        self.hybrid = HybridPolicy(
-            linear,
+        self._init_hybrid(
             mlp,
-            point,
-            action_limit=NORMALISED_LIMIT,
-            saturation="clip",
-            relevance=roa_relevance(self.roa_kwargs, ACTION_DTYPE),
+            features_dim,
+            lqr_gain=lqr_gain,
+            lqr_bias=lqr_bias,
+            operating_obs=operating_obs,
+            lambda_init=lambda_init,
+            learn_lambda=learn_lambda,
+            relevance=relevance,
+            relevance_parametrisation=relevance_parametrisation,
+            roa_obs_layout=roa_obs_layout,
+            roa_operating_state=roa_operating_state,
+            roa_lyapunov_matrix=roa_lyapunov_matrix,
+            roa_rho_in=roa_rho_in,
+            roa_width_init=roa_width_init,
+            learn_width=learn_width,
         )
+        self.clip_output = bool(clip_output)
 
     @property
     def nonlinear(self) -> nn.Module:
@@ -311,17 +435,7 @@ class HybridActor(Actor):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
-        data.update(
-            lqr_gain=self.lqr_gain,
-            lqr_bias=self.lqr_bias,
-            operating_obs=self.operating_obs_init,
-            lambda_init=self.lambda_init,
-            learn_lambda=self.learn_lambda,
-            relevance=self.relevance_kind,
-            relevance_parametrisation=self.relevance_parametrisation,
-            clip_output=self.clip_output,
-            **self.roa_kwargs,
-        )
+        data.update(self.hybrid_constructor_parameters(), clip_output=self.clip_output)
         return data
 
     def forward(self, obs: Tensor) -> Tensor:
@@ -336,23 +450,11 @@ class HybridActor(Actor):
         :math:`\tilde G(a)` exactly at :math:`r(a) = 1`.
         """
         features = self.extract_features(obs, self.features_extractor)
-        hybrid = self.hybrid
-        if hybrid.relevance_module is None:
-            offset = features - hybrid.operating_point
-            distance = offset.square() @ torch.exp(-hybrid.log_lambda)  # (B,)
-            relevance = torch.reciprocal(torch.square(distance + 1.0)).unsqueeze(-1)  # (B, 1)
-        else:  # ROA: exactly 1 on the flat top, where lerp returns G bit for bit; or precision
-            relevance = hybrid.relevance_module(features)  # (B, 1)
-        linear = torch.addmm(hybrid.linear.b, features, hybrid.linear.W.T)  # (B, F)
-        blend = torch.lerp(hybrid.nonlinear(features), linear, relevance)
+        relevance, linear = self.fused_relevance_and_linear(features)
+        blend = torch.lerp(self.hybrid.nonlinear(features), linear, relevance)
         if not self.clip_output:
             return blend
         return torch.clamp(blend, -NORMALISED_LIMIT, NORMALISED_LIMIT)
-
-    def relevance(self, obs: Tensor) -> Tensor:
-        """Relevance :math:`r(x)` of the linear part, shape (B, 1)."""
-        features = self.extract_features(obs, self.features_extractor)
-        return self.hybrid.relevance(features)
 
 
 def initialise_mlp(module: nn.Module, hidden_init: str, last_layer_init: float | None) -> None:
@@ -573,6 +675,47 @@ class LeocTD3Policy(TD3Policy):
         return data
 
 
+#: The ``roa_*`` keyword arguments of the hybrid actors (:func:`roa_relevance_kwargs`).
+ROA_KWARG_NAMES = (
+    "roa_obs_layout",
+    "roa_operating_state",
+    "roa_lyapunov_matrix",
+    "roa_rho_in",
+    "roa_width_init",
+    "learn_width",
+)
+
+
+def hybrid_actor_kwargs(
+    policy_kwargs: dict[str, Any],
+    *,
+    lqr_gain: object,
+    lqr_bias: object,
+    operating_obs: object,
+    lambda_init: float | Sequence[float],
+    learn_lambda: bool,
+    relevance: str,
+    relevance_parametrisation: str,
+) -> dict[str, Any]:
+    """The hybrid actor's keyword arguments of a hybrid policy, JSON-friendly.
+
+    The ``roa_*`` entries (:data:`ROA_KWARG_NAMES`) are *popped* from ``policy_kwargs`` (what is
+    left there is the SB3 policy's own); arrays become lists so that SB3 saves them with the
+    model.
+    """
+    roa = {name: policy_kwargs.pop(name) for name in ROA_KWARG_NAMES if name in policy_kwargs}
+    return {
+        "lqr_gain": np.asarray(lqr_gain, dtype=np.float64).tolist(),
+        "lqr_bias": np.asarray(lqr_bias, dtype=np.float64).tolist(),
+        "operating_obs": np.asarray(operating_obs, dtype=np.float64).tolist(),
+        "lambda_init": lambda_init,
+        "learn_lambda": bool(learn_lambda),
+        "relevance": relevance,
+        "relevance_parametrisation": relevance_parametrisation,
+        **roa,
+    }
+
+
 class HybridTD3Policy(LeocTD3Policy):
     """SB3 TD3/DDPG policy whose actor and target actor are :class:`HybridActor`.
 
@@ -611,25 +754,18 @@ class HybridTD3Policy(LeocTD3Policy):
         clip_output: bool = True,
         **kwargs: Any,
     ) -> None:
-        roa_names = (
-            "roa_obs_layout",
-            "roa_operating_state",
-            "roa_lyapunov_matrix",
-            "roa_rho_in",
-            "roa_width_init",
-            "learn_width",
-        )
-        roa = {name: kwargs.pop(name) for name in roa_names if name in kwargs}
         self.hybrid_kwargs = {
-            "lqr_gain": np.asarray(lqr_gain, dtype=np.float64).tolist(),
-            "lqr_bias": np.asarray(lqr_bias, dtype=np.float64).tolist(),
-            "operating_obs": np.asarray(operating_obs, dtype=np.float64).tolist(),
-            "lambda_init": lambda_init,
-            "learn_lambda": bool(learn_lambda),
-            "relevance": relevance,
-            "relevance_parametrisation": relevance_parametrisation,
+            **hybrid_actor_kwargs(
+                kwargs,
+                lqr_gain=lqr_gain,
+                lqr_bias=lqr_bias,
+                operating_obs=operating_obs,
+                lambda_init=lambda_init,
+                learn_lambda=learn_lambda,
+                relevance=relevance,
+                relevance_parametrisation=relevance_parametrisation,
+            ),
             "clip_output": bool(clip_output),
-            **roa,
         }
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
