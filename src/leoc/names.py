@@ -33,14 +33,28 @@ CONTROLLERS = (
     "ddpg_baseline",
     "ddpg_hybrid",
     "ddpg_hybrid_roa",
+    "sac_baseline",
+    "sac_hybrid",
+    "sac_hybrid_roa",
     "pilco_baseline",
     "pilco_hybrid",
     "pilco_hybrid_roa",
 )
 """Every controller ``leoc reproduce`` knows, in report order."""
-DEFAULT_CONTROLLERS = tuple(name for name in CONTROLLERS if not name.endswith("_roa"))
+FRAMEWORKS = ("ddpg", "sac", "pilco")
+"""The learners of ``leoc reproduce``'s trained controllers (each controller's name starts with
+one), in report order."""
+REQUEST_ONLY_FRAMEWORKS = ("sac",)
+"""Learners whose controllers ``leoc reproduce`` runs only when ``--controllers`` names them
+(the paper has no SAC)."""
+DEFAULT_CONTROLLERS = tuple(
+    name
+    for name in CONTROLLERS
+    if not name.endswith("_roa") and name.split("_")[0] not in REQUEST_ONLY_FRAMEWORKS
+)
 """What ``leoc reproduce`` runs unless ``--controllers`` says otherwise: the paper's controllers
-and the two linear references (the ROA-relevance hybrids are added on request)."""
+and the two linear references (the ROA-relevance hybrids and SAC's controllers are added on
+request)."""
 PROFILE_NAMES = ("quick", "smoke", "paper")
 """The profiles of ``leoc reproduce`` (``leoc.experiments.profiles.PROFILES``, same order)."""
 VARIANT_NAMES = ("leoc", "authors")

@@ -1,4 +1,4 @@
-"""``leoc train``: train a baseline or hybrid controller with PILCO, DDPG or TD3."""
+"""``leoc train``: train a baseline or hybrid controller with PILCO, DDPG, TD3 or SAC."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, non_negative_int, positive_int, system_name
 
-ALGO_CHOICES = ("pilco", "ddpg", "td3")
+ALGO_CHOICES = ("pilco", "ddpg", "td3", "sac")
+MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.ddpg.config.ALGOS, without importing SB3
 DEFAULT_RUNS_DIR = Path("runs")
 
 
@@ -18,9 +19,10 @@ def add_parser(commands: Any) -> None:
         "train",
         help="train a baseline or hybrid controller",
         description="Train a baseline (the learned policy alone) or the LEOC hybrid (LQR near "
-        "the operating point, the learned policy elsewhere) with PILCO, DDPG or TD3. The run "
-        "folder keeps the weights, config, learning curve and checkpoints; rerunning the same "
-        "command resumes an interrupted PILCO run.",
+        "the operating point, the learned policy elsewhere) with PILCO, DDPG, TD3 or SAC (for "
+        "SAC the hybrid is its deterministic action, the squashed mean; it explores with its "
+        "own Gaussian around it). The run folder keeps the weights, config, learning curve and "
+        "checkpoints; rerunning the same command resumes an interrupted PILCO run.",
     )
     train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
@@ -31,13 +33,32 @@ def add_parser(commands: Any) -> None:
         "--iterations", type=positive_int, help="PILCO iterations (default per system)"
     )
     train.add_argument(
-        "--steps", type=positive_int, help="DDPG/TD3 environment steps (default per system)"
+        "--steps",
+        type=positive_int,
+        help="DDPG/TD3/SAC environment steps (default per system: the paper's 10k, 15k for the "
+        "cart-pole)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(run=run)
 
 
+def check_budget_arguments(args: argparse.Namespace) -> None:
+    """``--iterations`` is PILCO's budget and ``--steps`` the model-free learners'; giving one
+    to the other kind of learner is an error (ValueError naming the argument), not a silent
+    default."""
+    if args.algo == "pilco" and args.steps is not None:
+        raise ValueError(
+            f"--steps: only for --algo {'/'.join(MODEL_FREE_ALGOS)}; PILCO's budget is --iterations"
+        )
+    if args.algo in MODEL_FREE_ALGOS and args.iterations is not None:
+        raise ValueError(
+            f"--iterations: only for --algo pilco; the budget of --algo {args.algo} is --steps"
+        )
+
+
 def run(args: argparse.Namespace) -> int:
+    """Train the controller ``args`` describe; prints the run folder."""
+    check_budget_arguments(args)
     kind = "hybrid" if args.hybrid else "baseline"
     run_dir = args.out or DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}_seed{args.seed}"
     if args.algo == "pilco":

@@ -1,4 +1,4 @@
-"""Stable-Baselines3 integration: LEOC hybrid actor/policies for DDPG and TD3, training glue.
+"""Stable-Baselines3 integration: LEOC hybrid actor/policies for DDPG, TD3 and SAC, training glue.
 
 Use the hybrid in plain SB3::
 
@@ -7,8 +7,11 @@ Use the hybrid in plain SB3::
     model = DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs("pendulum"))
 
 or train with the paper's settings through :func:`train_ddpg` (``leoc train SYSTEM --algo ddpg
---hybrid``). The authors' TF-Agents settings (nrjc/LEOC) are :data:`AUTHORS_DDPG` and
-:func:`authors_ddpg_overrides`, overrides of :class:`DDPGConfig` fields.
+--hybrid``). SAC's hybrid is :class:`HybridSACPolicy` (``SAC(HybridSACPolicy, env,
+policy_kwargs=hybrid_policy_kwargs("pendulum"))``, or ``leoc train SYSTEM --algo sac --hybrid``):
+its squashed mean is the same hybrid (:mod:`leoc.ddpg.sac`). The authors' TF-Agents settings
+(nrjc/LEOC) are :data:`AUTHORS_DDPG` and :func:`authors_ddpg_overrides`, overrides of
+:class:`DDPGConfig` fields.
 """
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
@@ -16,6 +19,7 @@ from leoc.ddpg.callbacks import LearningCurveCallback
 from leoc.ddpg.config import (
     ALGOS,
     AUTHORS_DDPG,
+    SAC_DEFAULTS,
     TOTAL_STEPS_BY_SYSTEM,
     DDPGConfig,
     authors_ddpg_overrides,
@@ -31,6 +35,7 @@ from leoc.ddpg.policies import (
     action_box,
     hybrid_policy_kwargs,
 )
+from leoc.ddpg.sac import HybridSACActor, HybridSACPolicy, LeocSAC, SquashedMean
 from leoc.ddpg.train import (
     DDPGResult,
     build_model,
@@ -43,20 +48,25 @@ from leoc.ddpg.train import (
 __all__ = [
     "ALGOS",
     "AUTHORS_DDPG",
+    "SAC_DEFAULTS",
     "TOTAL_STEPS_BY_SYSTEM",
     "AffineOutput",
     "DDPGConfig",
     "DDPGResult",
     "HybridActor",
     "HybridDDPGPolicy",
+    "HybridSACActor",
+    "HybridSACPolicy",
     "HybridTD3Policy",
     "LearningCurveCallback",
     "LeocDDPG",
+    "LeocSAC",
     "LeocTD3",
     "LeocTD3Policy",
     "PhysicalPolicy",
     "SeededOUNoise",
     "SplitCritic",
+    "SquashedMean",
     "action_box",
     "authors_ddpg_overrides",
     "build_model",

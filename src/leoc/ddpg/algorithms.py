@@ -47,7 +47,15 @@ from stable_baselines3.common.utils import polyak_update, update_learning_rate
 
 from leoc.ddpg.config import CRITIC_LOSSES, WARMUPS
 
-__all__ = ["CRITIC_LOSSES", "HUBER_DELTA", "LeocDDPG", "LeocTD3", "WARMUPS", "critic_loss_fn"]
+__all__ = [
+    "CRITIC_LOSSES",
+    "HUBER_DELTA",
+    "ActorRateAndWarmupMixin",
+    "LeocDDPG",
+    "LeocTD3",
+    "WARMUPS",
+    "critic_loss_fn",
+]
 
 NO_TARGET_UPDATE = 0.0  # Polyak coefficient that leaves the targets unchanged
 FULL_PROGRESS = 1.0  # SB3's "progress remaining" at the start of training
@@ -64,10 +72,48 @@ def critic_loss_fn(name: str) -> Any:
     return F.mse_loss
 
 
-class _PaperSettingsMixin:
-    """Separate actor learning rate and target update interval for SB3's TD3 family."""
+class ActorRateAndWarmupMixin:
+    """``actor_learning_rate`` and ``warmup`` for any SB3 off-policy algorithm with an actor.
+
+    Shared by :class:`LeocDDPG`, :class:`LeocTD3` and :class:`leoc.ddpg.sac.LeocSAC`; see the
+    module docstring for the two options. The class that mixes it in sets both attributes
+    (through :meth:`_init_actor_rate_and_warmup`) before SB3 uses them.
+    """
 
     actor_learning_rate: float | None
+    warmup: str
+
+    def _init_actor_rate_and_warmup(self, actor_learning_rate: float | None, warmup: str) -> None:
+        """Validate and set the two options (ValueError naming the argument)."""
+        if warmup not in WARMUPS:
+            raise ValueError(f"warmup: expected one of {WARMUPS}, found {warmup!r}")
+        if actor_learning_rate is not None and not actor_learning_rate > 0:
+            raise ValueError(f"actor_learning_rate: expected > 0, found {actor_learning_rate}")
+        self.warmup = warmup
+        self.actor_learning_rate = actor_learning_rate
+
+    def _update_learning_rate(
+        self, optimizers: list[torch.optim.Optimizer] | torch.optim.Optimizer
+    ) -> None:
+        super()._update_learning_rate(optimizers)  # type: ignore[misc]
+        if getattr(self, "actor_learning_rate", None) is None:
+            return
+        schedule = self.lr_schedule  # type: ignore[attr-defined]
+        ratio = schedule(self._current_progress_remaining) / schedule(FULL_PROGRESS)  # type: ignore[attr-defined]
+        update_learning_rate(self.actor.optimizer, self.actor_learning_rate * ratio)  # type: ignore[attr-defined,operator]
+
+    def _sample_action(
+        self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # warmup="policy": the noisy policy acts from the first step (no uniform phase); the
+        # updates still wait for learning_starts (SB3's learn loop checks it on its own).
+        starts = 0 if getattr(self, "warmup", "uniform") == "policy" else learning_starts
+        return super()._sample_action(starts, action_noise, n_envs)  # type: ignore[misc]
+
+
+class _PaperSettingsMixin(ActorRateAndWarmupMixin):
+    """Separate actor learning rate and target update interval for SB3's TD3 family."""
+
     target_update_interval: int
     polyak: float
 
@@ -93,35 +139,15 @@ class _PaperSettingsMixin:
     def _init_paper_settings(
         self, actor_learning_rate: float | None, target_update_interval: int
     ) -> None:
-        if actor_learning_rate is not None and not actor_learning_rate > 0:
-            raise ValueError(f"actor_learning_rate: expected > 0, found {actor_learning_rate}")
+        self._init_actor_rate_and_warmup(actor_learning_rate, self.warmup)
         if isinstance(target_update_interval, bool) or not (
             isinstance(target_update_interval, int) and target_update_interval >= 1
         ):
             raise ValueError(
                 f"target_update_interval: expected an int >= 1, found {target_update_interval!r}"
             )
-        self.actor_learning_rate = actor_learning_rate
         self.target_update_interval = target_update_interval
         self.polyak = float(self.tau)  # type: ignore[attr-defined]
-
-    def _update_learning_rate(
-        self, optimizers: list[torch.optim.Optimizer] | torch.optim.Optimizer
-    ) -> None:
-        super()._update_learning_rate(optimizers)  # type: ignore[misc]
-        if self.actor_learning_rate is None:
-            return
-        schedule = self.lr_schedule  # type: ignore[attr-defined]
-        ratio = schedule(self._current_progress_remaining) / schedule(FULL_PROGRESS)  # type: ignore[attr-defined]
-        update_learning_rate(self.actor.optimizer, self.actor_learning_rate * ratio)  # type: ignore[attr-defined]
-
-    def _sample_action(
-        self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
-    ) -> tuple[np.ndarray, np.ndarray]:
-        # warmup="policy": the noisy policy acts from the first step (no uniform phase); the
-        # updates still wait for learning_starts (SB3's learn loop checks it on its own).
-        starts = 0 if getattr(self, "warmup", "uniform") == "policy" else learning_starts
-        return super()._sample_action(starts, action_noise, n_envs)  # type: ignore[misc]
 
     def _train_calls(self, gradient_steps: int, batch_size: int) -> None:
         """SB3's own update (MSE loss, clipped target actions), else :meth:`_train_step`."""

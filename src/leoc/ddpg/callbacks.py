@@ -64,13 +64,16 @@ class LearningCurveCallback(BaseCallback):
     progress : bool or "lines"
         True: a tqdm progress bar over the total steps; ``"lines"``: a plain line (for a log
         file) every ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation:
-        ``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``.
+        ``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%`` (the
+        algorithm's name in the brackets: ``label``).
     total_steps : int
         Length of the progress bar.
     model_selection : {"final", "best_last_third"}
         Which actor the model holds at the end of training (see the module docstring).
     selection_start : int
         Evaluations at steps strictly after this one are ``"best_last_third"`` candidates.
+    label : str
+        The learner's name in the progress lines (``ddpg``, ``td3``, ``sac``).
 
     Attributes
     ----------
@@ -93,6 +96,7 @@ class LearningCurveCallback(BaseCallback):
         total_steps: int = 0,
         model_selection: str = "final",
         selection_start: int = 0,
+        label: str = "ddpg",
     ) -> None:
         if model_selection not in MODEL_SELECTIONS:
             raise ValueError(
@@ -110,6 +114,7 @@ class LearningCurveCallback(BaseCallback):
         self.best_return = float("-inf")
         self.model_selection = model_selection
         self.selection_start = int(selection_start)
+        self.label = label
         self.selected_steps: int | None = None
         self._selected_return = float("-inf")
         self._selected_actor: dict[str, Any] | None = None
@@ -143,12 +148,13 @@ class LearningCurveCallback(BaseCallback):
         return True
 
     def progress_line(self) -> str:
-        """``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%``."""
+        """``[LABEL] step K/N (P%), R steps/s, last evaluation: return X, held H%``."""
         steps = int(self.num_timesteps)
         elapsed = max(time.monotonic() - self._started, 1e-9)
         share = steps / self.total_steps if self.total_steps else 0.0
         text = (
-            f"[ddpg] step {steps}/{self.total_steps} ({share:.0%}), {steps / elapsed:.0f} steps/s"
+            f"[{self.label}] step {steps}/{self.total_steps} ({share:.0%}), "
+            f"{steps / elapsed:.0f} steps/s"
         )
         if self._last is not None:
             text += (

@@ -24,6 +24,7 @@ one at a time), each documented with the file it follows.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Literal
 
 from leoc.policies.relevance import (
@@ -32,9 +33,9 @@ from leoc.policies.relevance import (
     RELEVANCE_PARAMETRISATIONS,
 )
 
-#: Model-free learners: Stable-Baselines3's DDPG and TD3.
-ALGOS = ("ddpg", "td3")
-Algo = Literal["ddpg", "td3"]
+#: Model-free learners: Stable-Baselines3's DDPG, TD3 and SAC (each as baseline or hybrid).
+ALGOS = ("ddpg", "td3", "sac")
+Algo = Literal["ddpg", "td3", "sac"]
 
 # Environment steps per run (appendix C: 10000-15000 iterations).
 DEFAULT_TOTAL_STEPS = 10_000
@@ -51,6 +52,43 @@ CRITIC_LOSSES = ("mse", "huber")
 CRITIC_ACTION_UNITS = ("normalised", "physical")
 HIDDEN_INITS = ("torch", "tf_agents")
 MODEL_SELECTIONS = ("final", "best_last_third")
+
+# ------------------------------------------------------------------------------------------- SAC
+#: :meth:`DDPGConfig.for_system` defaults of ``algo="sac"`` where SAC's differ from the paper's
+#: DDPG (Haarnoja et al. 2018, "Soft Actor-Critic Algorithms and Applications", table 1: minibatch
+#: 256, soft target updates with factor 0.005 after every update; rl-baselines3-zoo's
+#: ``hyperparams/sac.yml`` for Pendulum-v1, this pendulum's dynamics: Adam step 1e-3 for the
+#: actor, the critics and the entropy coefficient). What describes the problem, not the learner,
+#: stays the paper's: discount 0.995, 400-300 networks, buffer 1e5, one episode (200 steps) of
+#: uniform actions before the first update, the budgets.
+SAC_DEFAULTS: dict[str, Any] = {
+    "actor_learning_rate": 1e-3,
+    "critic_learning_rate": 1e-3,
+    "batch_size": 256,
+    "polyak": 0.005,
+    "target_update_interval": 1,
+}
+#: Fields of the DDPG/TD3 family that SAC does not use (its exploration is its own Gaussian, its
+#: critics SB3's, its action bounded by the squash): a SAC config must leave them at their
+#: defaults.
+TD3_FAMILY_FIELDS = (
+    "ou_theta",
+    "ou_sigma",
+    "noise_units",
+    "noise_reset",
+    "critic_loss",
+    "critic_action_layer",
+    "critic_action_units",
+    "hidden_init",
+    "last_layer_init",
+    "td3_policy_delay",
+    "td3_target_noise",
+    "td3_target_noise_clip",
+    "actor_output_clip",
+)
+#: Fields only SAC uses: a DDPG or TD3 config must leave them at their defaults.
+SAC_FIELDS = ("sac_entropy_coef", "sac_target_entropy")
+AUTO = "auto"  # SB3's automatic entropy coefficient / target entropy
 
 # --------------------------------------------------------------------------- the authors' DDPG
 # nrjc/LEOC files (read with the search tool's read_file): DDPG/ddpg.py at commit
@@ -167,11 +205,14 @@ class DDPGConfig:
     ----------
     system : str
         System name (``pendulum``, ``cartpole``, ``mountaincar``).
-    algo : {"ddpg", "td3"}
+    algo : {"ddpg", "td3", "sac"}
         Stable-Baselines3 algorithm. DDPG is SB3's TD3 with ``policy_delay=1``, no target
-        policy smoothing and a single critic.
+        policy smoothing and a single critic. SAC (:mod:`leoc.ddpg.sac`) explores with its own
+        entropy-regularised Gaussian: the fields of :data:`TD3_FAMILY_FIELDS` must keep their
+        defaults, and :meth:`for_system` applies :data:`SAC_DEFAULTS`.
     hybrid : bool
-        Whether the actor is the LEOC hybrid ``sat(r G + (1 - r) H)`` or the plain MLP ``H``.
+        Whether the actor is the LEOC hybrid ``sat(r G + (1 - r) H)`` or the plain MLP ``H``
+        (for SAC: whether the squashed mean is).
     total_steps : int
         Environment steps (interaction time ``total_steps * dt`` seconds).
     actor_learning_rate, critic_learning_rate : float
@@ -250,6 +291,12 @@ class DDPGConfig:
     model_selection : {"final", "best_last_third"}
         The run's controller: the actor at the end of training (leoc), or the one of the best
         evaluation after two thirds of the updates (the authors').
+    sac_entropy_coef : "auto", "auto_<init>" or float
+        SAC's entropy coefficient alpha: learned to reach ``sac_target_entropy`` (``"auto"``,
+        starting at 1; ``"auto_0.1"`` starting at 0.1) or fixed (a positive number). SAC only.
+    sac_target_entropy : "auto" or float
+        Target entropy of the automatic tuning (``"auto"``: minus the action dimension,
+        Haarnoja et al. 2018). SAC only.
     step_rules : dict
         Fields of the :class:`~leoc.systems.StepRules` the training and evaluation environments
         step under (empty: leoc's rules; the authors' variant sets theirs).
@@ -296,6 +343,8 @@ class DDPGConfig:
     eval_interval: int = 1_000
     eval_episodes: int = 5
     model_selection: str = "final"
+    sac_entropy_coef: str | float = AUTO
+    sac_target_entropy: str | float = AUTO
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -305,6 +354,8 @@ class DDPGConfig:
             raise ValueError(f"system: expected one of {system_names()}, found {self.system!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo: expected one of {ALGOS}, found {self.algo!r}")
+        if not isinstance(self.hybrid, bool):
+            raise ValueError(f"hybrid: expected a bool, found {self.hybrid!r}")
         positive_ints = (
             "total_steps",
             "batch_size",
@@ -356,6 +407,29 @@ class DDPGConfig:
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts: expected >= 0, found {self.learning_starts}")
         self._check_authors_fields()
+        self._check_algo_fields()
+
+    def _check_algo_fields(self) -> None:
+        """Fields of another algorithm keep their defaults; SAC's own fields are valid."""
+        defaults = {field.name: field.default for field in dataclasses.fields(self)}
+        foreign = TD3_FAMILY_FIELDS if self.algo == "sac" else SAC_FIELDS
+        for name in foreign:
+            if getattr(self, name) != defaults[name]:
+                users = "DDPG and TD3" if self.algo == "sac" else "SAC"
+                raise ValueError(
+                    f"{name}: only {users} use it, so algo={self.algo!r} needs its default "
+                    f"{defaults[name]!r}; found {getattr(self, name)!r}"
+                )
+        _check_entropy_coef(self.sac_entropy_coef)
+        target = self.sac_target_entropy
+        if target != AUTO and (
+            isinstance(target, bool)
+            or not isinstance(target, (int, float))
+            or not math.isfinite(target)
+        ):
+            raise ValueError(
+                f"sac_target_entropy: expected 'auto' or a finite number, found {target!r}"
+            )
 
     def _check_authors_fields(self) -> None:
         """Validate the fields whose alternative values follow the authors' code."""
@@ -401,8 +475,9 @@ class DDPGConfig:
     def for_system(cls, name: str, algo: str = "ddpg", **overrides: Any) -> DDPGConfig:
         """The paper's defaults for system ``name`` and ``algo``, with ``overrides`` applied.
 
-        Per-system default: ``total_steps`` (15k for the cart-pole, 10k otherwise). The hold
-        test is the system's own (``System.hold_step``).
+        Per-system default: ``total_steps`` (15k for the cart-pole, 10k otherwise; SAC's
+        budgets are DDPG's). ``algo="sac"`` starts from :data:`SAC_DEFAULTS` (the overrides
+        still win). The hold test is the system's own (``System.hold_step``).
 
         Raises
         ------
@@ -418,6 +493,7 @@ class DDPGConfig:
             )
         values: dict[str, Any] = {
             "total_steps": TOTAL_STEPS_BY_SYSTEM.get(name, DEFAULT_TOTAL_STEPS),
+            **(SAC_DEFAULTS if algo == "sac" else {}),
         }
         values.update(overrides)
         for key in ("actor_hidden", "critic_hidden"):
@@ -442,3 +518,25 @@ class DDPGConfig:
             if key in values:
                 values[key] = tuple(values[key])
         return cls(**values)
+
+
+def _check_entropy_coef(value: object) -> None:
+    """``sac_entropy_coef``: ``"auto"``, ``"auto_<positive float>"`` or a positive number."""
+    if isinstance(value, str):
+        head, _, tail = value.partition("_")
+        try:
+            valid = head == AUTO and (not tail or float(tail) > 0)
+        except ValueError:
+            valid = False
+    else:
+        valid = (
+            not isinstance(value, bool)
+            and isinstance(value, (int, float))
+            and math.isfinite(value)
+            and value > 0
+        )
+    if not valid:
+        raise ValueError(
+            "sac_entropy_coef: expected 'auto', 'auto_<initial value>' or a positive number, "
+            f"found {value!r}"
+        )

@@ -4,14 +4,18 @@ SB3 actors work in float32 and output normalised actions in [-1, 1]. For evaluat
 robustness sweeps, region of attraction) we want a plain torch module mapping float64
 observations (B, D) to physical actions (B, F). :func:`physical_policy` builds it:
 
-* baseline actor: :math:`\pi(x) = c + h \odot \tanh(\mathrm{MLP}(x))`;
+* baseline actor: :math:`\pi(x) = c + h \odot \tanh(\mathrm{MLP}(x))` (for SAC its
+  deterministic action, the squashed mean :math:`c + h \odot \tanh M(x)`);
 * hybrid actor: :math:`\pi(x) = \operatorname{clip}_{[u_{low}, u_{high}]}(r G + (1 - r) H)`
   with :math:`G(x) = W x + b` from the actor's float64 buffers (the LQR design itself, not its
-  float32 rescaling) and :math:`H = c + h \odot \tanh(\mathrm{MLP})`, so that
-  :math:`\pi(a) = G(a)` and :math:`\partial\pi/\partial x(a) = W` hold to float64 round-off.
+  float32 rescaling) and :math:`H = c + h \odot \tanh(\mathrm{MLP})` (SAC:
+  :math:`c + h \odot \tanh M`), so that :math:`\pi(a) = G(a)` and
+  :math:`\partial\pi/\partial x(a) = W` hold to float64 round-off.
 
 The MLP weights and :math:`\lambda` are the actor's, converted to float64; the result agrees
-with the SB3 actor to float32 precision.
+with the SB3 actor's deterministic action to float32 precision (for the SAC hybrid, whose
+squashed mean is :math:`\tanh\operatorname{atanh}` of the clipped blend, also to
+:math:`\epsilon h` where the clip acts, :mod:`leoc.ddpg.sac`).
 """
 
 from __future__ import annotations
@@ -21,10 +25,12 @@ import math
 
 import numpy as np
 import torch
+from stable_baselines3.sac.policies import Actor as SACActor
 from stable_baselines3.td3.policies import Actor
 from torch import Tensor, nn
 
-from leoc.ddpg.policies import HybridActor, action_box, roa_relevance
+from leoc.ddpg.policies import HybridActorMixin, action_box, roa_relevance
+from leoc.ddpg.sac import SquashedMean
 from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance
 
 __all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
@@ -100,8 +106,10 @@ class PhysicalPolicy(nn.Module):
         return self.hybrid.relevance(x)
 
 
-def physical_policy(actor: Actor) -> PhysicalPolicy:
-    """float64 physical-units copy of an SB3 TD3/DDPG actor (baseline or :class:`HybridActor`).
+def physical_policy(actor: Actor | SACActor) -> PhysicalPolicy:
+    """float64 physical-units copy of an SB3 DDPG/TD3 or SAC actor, baseline or hybrid
+    (:class:`~leoc.ddpg.HybridActor`, :class:`~leoc.ddpg.HybridSACActor`): its deterministic
+    action.
 
     The copy shares nothing with ``actor`` (later training does not change it) and has no
     trainable parameters (all ``requires_grad`` off; gradients with respect to the *input* still
@@ -110,14 +118,16 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
     Raises
     ------
     TypeError
-        If ``actor`` is not an SB3 TD3/DDPG actor.
+        If ``actor`` is not an SB3 DDPG/TD3 or SAC actor.
     """
-    if not isinstance(actor, Actor):
-        raise TypeError(f"actor: expected an SB3 TD3/DDPG Actor, found {type(actor).__name__}")
+    if not isinstance(actor, (Actor, SACActor)):
+        raise TypeError(
+            f"actor: expected an SB3 DDPG/TD3 or SAC Actor, found {type(actor).__name__}"
+        )
     centre, half = action_box(actor.action_space)
     low = np.asarray(actor.action_space.low, dtype=np.float64).reshape(-1)
     high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
-    if isinstance(actor, HybridActor):
+    if isinstance(actor, HybridActorMixin):
         mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
         module = actor.hybrid.relevance_module
         if module is None:
@@ -148,7 +158,8 @@ def physical_policy(actor: Actor) -> PhysicalPolicy:
         )
         policy = PhysicalPolicy(hybrid, low, high, hybrid=hybrid)
     else:
-        mlp = copy.deepcopy(actor.mu).to(device="cpu", dtype=DTYPE)
+        mean = actor.mu if isinstance(actor, Actor) else SquashedMean(actor.latent_pi, actor.mu)
+        mlp = copy.deepcopy(mean).to(device="cpu", dtype=DTYPE)
         policy = PhysicalPolicy(AffineOutput(mlp, centre, half), low, high)
     policy.requires_grad_(False)
     return policy.eval()

@@ -1,4 +1,5 @@
-"""Training glue: ``train_ddpg`` runs SB3's DDPG/TD3 (baseline or LEOC hybrid) on one system.
+"""Training glue: ``train_ddpg`` runs SB3's DDPG, TD3 or SAC (baseline or LEOC hybrid) on one
+system.
 
 Run folder: the trainer contract of :mod:`leoc.training` (every file written atomically)::
 
@@ -34,6 +35,7 @@ from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, action_box, hybrid_policy_kwargs
+from leoc.ddpg.sac import LeocSAC, build_sac_model
 from leoc.io import write_bytes_atomic, write_text_atomic
 from leoc.training import (
     CONFIG_FILE,
@@ -58,6 +60,7 @@ DEFAULT_RUN_ROOT = Path("runs") / "ddpg"
 # Seed offset of the exploration noise's own stream (evaluation: leoc.training).
 NOISE_SEED_OFFSET = 20_000
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
+ALGO_CLASSES = {"ddpg": LeocDDPG, "td3": LeocTD3, "sac": LeocSAC}
 DDPGResult = TrainResult  # the one trainer result (leoc.training)
 
 
@@ -68,8 +71,11 @@ def _atomic_save_model(model: Any, path: Path) -> None:
 
 
 def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
-    """The SB3 model (:class:`LeocDDPG` or :class:`LeocTD3`) of ``config`` on ``env`` (a
-    :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is the one designed for)."""
+    """The SB3 model (:class:`LeocDDPG`, :class:`LeocTD3` or :class:`~leoc.ddpg.LeocSAC`) of
+    ``config`` on ``env`` (a :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is
+    the one designed for)."""
+    if config.algo == "sac":
+        return build_sac_model(config, seed, env)
     system = env.unwrapped.system
     policy_kwargs: dict[str, Any] = {
         "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
@@ -164,18 +170,22 @@ def train_ddpg(
     progress: bool | str = True,
     **overrides: Any,
 ) -> DDPGResult:
-    """Train DDPG or TD3 (baseline MLP actor or LEOC hybrid) on ``system`` and save the run.
+    """Train DDPG, TD3 or SAC (baseline MLP actor or LEOC hybrid) on ``system``; save the run.
 
     Parameters
     ----------
     system : str
         ``pendulum``, ``cartpole`` or ``mountaincar``.
-    algo : {"ddpg", "td3"}
+    algo : {"ddpg", "td3", "sac"}
+        SAC's settings start from :data:`~leoc.ddpg.config.SAC_DEFAULTS`; its budgets are
+        DDPG's.
     hybrid : bool
-        LEOC hybrid actor (LQR blended with the MLP) instead of the plain MLP.
+        LEOC hybrid actor (LQR blended with the MLP) instead of the plain MLP (for SAC: the
+        hybrid squashed mean, :mod:`leoc.ddpg.sac`).
     seed : int
-        The only seed: SB3 (torch, numpy, random, action space), training env, exploration
-        noise (``seed + 20000``) and evaluation starts (``seed + 10000 + k``).
+        The only seed: SB3 (torch, numpy, random, action space; SAC's Gaussian samples),
+        training env, exploration noise (``seed + 20000``, DDPG/TD3) and evaluation starts
+        (``seed + 10000 + k``).
     run_dir : str or Path, optional
         Output folder; default ``runs/ddpg/{system}-{algo}-{hybrid|baseline}-seed{seed}``.
     total_steps : int, optional
@@ -190,6 +200,11 @@ def train_ddpg(
     Returns
     -------
     DDPGResult
+
+    Raises
+    ------
+    ValueError
+        On an unknown ``algo`` or system, or a setting ``algo`` does not use (naming it).
     """
     from leoc.systems import StepRules, make_env, make_system
 
@@ -220,6 +235,7 @@ def train_ddpg(
         total_steps=config.total_steps,
         model_selection=config.model_selection,
         selection_start=last_third_start(config.total_steps, config.learning_starts),
+        label=algo,
     )
     model.learn(total_timesteps=config.total_steps, callback=callback)
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
@@ -243,7 +259,7 @@ def load_ddpg_model(run_dir: str | Path, which: str = "final") -> Any:
         raise ValueError(f"which: expected one of {tuple(MODEL_FILES)}, found {which!r}")
     run_path = Path(run_dir)
     config = read_config(run_path)
-    algo_class = LeocTD3 if config.get("algo") == "td3" else LeocDDPG
+    algo_class = ALGO_CLASSES.get(config.get("algo", "ddpg"), LeocDDPG)
     path = run_path / MODEL_FILES[which]
     if not path.is_file():
         raise FileNotFoundError(f"controller: {path} is missing")

@@ -27,7 +27,7 @@ PRIOR_WEIGHT_S = 60.0
 """Seconds of expected work the prior speed factor (1) is worth."""
 MIN_REMAINING_S = 1.0
 """What a running run that has outlived its expectation is still given."""
-_DDPG = re.compile(r"\[ddpg\] step (\d+)/(\d+)")
+_DDPG = re.compile(r"\[(?:ddpg|td3|sac)\] step (\d+)/(\d+)")
 _PILCO = re.compile(r"\[pilco\] iter\s+(\d+)/(\d+)")
 
 
@@ -50,9 +50,9 @@ class Running(NamedTuple):
 def trainer_progress(line: str) -> float | None:
     """The fraction of a run's training done, from its last log line.
 
-    ``[ddpg] step K/N``: K/N (steps cost alike). ``[pilco] iter K/N``: K(K+1)/(N(N+1)), since
-    an iteration costs about in proportion to the data gathered so far, which grows by one
-    rollout per iteration. None for any other line.
+    ``[ddpg] step K/N`` (or ``[td3]``, ``[sac]``): K/N (steps cost alike).
+    ``[pilco] iter K/N``: K(K+1)/(N(N+1)), since an iteration costs about in proportion to the
+    data gathered so far, which grows by one rollout per iteration. None for any other line.
     """
     match = _DDPG.search(line)
     if match:

@@ -14,14 +14,18 @@ from leoc.systems import SYSTEM_NAMES, system_names
 LINEAR_CONTROLLERS = ("linear", "linear_pilco")
 TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in ("linear", "linear_pilco"))
 # The linear reference of each framework: the LQR designed and run at that framework's control
-# period (DDPG acts every simulator step, PILCO holds each action for ``action_repeat`` steps).
-LINEAR_REFERENCE = {"ddpg": "linear", "pilco": "linear_pilco"}
+# period (DDPG and SAC act every simulator step, PILCO holds each action for ``action_repeat``
+# steps).
+LINEAR_REFERENCE = {"ddpg": "linear", "sac": "linear", "pilco": "linear_pilco"}
 CONTROLLER_LABELS = {
     "linear": "linear (LQR at dt)",
     "linear_pilco": "linear (LQR at PILCO's period)",
     "ddpg_baseline": "DDPG baseline",
     "ddpg_hybrid": "DDPG hybrid",
     "ddpg_hybrid_roa": "DDPG hybrid (ROA relevance)",
+    "sac_baseline": "SAC baseline",
+    "sac_hybrid": "SAC hybrid",
+    "sac_hybrid_roa": "SAC hybrid (ROA relevance)",
     "pilco_baseline": "PILCO baseline",
     "pilco_hybrid": "PILCO hybrid",
     "pilco_hybrid_roa": "PILCO hybrid (ROA relevance)",
@@ -40,11 +44,12 @@ class Profile:
     pilco_iterations : dict system -> int
         PILCO iterations after the random rollouts (None entries: the PILCO default).
     ddpg_steps : dict system -> int
-        DDPG environment steps (None entries: the DDPG default, the paper's 10k / 15k).
+        DDPG environment steps (None entries: the DDPG default, the paper's 10k / 15k); SAC's
+        runs get the same budgets.
     default_pilco_iterations, default_ddpg_steps : int or None
         The budgets of a system missing from the dicts (a user's registered system).
     pilco_overrides, ddpg_overrides : dict
-        Further keyword settings passed to the trainers.
+        Further keyword settings passed to the trainers (``ddpg_overrides`` to SAC's too).
     run_seconds : dict ``"system/controller"`` -> float
         Measured wall time of one run of that kind on one worker (the ETA's expected costs,
         :mod:`leoc.experiments.eta`); kinds not listed: :data:`FALLBACK_RUN_SECONDS` of their
@@ -85,11 +90,11 @@ class Profile:
         return self.pilco_iterations.get(system, self.default_pilco_iterations)
 
     def steps_for(self, system: str) -> int | None:
-        """DDPG steps of ``system`` (None: the DDPG default)."""
+        """DDPG (and SAC) steps of ``system`` (None: the DDPG default)."""
         return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
 
-FALLBACK_RUN_SECONDS = {"linear": 5.0, "ddpg": 120.0, "pilco": 250.0}
+FALLBACK_RUN_SECONDS = {"linear": 5.0, "ddpg": 120.0, "sac": 360.0, "pilco": 250.0}
 """Expected wall time of a run kind a profile has no measurement for (a user's system)."""
 
 # Measured run costs [s]: the median over seeds of each kind's wall time (training and
@@ -228,7 +233,7 @@ class RunSpec(NamedTuple):
 
     @property
     def framework(self) -> str:
-        """``linear``, ``ddpg`` or ``pilco``."""
+        """``linear``, ``ddpg``, ``sac`` or ``pilco``."""
         return "linear" if self.controller in LINEAR_CONTROLLERS else self.controller.split("_")[0]
 
     @property
@@ -263,5 +268,5 @@ def run_specs(
         for controller in controllers
         for seed in (profile.seeds if controller not in LINEAR_CONTROLLERS else (0,))
     ]
-    cost = {"pilco": 2, "ddpg": 1, "linear": 0}
+    cost = {"pilco": 2, "sac": 2, "ddpg": 1, "linear": 0}
     return sorted(specs, key=lambda spec: -cost[spec.framework])

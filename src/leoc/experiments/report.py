@@ -45,6 +45,7 @@ from leoc.experiments.stats import (
     seed_summary,
 )
 from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
+from leoc.names import FRAMEWORKS
 from leoc.systems import make_system, system_names
 from leoc.training import MODEL_SELECTION_TEXT
 
@@ -267,7 +268,7 @@ def improvement_rows(evaluations: Evaluations) -> list[dict[str, Any]]:
     """Probability that the hybrid's final return beats its baseline's, per framework."""
     rows = []
     for system, by_controller in evaluations.items():
-        for framework in ("ddpg", "pilco"):
+        for framework in FRAMEWORKS:
             hybrid = by_controller.get(f"{framework}_hybrid")
             baseline = by_controller.get(f"{framework}_baseline")
             if not hybrid or not baseline:
@@ -844,8 +845,9 @@ def render_markdown(
         f"Model selection: {MODEL_SELECTION_TEXT}. Every controller is evaluated at the control "
         "period it was trained at (the 'period' column: simulator steps per decision; PILCO "
         "holds each action for that many steps), and each hybrid is compared with the LQR "
-        "designed for its own period: DDPG hybrids with *linear (LQR at dt)*, PILCO hybrids "
-        "with *linear (LQR at PILCO's period)*.",
+        "designed for its own period: DDPG and SAC hybrids with *linear (LQR at dt)*, PILCO "
+        "hybrids with *linear (LQR at PILCO's period)*. SAC's controller is its deterministic "
+        "action (the squashed mean), trained at the DDPG budgets.",
         "",
     ]
     aggregated = "; ".join(

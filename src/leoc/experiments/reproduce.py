@@ -150,6 +150,7 @@ def train_controller(
         )
         return variant.linear_controller(system, repeat), None
     # the variant's settings, then the profile's budgets and overrides, then the run's relevance
+    # SAC runs at DDPG's budgets and with the profile's DDPG overrides
     budget = (profile.pilco_iterations if spec.framework == "pilco" else profile.ddpg_steps).get(
         spec.system
     )
@@ -174,7 +175,7 @@ def train_controller(
 
         result = train_ddpg(
             spec.system,
-            algo="ddpg",
+            algo=spec.framework,
             hybrid=spec.hybrid,
             seed=spec.seed,
             run_dir=train_dir,

@@ -27,6 +27,8 @@ field                  leoc (default)                        authors
                                                              files configure it)
 ``pilco``              none (PilcoConfig's defaults)         :func:`authors_pilco_overrides`
                                                              (``dao/trainer.py``, the gin files)
+``sac``                none (SAC's defaults)                 none (the authors ran no SAC: their
+                                                             LQR and step rules, leoc's SAC)
 =====================  ====================================  ===================================
 
 The metric set (leoc's or the authors', :mod:`leoc.evaluation.metric_sets`) is chosen apart
@@ -44,6 +46,7 @@ from torch import nn
 
 from leoc.ddpg.config import authors_ddpg_overrides
 from leoc.evaluation.rollout import RESPONSE_STEPS
+from leoc.names import FRAMEWORKS
 from leoc.pilco.config import authors_pilco_overrides
 from leoc.systems import StepRules, System, make_system
 from leoc.systems.base import DEFAULT_RULES
@@ -77,12 +80,12 @@ class Variant:
         Rules of each system's steps; a system not listed steps under leoc's.
     response_steps : mapping of system name -> int
         Length of the impulse and step records; a system not listed gets 200.
-    ddpg, pilco : callable or None
-        ``settings(system, hybrid, budget) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` or
-        :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none); ``budget`` is
-        the run's training budget (DDPG steps, PILCO iterations) where a profile sets one, else
-        None (the variant's own). The variant's ``lqr_method`` and step rules are added by
-        :meth:`training_settings`.
+    ddpg, sac, pilco : callable or None
+        ``settings(system, hybrid, budget) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` (DDPG,
+        SAC) or :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none);
+        ``budget`` is the run's training budget (DDPG/SAC steps, PILCO iterations) where a
+        profile sets one, else None (the variant's own). The variant's ``lqr_method`` and step
+        rules are added by :meth:`training_settings`.
     """
 
     name: str
@@ -97,26 +100,27 @@ class Variant:
     )
     ddpg: Callable[[str, bool, int | None], dict[str, Any]] | None = None
     pilco: Callable[[str, bool, int | None], dict[str, Any]] | None = None
+    sac: Callable[[str, bool, int | None], dict[str, Any]] | None = None
 
     def training_settings(
         self, framework: str, system: str, hybrid: bool, budget: int | None = None
     ) -> dict[str, Any]:
-        """Config fields of a ``framework`` (``"ddpg"`` or ``"pilco"``) run under this variant:
+        """Config fields of a ``framework`` (:data:`leoc.names.FRAMEWORKS`) run under this variant:
         its framework settings, its LQR design (where it is not leoc's) and its step rules
         (where they are not leoc's), so that leoc's own configs stay as they were.
 
-        ``budget`` (DDPG environment steps or PILCO iterations; None: the variant's or the
+        ``budget`` (DDPG/SAC environment steps or PILCO iterations; None: the variant's or the
         config's own) is the run's training budget; it is set as ``total_steps`` or
         ``iterations`` and the variant's settings that depend on it follow it (the authors'
         PILCO model selection starts after half of the iterations)."""
-        if framework not in ("ddpg", "pilco"):
-            raise ValueError(f"framework: expected 'ddpg' or 'pilco', found {framework!r}")
+        if framework not in FRAMEWORKS:
+            raise ValueError(f"framework: expected one of {FRAMEWORKS}, found {framework!r}")
         if budget is not None and (isinstance(budget, bool) or int(budget) != budget or budget < 1):
             raise ValueError(f"budget: expected a positive integer or None, found {budget!r}")
-        settings_of = self.ddpg if framework == "ddpg" else self.pilco
+        settings_of = {"ddpg": self.ddpg, "sac": self.sac, "pilco": self.pilco}[framework]
         settings = dict(settings_of(system, hybrid, budget)) if settings_of is not None else {}
         if budget is not None:
-            settings["total_steps" if framework == "ddpg" else "iterations"] = int(budget)
+            settings["iterations" if framework == "pilco" else "total_steps"] = int(budget)
         if self.lqr_method != LEOC_LQR_METHOD:
             settings["lqr_method"] = self.lqr_method
         rules = self.rules_for(system)
@@ -156,6 +160,7 @@ class Variant:
             "response_steps": dict(self.response_steps),
             "ddpg": None if self.ddpg is None else self.ddpg.__qualname__,
             "pilco": None if self.pilco is None else self.pilco.__qualname__,
+            "sac": None if self.sac is None else self.sac.__qualname__,
         }
 
 

@@ -1,5 +1,6 @@
 """Learning curves (the paper's figure 6): return against interaction time, baseline and hybrid,
-one row per framework and one column per system."""
+one row per framework (DDPG and PILCO as in the paper; SAC too when the report has its curves)
+and one column per system."""
 
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ from leoc.evaluation.plots.common import (
     new_figure,
     save_figure,
 )
+from leoc.names import FRAMEWORKS
 
-FRAMEWORKS = ("ddpg", "pilco")
+PAPER_FRAMEWORKS = ("ddpg", "pilco")  # rows drawn even without curves (the paper's figure 6)
 KINDS = ("baseline", "hybrid")
 BAND_ALPHA = 0.2
 MARKER_BELOW_POINTS = 20
@@ -60,11 +62,13 @@ def draw_learning_curves(
     """The figure of :func:`plot_learning_curves` (not saved)."""
     labels = dict(labels or {})
     systems = list(curves)
-    figure, axes = new_figure(len(FRAMEWORKS), max(1, len(systems)), (4.2, 3.0))
+    drawn = {key.split("_")[0] for by_controller in curves.values() for key in by_controller}
+    frameworks = [name for name in FRAMEWORKS if name in PAPER_FRAMEWORKS or name in drawn]
+    figure, axes = new_figure(len(frameworks), max(1, len(systems)), (4.2, 3.0))
     kinds_used: set[str] = set()
     counts: set[int] = set()
     for column, system in enumerate(systems):
-        for row, framework in enumerate(FRAMEWORKS):
+        for row, framework in enumerate(frameworks):
             axis = axes[row][column]
             for kind in KINDS:
                 key = f"{framework}_{kind}"
