@@ -415,9 +415,9 @@ class DDPGConfig:
         foreign = TD3_FAMILY_FIELDS if self.algo == "sac" else SAC_FIELDS
         for name in foreign:
             if getattr(self, name) != defaults[name]:
-                users = "DDPG and TD3" if self.algo == "sac" else "SAC"
+                users = "DDPG and TD3 use" if self.algo == "sac" else "SAC uses"
                 raise ValueError(
-                    f"{name}: only {users} use it, so algo={self.algo!r} needs its default "
+                    f"{name}: only {users} it, so algo={self.algo!r} needs its default "
                     f"{defaults[name]!r}; found {getattr(self, name)!r}"
                 )
         _check_entropy_coef(self.sac_entropy_coef)

@@ -1,0 +1,519 @@
+"""Tests of leoc.ddpg.sac: the LEOC hybrid as the squashed mean of Stable-Baselines3's SAC.
+
+References are independent of the code under test: the LQR design recomputed with
+``design_lqr``, the blend recomputed from its formula, autograd Jacobians, Monte Carlo moments
+of SAC's own sampler, closed forms (atanh, tanh).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+from stable_baselines3 import SAC
+from stable_baselines3.common.torch_layers import FlattenExtractor
+
+from leoc.control import design_lqr
+from leoc.ddpg import (
+    SAC_DEFAULTS,
+    DDPGConfig,
+    HybridSACActor,
+    HybridSACPolicy,
+    LeocSAC,
+    hybrid_policy_kwargs,
+    load_ddpg_controller,
+    physical_policy,
+    train_ddpg,
+)
+from leoc.ddpg.sac import squashed_blend_mean
+from leoc.systems import SYSTEM_NAMES, make_env, make_system
+
+SMALL_NET = [32, 32]
+F64_ATOL = 1e-12
+F32_ATOL = 2e-5
+ROA_LEVEL = 0.5  # a flat-top level for the identity tests (certification is not under test)
+LOG_STD_WEIGHT_SCALE = 1e-3  # random log-std head: weights (the hidden features are large)
+LOG_STD_BIAS_SCALE = 0.5  # and bias, so std = exp(N(0, 0.5^2)) roughly
+TINY_RUN = {
+    "total_steps": 240,
+    "learning_starts": 60,
+    "batch_size": 32,
+    "actor_hidden": (16, 16),
+    "critic_hidden": (16, 16),
+    "eval_interval": 120,
+    "eval_episodes": 1,
+    "progress": False,
+}
+
+
+@pytest.fixture(autouse=True)
+def _single_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def _roa_kwargs(system, design) -> dict:
+    """``roa_*`` kwargs at a fixed level (the proof of the level is leoc.control's, not ours)."""
+    return {
+        "roa_obs_layout": system.observation.to_list(),
+        "roa_operating_state": np.asarray(system.operating_state).tolist(),
+        "roa_lyapunov_matrix": np.asarray(design.P).tolist(),
+        "roa_rho_in": ROA_LEVEL,
+        "roa_width_init": 1.0,
+        "learn_width": True,
+    }
+
+
+def _sac_model(system_name: str, relevance: str = "paper", seed: int = 0, **kw) -> SAC:
+    system = make_system(system_name)
+    kwargs = hybrid_policy_kwargs(system, net_arch=SMALL_NET)
+    if relevance == "roa":
+        kwargs.update(relevance="roa", **_roa_kwargs(system, design_lqr(system)))
+    env = make_env(system_name)
+    return SAC(HybridSACPolicy, env, policy_kwargs=kwargs, seed=seed, device="cpu", **kw)
+
+
+def _randomise(actor: HybridSACActor, generator: torch.Generator) -> None:
+    """Random H (mean head and hidden layers far from their initialisation), a random log-std
+    head (small weights: a std of order 1, neither vanishing nor at SB3's cap) and random
+    relevance parameters (Lambda, or the ROA band width)."""
+    with torch.no_grad():
+        for param in actor.hybrid.nonlinear.parameters():
+            param.copy_(torch.randn(param.shape, generator=generator))
+        weight, bias = actor.log_std.weight, actor.log_std.bias
+        weight.copy_(LOG_STD_WEIGHT_SCALE * torch.randn(weight.shape, generator=generator))
+        bias.copy_(LOG_STD_BIAS_SCALE * torch.randn(bias.shape, generator=generator))
+        if actor.hybrid.relevance_module is None:
+            actor.hybrid.log_lambda.copy_(torch.randn(actor.hybrid.log_lambda.shape))
+        else:
+            width = actor.hybrid.relevance_module.width_param
+            width.copy_(torch.randn(width.shape, generator=generator))
+
+
+def _deterministic64(actor: HybridSACActor):
+    """The SB3 actor's own deterministic action in float64, physical units: its mean and
+    log-std heads, then SAC's distribution's deterministic action (tanh of the mean).
+
+    The float64 copy takes observations as its features (SB3's preprocessing would cast them to
+    float32), and its normalised LQR (W / h, (b - c) / h) and operating point are recomputed in
+    float64 from the actor's float64 buffers of W, b and a (the float32 actor holds them rounded
+    to float32)."""
+    actor64 = copy.deepcopy(actor).double()
+    actor64.extract_features = lambda obs, extractor=None: obs
+    low = torch.as_tensor(actor.action_space.low, dtype=torch.float64)
+    high = torch.as_tensor(actor.action_space.high, dtype=torch.float64)
+    centre, half = (high + low) / 2, (high - low) / 2
+    with torch.no_grad():
+        actor64.hybrid.linear.W.copy_(actor.physical_gain / half[:, None])
+        actor64.hybrid.linear.b.copy_((actor.physical_bias - centre) / half)
+        actor64.hybrid.operating_point.copy_(actor.operating_obs)
+        module = actor64.hybrid.relevance_module
+        if module is not None and hasattr(module, "operating_point"):  # precision relevance
+            module.operating_point.copy_(actor.operating_obs)
+
+    def action(obs: torch.Tensor) -> torch.Tensor:
+        mean, log_std, _ = actor64.get_action_dist_params(obs)
+        squashed = actor64.action_dist.actions_from_params(mean, log_std, deterministic=True)
+        return centre + half * squashed
+
+    return action
+
+
+# ------------------------------------------------------------------------------- identities
+
+
+@pytest.mark.parametrize(
+    ("system_name", "relevance"),
+    [(name, "paper") for name in SYSTEM_NAMES] + [("mountaincar", "roa"), ("cartpole", "roa")],
+)
+def test_identities_at_the_operating_point_after_squashing(system_name, relevance):
+    system = make_system(system_name)
+    design = design_lqr(system)  # independent reference for G(x) = W x + b
+    model = _sac_model(system_name, relevance)
+    _randomise(model.actor, torch.Generator().manual_seed(7))
+    point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
+    expected = design.W @ system.operating_obs + design.b
+    for action in (physical_policy(model.actor), _deterministic64(model.actor)):
+        value = action(point[None, :])[0]
+        np.testing.assert_allclose(value.detach().numpy(), expected, rtol=0, atol=F64_ATOL)
+        jacobian = torch.autograd.functional.jacobian(lambda x, f=action: f(x[None, :])[0], point)
+        np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=1e-10)
+    # SAC's float32 actor inside SB3: the same identities in normalised units u / u_max
+    limit = system.action_limit
+    point32 = point.float()[None, :]
+    with torch.no_grad():
+        value32 = model.actor(point32, deterministic=True)[0].double() * limit
+    np.testing.assert_allclose(value32.numpy(), expected, rtol=0, atol=F32_ATOL)
+    jacobian32 = torch.autograd.functional.jacobian(
+        lambda x: model.actor(x[None, :], deterministic=True)[0], point32[0]
+    )
+    np.testing.assert_allclose(jacobian32.double().numpy() * limit, design.W, rtol=1e-4, atol=1e-4)
+
+
+def test_identities_with_an_asymmetric_box_where_g_of_a_is_not_zero():
+    """G(a) = 1.3 in a box [-1, 3] (normalised G(a) = 0.15): value and slope survive the
+    atanh / tanh pair, for the paper's relevance in both parametrisations."""
+    generator = torch.Generator().manual_seed(5)
+    gain = np.array([[0.7, -1.1, 0.4]])
+    point = np.array([0.2, -0.5, 1.0])
+    bias = np.array([1.3]) - gain @ point
+    box = spaces.Box(low=-1.0, high=3.0, shape=(1,), dtype=np.float32)
+    obs_space = spaces.Box(low=-10.0, high=10.0, shape=(3,), dtype=np.float32)
+    for parametrisation in ("log_lambda", "precision"):
+        actor = HybridSACActor(
+            obs_space,
+            box,
+            SMALL_NET,
+            FlattenExtractor(obs_space),
+            3,
+            lqr_gain=gain,
+            lqr_bias=bias,
+            operating_obs=point,
+            lambda_init=0.3,
+            relevance_parametrisation=parametrisation,
+        )
+        with torch.no_grad():
+            for param in actor.hybrid.nonlinear.parameters():
+                param.copy_(2.0 * torch.randn(param.shape, generator=generator))
+        point64 = torch.as_tensor(point)
+        for action in (physical_policy(actor), _deterministic64(actor)):
+            np.testing.assert_allclose(
+                action(point64[None])[0].detach().numpy(), [1.3], rtol=0, atol=F64_ATOL
+            )
+            jacobian = torch.autograd.functional.jacobian(
+                lambda x, f=action: f(x[None])[0], point64
+            )
+            np.testing.assert_allclose(jacobian.numpy(), gain, rtol=0, atol=1e-10)
+
+
+def test_squashed_mean_is_the_ddpg_blend_away_from_the_operating_point():
+    """tanh(mu) = clip(r G~ + (1 - r) tanh M), recomputed from the formula (relevance from
+    Lambda, G from the LQR design, M from SB3's layers), on states far and near."""
+    system = make_system("cartpole")
+    design = design_lqr(system)
+    model = _sac_model("cartpole")
+    generator = torch.Generator().manual_seed(3)
+    _randomise(model.actor, generator)
+    actor = model.actor
+    obs = torch.as_tensor(system.operating_obs) + torch.randn(
+        256, system.obs_dim, generator=generator, dtype=torch.float64
+    ) * torch.logspace(-2, 0.5, 256, dtype=torch.float64).unsqueeze(1)
+    lam = torch.exp(actor.hybrid.log_lambda.detach()).double()
+    distance = ((obs - torch.as_tensor(system.operating_obs)) ** 2 / lam).sum(1, keepdim=True)
+    relevance = 1.0 / (1.0 + distance) ** 2
+    limit = system.action_limit
+    linear = (obs @ torch.as_tensor(design.W).T + torch.as_tensor(design.b)) / limit
+    layers = copy.deepcopy(actor.hybrid.nonlinear).double()
+    with torch.no_grad():
+        pre_squash = layers.mean(layers.latent(obs))
+        expected = (relevance * linear + (1 - relevance) * torch.tanh(pre_squash)).clamp(-1, 1)
+        inside_sb3 = actor(obs.float(), deterministic=True).double()
+        physical = physical_policy(actor)(obs) / limit
+    np.testing.assert_allclose(inside_sb3.numpy(), expected.numpy(), rtol=0, atol=F32_ATOL)
+    np.testing.assert_allclose(physical.numpy(), expected.numpy(), rtol=0, atol=F32_ATOL)
+    assert float((expected.abs() > 0.999).double().mean()) > 0  # the clip is exercised
+    assert float(((relevance > 0.05) & (relevance < 0.95)).double().mean()) > 0.1  # the blend
+
+
+def test_squashed_blend_mean_known_answers():
+    g = torch.linspace(-0.99, 0.99, 41, dtype=torch.float64).unsqueeze(1)
+    m = torch.linspace(-8.0, 8.0, 41, dtype=torch.float64).unsqueeze(1)
+    ones, zeros = torch.ones_like(g), torch.zeros_like(g)
+    # r = 1: atanh(G~) exactly, whatever M; r = 0: SB3's own mean M
+    np.testing.assert_allclose(
+        squashed_blend_mean(g, m, ones), torch.atanh(g), rtol=1e-14, atol=1e-15
+    )
+    np.testing.assert_allclose(squashed_blend_mean(g, m, zeros), m, rtol=1e-13, atol=1e-13)
+    # float32 keeps M to relative round-off where atanh(tanh(M)) has lost its digits
+    m32 = torch.tensor([[6.5], [7.5], [-7.9]])
+    kept = squashed_blend_mean(torch.zeros_like(m32), m32, torch.zeros_like(m32))
+    np.testing.assert_allclose(kept, m32, rtol=1e-5)
+    assert float((torch.atanh(torch.tanh(m32)) - m32).abs().max()) > 1e-2  # the naive way
+    # G~ outside the box: the clip, |mu| = atanh(1 - eps), and no NaN with or without blend
+    outside = torch.tensor([[3.0], [-5.0]], dtype=torch.float64)
+    r = torch.tensor([[1.0], [0.9]], dtype=torch.float64)
+    mu = squashed_blend_mean(outside, torch.zeros_like(outside), r)
+    bound = math.atanh(1.0 - torch.finfo(torch.float64).eps)
+    np.testing.assert_allclose(mu.abs().numpy(), [[bound], [bound]], rtol=1e-6)
+    assert torch.all(torch.sign(mu) == torch.sign(outside))
+
+
+@pytest.mark.parametrize("system_name", ["cartpole", "mountaincar"])
+def test_the_flat_top_action_is_g_exactly(system_name):
+    """ROA relevance: r == 1 on V <= rho_in; where also |G| is inside the limits, SAC's own
+    deterministic action (float64) and the physical policy are G to 1e-12."""
+    system = make_system(system_name)
+    design = design_lqr(system)
+    model = _sac_model(system_name, "roa")
+    _randomise(model.actor, torch.Generator().manual_seed(3))
+    rng = np.random.default_rng(0)
+    directions = rng.standard_normal((512, system.state_dim))
+    levels = rng.uniform(0.0, 0.999, 512) * ROA_LEVEL
+    scales = np.sqrt(levels / np.einsum("bi,ij,bj->b", directions, design.P, directions))
+    states = system.operating_state + scales[:, None] * directions
+    obs = system.observe(torch.as_tensor(states))
+    linear = obs.numpy() @ design.W.T + design.b
+    inside = np.abs(linear[:, 0]) < 0.95 * system.action_limit
+    assert inside.sum() > 100
+    obs, linear = obs[inside], linear[inside]
+    with torch.no_grad():
+        assert torch.equal(model.actor.relevance(obs.float()), torch.ones(len(obs), 1))
+        for action in (physical_policy(model.actor), _deterministic64(model.actor)):
+            np.testing.assert_allclose(action(obs).numpy(), linear, rtol=0, atol=F64_ATOL)
+
+
+# ------------------------------------------------------------------------------ exploration
+
+
+def test_sampled_actions_are_sacs_gaussian_around_the_deterministic_one():
+    """Monte Carlo: the pre-tanh samples have mean atanh(deterministic action) and SAC's std
+    exp(log_std head), at the operating point and away from it."""
+    system = make_system("pendulum")
+    model = _sac_model("pendulum")
+    _randomise(model.actor, torch.Generator().manual_seed(11))
+    actor = model.actor
+    samples = 40_000
+    for state in (system.operating_state, np.array([0.8, -1.5])):
+        obs = system.observe(torch.as_tensor(state)[None]).float()
+        with torch.no_grad():
+            deterministic = actor(obs, deterministic=True)  # (1, 1), normalised
+            latent = actor.hybrid.nonlinear.latent(obs)
+            std = torch.exp(actor.log_std(latent).clamp(-20, 2))  # SB3's clamp of the head
+            torch.manual_seed(0)
+            sampled = actor(obs.expand(samples, -1), deterministic=False)
+            pre_tanh = actor.action_dist.gaussian_actions
+        centre = torch.atanh(deterministic.double())
+        assert torch.allclose(torch.tanh(pre_tanh), sampled)
+        mean = pre_tanh.double().mean(0)
+        spread = pre_tanh.double().std(0)
+        standard_error = float(std) / math.sqrt(samples)
+        assert abs(float(mean - centre)) < 5 * standard_error, (mean, centre, std)
+        assert abs(float(spread / std) - 1.0) < 0.02
+        assert float(std) > 0.05  # the head is random, not vanishing: the check has teeth
+
+
+# ------------------------------------------------------------------------ training, saving
+
+
+def test_training_moves_mean_log_std_lambda_and_entropy_and_repeats_exactly(tmp_path):
+    def run():
+        model = _sac_model("pendulum", seed=4, learning_starts=20, batch_size=16)
+        before = copy.deepcopy(model.actor.state_dict())
+        coef_before = float(model.log_ent_coef.detach())
+        model.learn(60)
+        return model, before, coef_before
+
+    model, before, coef_before = run()
+    after = model.actor.state_dict()
+    for name in ("hybrid.log_lambda", "log_std.weight", "hybrid.nonlinear.mean.weight"):
+        assert not torch.equal(before[name], after[name]), name
+    assert float(model.log_ent_coef.detach()) != coef_before
+    again, _, _ = run()
+    for name, value in after.items():
+        assert torch.equal(value, again.actor.state_dict()[name]), name
+    # SB3's save/load rebuilds the hybrid actor with its learned parameters
+    model.save(tmp_path / "sac.zip")
+    loaded = LeocSAC.load(tmp_path / "sac.zip", device="cpu")
+    assert isinstance(loaded.actor, HybridSACActor)
+    probe = torch.randn(16, 3, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        assert torch.equal(loaded.actor(probe, True), model.actor(probe, True))
+
+
+def test_actor_learning_rate_and_target_update_interval():
+    env = make_env("pendulum")
+    model = LeocSAC(
+        "MlpPolicy",
+        env,
+        learning_rate=1e-3,
+        actor_learning_rate=2e-4,
+        target_update_interval=3,
+        learning_starts=16,
+        batch_size=8,
+        policy_kwargs={"net_arch": [8]},
+        seed=0,
+        device="cpu",
+    )
+    model.learn(16)  # fill the buffer; no update yet
+    assert model._n_updates == 0
+    changed = []
+    for _ in range(6):
+        target = [p.detach().clone() for p in model.critic_target.parameters()]
+        model.train(gradient_steps=1, batch_size=8)
+        moved = any(
+            not torch.equal(a, b)
+            for a, b in zip(target, model.critic_target.parameters(), strict=True)
+        )
+        changed.append(moved)
+    assert changed == [False, False, True, False, False, True]
+    assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(2e-4)
+    assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(1e-3)
+    assert model.tau == model.polyak
+
+
+def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):
+    result = train_ddpg(
+        "mountaincar", algo="sac", hybrid=True, seed=2, run_dir=tmp_path, **TINY_RUN
+    )
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["algo"] == "sac" and config["hybrid"] is True
+    assert config["polyak"] == SAC_DEFAULTS["polyak"] and config["total_steps"] == 240
+    assert [row["steps"] for row in result.curve] == [0, 120, 240]
+    policy = load_ddpg_controller(tmp_path)
+    assert policy.is_hybrid
+    obs = torch.randn(8, 2, dtype=torch.float64)
+    torch.testing.assert_close(policy(obs), result.policy(obs), rtol=0, atol=0)
+
+
+# ----------------------------------------------------------------------------- config, CLI
+
+
+def test_sac_config_defaults_leave_ddpg_unchanged():
+    ddpg = DDPGConfig.for_system("cartpole")
+    sac = DDPGConfig.for_system("cartpole", algo="sac")
+    assert sac.total_steps == ddpg.total_steps == 15_000  # the same budgets
+    for name, value in SAC_DEFAULTS.items():
+        assert getattr(sac, name) == value
+    assert (ddpg.batch_size, ddpg.polyak, ddpg.actor_learning_rate) == (64, 0.05, 5e-4)
+    assert sac.actor_hidden == sac.critic_hidden == (400, 300)
+    assert sac.sac_entropy_coef == "auto" and sac.step_rules == {}
+    assert DDPGConfig.for_system("pendulum", algo="sac", batch_size=64).batch_size == 64
+    assert DDPGConfig.from_dict(sac.as_dict()) == sac
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"algo": "ppo"}, "algo: expected one of"),
+        ({"algo": "sac", "ou_sigma": 0.3}, "ou_sigma: only DDPG and TD3 use it"),
+        ({"algo": "sac", "actor_output_clip": False}, "actor_output_clip: only DDPG and TD3"),
+        ({"algo": "td3", "sac_entropy_coef": 0.1}, "sac_entropy_coef: only SAC uses it"),
+        ({"algo": "sac", "sac_entropy_coef": "auto_x"}, "sac_entropy_coef: expected 'auto'"),
+        ({"algo": "sac", "sac_entropy_coef": -1.0}, "sac_entropy_coef: expected 'auto'"),
+        ({"algo": "sac", "sac_target_entropy": "low"}, "sac_target_entropy: expected"),
+        ({"algo": "sac", "hybrid": "yes"}, "hybrid: expected a bool"),
+    ],
+)
+def test_bad_config_is_an_error_naming_the_field(overrides, message):
+    algo = overrides.pop("algo")
+    with pytest.raises(ValueError, match=message):
+        DDPGConfig.for_system("pendulum", algo=algo, **overrides)
+
+
+def test_what_cannot_be_a_sac_hybrid_is_refused():
+    kwargs = hybrid_policy_kwargs("pendulum", net_arch=SMALL_NET)
+    with pytest.raises(ValueError, match="use_sde: the SAC hybrid needs"):
+        SAC(HybridSACPolicy, make_env("pendulum"), policy_kwargs=kwargs, use_sde=True)
+    with pytest.raises(ValueError, match="clip_output: the SAC hybrid"):
+        SAC(HybridSACPolicy, make_env("pendulum"), policy_kwargs={**kwargs, "clip_output": False})
+    with pytest.raises(ValueError, match="relevance: expected one of"):
+        SAC(HybridSACPolicy, make_env("pendulum"), policy_kwargs={**kwargs, "relevance": "flat"})
+    with pytest.raises(ValueError, match="algo: expected one of"):
+        train_ddpg("pendulum", algo="pilco", hybrid=True, run_dir=None, progress=False)
+
+
+def test_cli_trains_a_sac_hybrid_that_simulate_reads(tmp_path, monkeypatch, capsys):
+    from leoc.cli import main
+
+    # tiny networks and batches through the command's own defaults
+    tiny = {"actor_hidden": (16, 16), "critic_hidden": (16, 16), "batch_size": 32}
+    for name, value in tiny.items():
+        monkeypatch.setitem(SAC_DEFAULTS, name, value)
+    out = tmp_path / "sac"
+    argv = ["train", "pendulum", "--algo", "sac", "--hybrid", "--steps", "300", "--out", str(out)]
+    assert main([*argv, "--quiet", "--seed", "3"]) == 0
+    config = json.loads((out / "config.json").read_text())
+    assert (config["algo"], config["hybrid"], config["actor_hidden"]) == ("sac", True, [16, 16])
+    capsys.readouterr()
+    assert main(["simulate", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["system"], report["controller"]) == ("pendulum", str(out))
+    assert len(report["deviation"]) == make_system("pendulum").episode_steps + 1
+    assert "steady_state_error" in report["metrics"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--algo", "sac", "--iterations", "3"], "--iterations: only for --algo pilco"),
+        (["--algo", "pilco", "--steps", "300"], "--steps: only for --algo ddpg/td3/sac"),
+        (["--algo", "ppo"], "invalid choice: 'ppo'"),
+    ],
+)
+def test_cli_budget_and_algo_errors_name_the_argument(argv, expected, capsys):
+    from leoc.cli import main
+
+    try:
+        status = main(["train", "pendulum", *argv])
+    except SystemExit as stop:
+        status = stop.code
+    assert status == 2
+    assert expected in capsys.readouterr().err
+
+
+def test_progress_lines_name_sac_and_the_eta_reads_them():
+    from leoc.ddpg.callbacks import LearningCurveCallback
+    from leoc.experiments.eta import trainer_progress
+
+    callback = LearningCurveCallback(
+        make_system("pendulum"),
+        np.zeros((1, 2)),
+        500,
+        progress="lines",
+        total_steps=1000,
+        label="sac",
+    )
+    callback.num_timesteps = 250
+    line = callback.progress_line()
+    assert line.startswith("[sac] step 250/1000 (25%)")
+    assert trainer_progress(line) == 0.25
+
+
+# ---------------------------------------------------------------------------------- reproduce
+
+
+def test_sac_controllers_are_named_but_not_default():
+    from leoc.experiments.profiles import LINEAR_REFERENCE, RunSpec
+    from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS
+
+    for name in ("sac_baseline", "sac_hybrid", "sac_hybrid_roa"):
+        assert name in CONTROLLERS and name not in DEFAULT_CONTROLLERS
+    spec = RunSpec("cartpole", "sac_hybrid_roa", 1)
+    assert (spec.framework, spec.hybrid, spec.relevance) == ("sac", True, "roa")
+    assert LINEAR_REFERENCE["sac"] == "linear"
+
+
+@pytest.mark.slow
+def test_reproduce_smoke_gives_a_sac_hybrid_row(tmp_path):
+    from leoc.experiments.reproduce import reproduce
+
+    path = reproduce(
+        tmp_path,
+        profile_name="smoke",
+        systems=["pendulum"],
+        controllers=["linear", "sac_hybrid"],
+        jobs=1,
+        echo=lambda _: None,
+    )
+    results = json.loads((tmp_path / "results.json").read_text())
+    rows = [row for row in results["responses"] if row["controller"] == "sac_hybrid"]
+    assert {row["test"] for row in rows} == {"impulse", "step"}
+    run = json.loads(
+        (tmp_path / "runs" / "pendulum" / "sac_hybrid" / "seed0" / "evaluation.json").read_text()
+    )
+    assert run["spec"]["controller"] == "sac_hybrid" and run["curve"]["seconds"]
+    train_config = json.loads(
+        (
+            tmp_path / "runs" / "pendulum" / "sac_hybrid" / "seed0" / "train" / "config.json"
+        ).read_text()
+    )
+    assert train_config["algo"] == "sac" and train_config["total_steps"] == 400
+    report = path.read_text()
+    assert "SAC hybrid" in report
