@@ -297,7 +297,7 @@ def test_config_defaults_and_overrides():
     with pytest.raises(ValueError, match="unknown DDPGConfig fields"):
         DDPGConfig.for_system("pendulum", bogus=1)
     with pytest.raises(ValueError, match="algo"):
-        DDPGConfig.for_system("pendulum", "sac")
+        DDPGConfig.for_system("pendulum", "ppo")
     assert DDPGConfig.from_dict(pendulum.as_dict()) == pendulum
 
 
