@@ -177,7 +177,7 @@ def train_ddpg(
     system : str
         ``pendulum``, ``cartpole`` or ``mountaincar``.
     algo : {"ddpg", "td3", "sac"}
-        SAC's settings start from :data:`~leoc.ddpg.config.SAC_DEFAULTS`; its budgets are
+        SAC's settings start from :data:`~leoc.ddpg.SAC_DEFAULTS`; its budgets are
         DDPG's.
     hybrid : bool
         LEOC hybrid actor (LQR blended with the MLP) instead of the plain MLP (for SAC: the

@@ -105,7 +105,7 @@ class Variant:
     def training_settings(
         self, framework: str, system: str, hybrid: bool, budget: int | None = None
     ) -> dict[str, Any]:
-        """Config fields of a ``framework`` (:data:`leoc.names.FRAMEWORKS`) run under this variant:
+        """Config fields of a ``framework`` (``leoc.names.FRAMEWORKS``) run under this variant:
         its framework settings, its LQR design (where it is not leoc's) and its step rules
         (where they are not leoc's), so that leoc's own configs stay as they were.
 
