@@ -1,12 +1,14 @@
-"""Training speed of SB3 DDPG/TD3 with the LEOC hybrid actor against the baseline MLP actor.
+"""Training speed of SB3 DDPG/TD3/SAC with the LEOC hybrid actor against the baseline MLP actor.
 
 Measures environment steps per second of ``model.learn`` (environment stepping, action
 selection, replay and one gradient update per step: everything training does) with the paper's
-settings (400-300 actor and critic, batch 64), evaluation switched off. A hybrid and a baseline
-model train side by side in one process, alternating chunks of 100 steps (A B B A ...), so that
-the load of a shared machine hits both alike; the overhead is the median of the per-chunk time
-ratios (and, for reference, the ratio of total times). Also prints the cost of one actor forward and
-backward pass on a batch of 64 (the part the hybrid changes) and of one ``predict`` call.
+settings (400-300 actor and critic, batch 64; SAC: its own settings, batch 256), evaluation
+switched off. A hybrid and a baseline model train side by side in one process, alternating
+chunks of 100 steps (A B B A ...), so that the load of a shared machine hits both alike; the
+overhead is the median of the per-chunk time ratios (and, for reference, the ratio of total
+times). Also prints the cost of one actor forward and backward pass on a batch of 64 (the part
+the hybrid changes) and of one ``predict`` call. ``benchmarks/bench_sac.py`` sets SAC's cost
+beside DDPG's.
 
 Usage::
 
@@ -83,7 +85,7 @@ def time_actor(system: str, algo: str, hybrid: bool) -> tuple[float, float]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--system", default="pendulum")
-    parser.add_argument("--algo", default="ddpg", choices=["ddpg", "td3"])
+    parser.add_argument("--algo", default="ddpg", choices=["ddpg", "td3", "sac"])
     parser.add_argument("--steps", type=int, default=2000, help="timed steps per run")
     parser.add_argument("--chunk", type=int, default=100, help="steps per alternation")
     parser.add_argument("--repeats", type=int, default=2, help="pairs of fresh models")
