@@ -811,6 +811,25 @@ def machine_line(machine: dict[str, Any] | None) -> str:
     )
 
 
+def _has_sac(evaluations: Evaluations) -> bool:
+    return any(c.startswith("sac_") for by_c in evaluations.values() for c in by_c)
+
+
+def _dt_hybrids(evaluations: Evaluations) -> str:
+    """The hybrids compared with the LQR at dt: DDPG's, and SAC's when the report has them."""
+    return "DDPG and SAC hybrids" if _has_sac(evaluations) else "DDPG hybrids"
+
+
+def _sac_note(evaluations: Evaluations) -> str:
+    """What a SAC controller is, said only in a report that has one."""
+    if not _has_sac(evaluations):
+        return ""
+    return (
+        " A SAC controller is SAC's deterministic action (its squashed mean), trained at the "
+        "DDPG budgets."
+    )
+
+
 def render_markdown(
     meta: dict[str, Any],
     evaluations: Evaluations,
@@ -845,9 +864,8 @@ def render_markdown(
         f"Model selection: {MODEL_SELECTION_TEXT}. Every controller is evaluated at the control "
         "period it was trained at (the 'period' column: simulator steps per decision; PILCO "
         "holds each action for that many steps), and each hybrid is compared with the LQR "
-        "designed for its own period: DDPG and SAC hybrids with *linear (LQR at dt)*, PILCO "
-        "hybrids with *linear (LQR at PILCO's period)*. SAC's controller is its deterministic "
-        "action (the squashed mean), trained at the DDPG budgets.",
+        f"designed for its own period: {_dt_hybrids(evaluations)} with *linear (LQR at dt)*, "
+        "PILCO hybrids with *linear (LQR at PILCO's period)*." + _sac_note(evaluations),
         "",
     ]
     aggregated = "; ".join(
