@@ -372,7 +372,33 @@ def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):
     torch.testing.assert_close(policy(obs), result.policy(obs), rtol=0, atol=0)
 
 
+def test_baseline_physical_policy_is_sacs_deterministic_action():
+    model = SAC("MlpPolicy", make_env("cartpole"), policy_kwargs={"net_arch": SMALL_NET}, seed=1)
+    obs = torch.randn(32, 5, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    limit = make_system("cartpole").action_limit
+    policy = physical_policy(model.actor)
+    assert not policy.is_hybrid
+    with torch.no_grad():
+        expected = model.actor(obs.float(), deterministic=True).double() * limit
+        predicted = model.predict(obs.float().numpy(), deterministic=True)[0]  # physical
+        np.testing.assert_allclose(policy(obs).numpy(), expected.numpy(), rtol=0, atol=F32_ATOL)
+    np.testing.assert_allclose(policy(obs).numpy(), predicted, rtol=0, atol=F32_ATOL)
+
+
 # ----------------------------------------------------------------------------- config, CLI
+
+
+def test_variants_give_sac_their_lqr_and_rules_but_no_ddpg_settings():
+    from leoc.experiments.variants import AUTHORS, LEOC
+
+    assert LEOC.training_settings("sac", "cartpole", True, 400) == {"total_steps": 400}
+    settings = AUTHORS.training_settings("sac", "cartpole", True, 400)
+    assert settings["lqr_method"] == "authors" and settings["total_steps"] == 400
+    assert settings["step_rules"]["exit_penalty"] == -100.0
+    config = DDPGConfig.for_system("cartpole", "sac", hybrid=True, **settings)
+    assert config.ou_sigma == DDPGConfig.ou_sigma and config.batch_size == 256
+    with pytest.raises(ValueError, match="framework: expected one of"):
+        LEOC.training_settings("ppo", "cartpole", True)
 
 
 def test_sac_config_defaults_leave_ddpg_unchanged():
