@@ -12,7 +12,7 @@ or train with the paper's settings through :func:`train_ddpg` (``leoc train SYST
 """
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import LearningCurveCallback
+from leoc.ddpg.callbacks import HeldOutEvaluationCallback, LearningCurveCallback
 from leoc.ddpg.config import (
     ALGOS,
     AUTHORS_DDPG,
@@ -47,6 +47,7 @@ __all__ = [
     "AffineOutput",
     "DDPGConfig",
     "DDPGResult",
+    "HeldOutEvaluationCallback",
     "HybridActor",
     "HybridDDPGPolicy",
     "HybridTD3Policy",
