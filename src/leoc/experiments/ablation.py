@@ -157,6 +157,8 @@ TRAIN_DIR = "train"
 # Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.
 # profiles.PAPER_RUN_SECONDS over the paper's budgets); the ETA's prior before runs finish.
 FALLBACK_SECONDS_PER_KSTEP = 12.0
+# Decimals of the held-out returns in a record (they are reported, not tested on).
+RETURN_DECIMALS = 3
 #: Evaluation interval of a system the authors did not run (environment steps).
 DEFAULT_INTERVAL = 500
 # Fields a run's identity fixes: the plan's overrides may not set them.
@@ -467,7 +469,7 @@ def _evaluations(curve: Sequence[Mapping[str, Any]], held_out: Sequence[Mapping[
             "steps": int(row["steps"]),
             "selection_return": float(row["mean_return"]),
             "selection_held_fraction": float(row["held_fraction"]),
-            "test_returns": [float(value) for value in test["returns"]],
+            "test_returns": [round(float(value), RETURN_DECIMALS) for value in test["returns"]],
             "test_hold_steps": list(test["hold_steps"]),
         }
         for row, test in zip(curve, held_out, strict=True)

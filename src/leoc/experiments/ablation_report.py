@@ -56,7 +56,7 @@ CSV_COLUMNS = (
     "reached",
 )
 #: Spacing of the budget columns in the markdown's success-against-budget tables (steps).
-DEFAULT_TABLE_EVERY = 2_000
+DEFAULT_TABLE_EVERY = 1_000
 MAX_LOG_BYTES = 256 * 1024
 DECIMALS = 4
 SUCCESS_TEXT = (
@@ -196,25 +196,45 @@ def _at(rates: Sequence[CellRate]) -> dict[tuple[str, str, str, int], CellRate]:
     return {(c.system, c.controller, c.setting, c.budget): c for c in rates}
 
 
-def paper_budget_tables(rates: Sequence[CellRate]) -> list[str]:
-    """Markdown: per system, settings x controllers, success at the paper's budget and the
-    reached count."""
+def headline_budget(rates: Sequence[CellRate], system: str) -> int:
+    """The budget of ``system``'s headline table: the paper's when every cell reached it,
+    else the largest budget every cell reached."""
+    cells = [c for c in rates if c.system == system]
+    reached_by_all = set.intersection(
+        *(
+            {c.budget for c in cells if (c.controller, c.setting) == key}
+            for key in {(c.controller, c.setting) for c in cells}
+        )
+    )
+    paper = paper_budget(system)
+    return paper if paper in reached_by_all else max(reached_by_all)
+
+
+def headline_tables(rates: Sequence[CellRate]) -> list[str]:
+    """Markdown: per system, settings x controllers, success at the paper's budget (or the
+    largest all cells reached, said so) and the reached counts."""
     at = _at(rates)
     lines: list[str] = []
-    systems = _order({c.system for c in rates}, ABLATION_SYSTEMS)
-    for system in systems:
-        budget = paper_budget(system)
+    for system in _order({c.system for c in rates}, ABLATION_SYSTEMS):
+        budget = headline_budget(rates, system)
         cells = [c for c in rates if c.system == system]
         controllers = _order({c.controller for c in cells}, ABLATION_CONTROLLERS)
         settings = _order({c.setting for c in cells}, SETTINGS)
-        lines += [f"### {system}, at the paper's budget ({budget} steps)", ""]
+        if budget == paper_budget(system):
+            lines += [f"### {system}, at the paper's budget ({budget} steps)", ""]
+        else:
+            lines += [
+                f"### {system}, at {budget} steps (runs shorter than the paper's "
+                f"{paper_budget(system)})",
+                "",
+            ]
         header = ["setting", *(CONTROLLER_LABELS.get(c, c) for c in controllers)]
         header += [f"reached: {CONTROLLER_LABELS.get(c, c)}" for c in controllers]
         rows = []
         for setting in settings:
             found = [at.get((system, controller, setting, budget)) for controller in controllers]
             row = [SETTING_LABELS.get(setting, setting)]
-            row += [format_rate(c) if c else "not run to this budget" for c in found]
+            row += [format_rate(c) if c else "-" for c in found]
             row += [f"{c.reached}/{c.seeds}" if c else "-" for c in found]
             rows.append(row)
         lines += [*_table(header, rows), ""]
@@ -222,12 +242,16 @@ def paper_budget_tables(rates: Sequence[CellRate]) -> list[str]:
 
 
 def budget_columns(budgets: Iterable[int], every: int, paper: int | None) -> list[int]:
-    """The budgets shown as columns: multiples of ``every``, the paper's budget and the
-    largest evaluated one."""
+    """The budgets shown as columns: at each multiple of ``every`` the largest evaluated
+    budget up to it, the paper's budget and the largest evaluated one."""
     budgets = sorted(set(budgets))
     if not budgets:
         return []
-    chosen = {b for b in budgets if b % every == 0} | {budgets[-1]}
+    chosen = {budgets[-1]}
+    for target in range(every, budgets[-1] + 1, every):
+        below = [b for b in budgets if b <= target]
+        if below:
+            chosen.add(below[-1])
     if paper in budgets:
         chosen.add(paper)
     return sorted(chosen)
@@ -291,7 +315,7 @@ def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_T
         "",
         "## Success at the paper's budget",
         "",
-        *paper_budget_tables(rates),
+        *headline_tables(rates),
         "## Success against budget",
         "",
         *budget_tables(rates, every),
@@ -303,6 +327,22 @@ def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_T
         "",
     ]
     return "\n".join(lines)
+
+
+def cell_series(rates: Sequence[CellRate]) -> list[dict[str, Any]]:
+    """One entry per system x controller x setting, with its budgets and, at each, the
+    counts and the Wilson interval (the JSON's form of the CSV's rows)."""
+    series: dict[tuple[str, str, str], dict[str, Any]] = {}
+    for cell in rates:
+        entry = series.setdefault(
+            (cell.system, cell.controller, cell.setting),
+            {"system": cell.system, "controller": cell.controller, "setting": cell.setting}
+            | {name: [] for name in CSV_COLUMNS[3:]},
+        )
+        for name, value in cell.as_row().items():
+            if name in entry and isinstance(entry[name], list):
+                entry[name].append(value)
+    return list(series.values())
 
 
 def figure_curves(rates: Sequence[CellRate]) -> dict[str, dict[str, dict[str, dict]]]:
@@ -361,7 +401,7 @@ def write_tables(
         "definition": SUCCESS_TEXT,
         "settings": {name: SETTING_LABELS[name] for name in SETTINGS},
         "paper_budgets": {s: paper_budget(s) for s in sorted({c.system for c in rates})},
-        "cells": rows,
+        "cells": cell_series(rates),
         "runs": runs,
     }
     write_json_atomic(out / "ablation.json", summary, indent=1)
