@@ -42,9 +42,10 @@ Letters: B batch (boxes), S input dimension (the box's), ``...`` any value shape
 
 References
 ----------
-R. E. Moore, R. B. Kearfott and M. J. Cloud, *Introduction to Interval Analysis*, SIAM 2009.
-S. M. Rump, "Fast and parallel interval arithmetic", BIT 39(3), 1999.
-N. J. Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., SIAM 2002.
+- Moore, R. E., Kearfott, R. B. and Cloud, M. J., *Introduction to Interval Analysis*, SIAM
+  2009.
+- Rump, S. M., "Fast and parallel interval arithmetic", BIT 39(3), 1999.
+- Higham, N. J., *Accuracy and Stability of Numerical Algorithms*, 2nd ed., SIAM 2002.
 """
 
 from __future__ import annotations

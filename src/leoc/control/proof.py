@@ -156,10 +156,12 @@ class LevelProof(NamedTuple):
 
     @property
     def proved(self) -> bool:
+        """Whether a positive level was proved (``rho > 0``)."""
         return self.rho > 0.0
 
     @property
     def status(self) -> str:
+        """``"proved"`` if a positive level was proved, else ``"not proved"``."""
         return STATUS_PROVED if self.proved else STATUS_NOT_PROVED
 
 

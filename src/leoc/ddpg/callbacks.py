@@ -6,12 +6,12 @@ The curve is return against *interaction time*: environment steps and simulated 
 deterministic swing-up episodes on the pure step function, from the same seeded starts at every
 evaluation, so points are comparable and PILCO's curves are measured the same way.
 
-Model selection (:data:`MODEL_SELECTIONS`): ``"final"`` (leoc's, :mod:`leoc.training`) keeps the
-actor at the end of training; ``"best_last_third"`` restores, at the end of training, the actor
-of the best evaluation (strictly highest mean return, the earliest on ties) among those after
-:func:`last_third_start`, as nrjc/LEOC's ``dao/trainer.py`` does (``DDPGTrainer.train`` saves
-the policy when ``iteration > int(num_iterations / 3 * 2)`` and the evaluation return beats the
-best so far; that saved policy is their controller).
+Model selection (``MODEL_SELECTIONS`` of :mod:`leoc.ddpg.config`): ``"final"`` (leoc's,
+:mod:`leoc.training`) keeps the actor at the end of training; ``"best_last_third"`` restores, at the
+end of training, the actor of the best evaluation (strictly highest mean return, the earliest on
+ties) among those after :func:`last_third_start`, as nrjc/LEOC's ``dao/trainer.py`` does
+(``DDPGTrainer.train`` saves the policy when ``iteration > int(num_iterations / 3 * 2)`` and the
+evaluation return beats the best so far; that saved policy is their controller).
 """
 
 from __future__ import annotations

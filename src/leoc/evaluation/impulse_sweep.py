@@ -66,7 +66,7 @@ class ImpulsePoint(NamedTuple):
     settling_time : int or None
         Steps (2 % band of the peak deviation); None if not settled.
     peak_deviation : float
-        Largest |e| in report units.
+        Largest ``|e|`` in report units.
     min_relevance : float or None
         Least r(x) along the response (hybrids); None for non-hybrids.
     """

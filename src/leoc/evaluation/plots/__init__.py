@@ -1,6 +1,6 @@
 """Figures, one module per family: responses (paper figure 7), learning curves (figure 6),
 robustness (figure 8), relevance along a swing-up (figure 4), empirical basins; shared colours,
-legend, caption and the layout checks in :mod:`~leoc.evaluation.plots.common`.
+legend, caption and the layout checks in ``leoc.evaluation.plots.common``.
 
 matplotlib is imported inside the functions (Agg backend), so importing these modules is cheap
 and works without a display.

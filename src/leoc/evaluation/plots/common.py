@@ -16,6 +16,7 @@ import numpy as np
 
 from leoc.io import save_figure_atomic
 
+#: Line colour of each controller name (hex); other names get a neutral grey.
 CONTROLLER_COLOURS = {
     "linear": "#222222",
     "linear_pilco": "#8c564b",
@@ -28,6 +29,7 @@ CONTROLLER_COLOURS = {
     "pilco_hybrid": "#ff7f0e",
     "pilco_hybrid_roa": "#bcbd22",
 }
+#: matplotlib line style of each controller name; other names are drawn solid.
 CONTROLLER_STYLES = {
     "linear": "-",
     "linear_pilco": "-.",
@@ -58,10 +60,12 @@ EDGE_TOLERANCE = 1e-9
 
 
 def controller_colour(label: str) -> str:
+    """Colour of the controller called ``label`` (:data:`CONTROLLER_COLOURS`, else grey)."""
     return CONTROLLER_COLOURS.get(label, OTHER_COLOUR)
 
 
 def controller_style(label: str) -> Any:
+    """Line style of the controller called ``label`` (:data:`CONTROLLER_STYLES`, else solid)."""
     return CONTROLLER_STYLES.get(label, "-")
 
 
