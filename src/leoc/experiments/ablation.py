@@ -161,7 +161,7 @@ FALLBACK_SECONDS_PER_KSTEP = 12.0
 RETURN_DECIMALS = 3
 #: Evaluation interval of a system the authors did not run (environment steps).
 DEFAULT_INTERVAL = 500
-# Fields a run's identity fixes: the plan's overrides may not set them.
+#: Fields a run's identity fixes: the plan's overrides may not set them.
 PLAN_FIELDS = ("system", "algo", "hybrid", "relevance", "total_steps", "eval_interval")
 
 
