@@ -64,7 +64,7 @@ that learnt and then forgot.
 
 Folder layout::
 
-    OUT/ablation.json                                 the plan (budgets, evaluation intervals,
+    OUT/plan.json                                     the plan (budgets, evaluation intervals,
                                                       held-out episodes, overrides), pinned by
                                                       the first invocation, and the last command
     OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/train/   train_ddpg's run folder
@@ -151,7 +151,7 @@ RESULT_FILE = "result.json"
 #: Name of a run's log (progress lines).
 LOG_FILE = "train.log"
 #: The plan pinned by the first invocation on a folder.
-PLAN_FILE = "ablation.json"
+PLAN_FILE = "plan.json"
 #: Subfolder of a run folder holding :func:`~leoc.ddpg.train_ddpg`'s files.
 TRAIN_DIR = "train"
 # Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.

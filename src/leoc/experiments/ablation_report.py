@@ -1,8 +1,8 @@
 """The DDPG ablation's table and figure, from the runs' records, deterministic.
 
 :func:`publish_ablation` reads every finished run of an ablation folder
-(:mod:`leoc.experiments.ablation`), copies the records (not the trained models) to the
-destination when it is another folder, and writes there::
+(:mod:`leoc.experiments.ablation`), copies the records, logs and ``plan.json`` (not the
+trained models) to the destination when it is another folder, and writes there::
 
     ablation.md             the tables: success k/n with a Wilson 95% interval per system x
                             controller x setting at the paper's budget, the optimistic "reached
