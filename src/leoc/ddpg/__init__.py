@@ -15,7 +15,7 @@ its squashed mean is the same hybrid (:mod:`leoc.ddpg.sac`). The authors' TF-Age
 """
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import LearningCurveCallback
+from leoc.ddpg.callbacks import HeldOutEvaluationCallback, LearningCurveCallback
 from leoc.ddpg.config import (
     ALGOS,
     AUTHORS_DDPG,
@@ -53,6 +53,7 @@ __all__ = [
     "AffineOutput",
     "DDPGConfig",
     "DDPGResult",
+    "HeldOutEvaluationCallback",
     "HybridActor",
     "HybridDDPGPolicy",
     "HybridSACActor",

@@ -28,7 +28,12 @@ from leoc.ddpg.config import MODEL_SELECTIONS
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
-__all__ = ["MODEL_SELECTIONS", "LearningCurveCallback", "last_third_start"]
+__all__ = [
+    "MODEL_SELECTIONS",
+    "HeldOutEvaluationCallback",
+    "LearningCurveCallback",
+    "last_third_start",
+]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
 PROGRESS_LINE_INTERVAL_S = 10.0
@@ -210,3 +215,67 @@ class LearningCurveCallback(BaseCallback):
             self._selected_return = mean_return
             self.selected_steps = steps
             self._selected_actor = copy.deepcopy(self.model.actor.state_dict())
+
+
+class HeldOutEvaluationCallback(BaseCallback):
+    """Evaluate the current actor on held-out episodes at the learning curve's steps.
+
+    Runs the deterministic actor (in physical units) from ``starts`` on ``system`` at step 0,
+    every ``eval_interval`` environment steps, and at the end of training if the last step
+    is not a multiple of ``eval_interval``: the steps at which :class:`LearningCurveCallback`
+    evaluates. Nothing here feeds back into training or model selection, so these episodes
+    measure the actor at each step without the optimism of a selection on them (the
+    ablation's success test, :mod:`leoc.experiments.ablation`).
+
+    Pass it to :func:`leoc.ddpg.train_ddpg` in ``callbacks``: it runs before the learning-curve
+    callback, so at the end of training it sees the final actor, before ``"best_last_third"``
+    restores the selected one.
+
+    Parameters
+    ----------
+    system : leoc.systems.System
+        The system the episodes run on (its hold test); may step under other rules than the
+        training environment.
+    starts : (E, S) array
+        One deterministic episode per start.
+    eval_interval : int
+        Environment steps between evaluations (the run's ``eval_interval``).
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per evaluation: ``steps``, ``returns`` (per episode) and ``hold_steps`` (per
+        episode, None where it did not hold; :meth:`leoc.systems.System.hold_step`).
+    """
+
+    def __init__(self, system: Any, starts: np.ndarray, eval_interval: int) -> None:
+        valid = isinstance(eval_interval, int) and not isinstance(eval_interval, bool)
+        if not valid or eval_interval < 1:
+            raise ValueError(f"eval_interval: expected a positive int, found {eval_interval!r}")
+        super().__init__(verbose=0)
+        self.system = system
+        self.starts = np.asarray(starts, dtype=float)
+        self.eval_interval = eval_interval
+        self.rows: list[dict[str, Any]] = []
+
+    def _on_training_start(self) -> None:
+        self._evaluate()
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps % self.eval_interval == 0:
+            self._evaluate()
+        return True
+
+    def _on_training_end(self) -> None:
+        if not self.rows or self.rows[-1]["steps"] != self.num_timesteps:
+            self._evaluate()
+
+    def _evaluate(self) -> None:
+        result = evaluate_episodes(self.system, physical_policy(self.model.actor), self.starts)
+        self.rows.append(
+            {
+                "steps": int(self.num_timesteps),
+                "returns": result.returns,
+                "hold_steps": result.hold_steps,
+            }
+        )

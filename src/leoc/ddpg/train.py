@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
@@ -168,6 +170,7 @@ def train_ddpg(
     run_dir: str | Path | None = None,
     total_steps: int | None = None,
     progress: bool | str = True,
+    callbacks: Sequence[BaseCallback] = (),
     **overrides: Any,
 ) -> DDPGResult:
     """Train DDPG, TD3 or SAC (baseline MLP actor or LEOC hybrid) on ``system``; save the run.
@@ -194,6 +197,10 @@ def train_ddpg(
         True: a progress bar; ``"lines"``: a plain line now and then (steps done / total,
         steps per second, the last evaluation's return; for logs, ``leoc reproduce``); False:
         nothing.
+    callbacks : sequence of stable_baselines3.common.callbacks.BaseCallback
+        Further SB3 callbacks (e.g. :class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback`).
+        They run before the learning-curve callback, so at the end of training they see the
+        final actor, before model selection restores the selected one.
     **overrides
         Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...).
 
@@ -237,7 +244,10 @@ def train_ddpg(
         selection_start=last_third_start(config.total_steps, config.learning_starts),
         label=algo,
     )
-    model.learn(total_timesteps=config.total_steps, callback=callback)
+    model.learn(
+        total_timesteps=config.total_steps,
+        callback=CallbackList([*callbacks, callback]) if callbacks else callback,
+    )
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
     env.close()
 

@@ -431,3 +431,60 @@ def curve_bands(
         blocks.append(iqm(array[rows], axis=1))  # (count, n, T) -> (count, T)
     low, high = _percentile_interval(np.concatenate(blocks), confidence)
     return CurveBands(center, low, high, n, confidence, None)
+
+
+# ------------------------------------------------------------------------------- proportions
+class Interval(NamedTuple):
+    """A confidence interval ``[low, high]``."""
+
+    low: float
+    high: float
+
+
+def wilson_interval(successes: int, trials: int, confidence: float = CONFIDENCE) -> Interval:
+    r"""Wilson score interval of a success rate ``successes / trials`` [1]_.
+
+    With :math:`\hat p = k / n` and :math:`z` the standard normal quantile of
+    :math:`(1 + c) / 2` (1.96 for :math:`c` = 0.95):
+
+    .. math::
+        \frac{\hat p + \frac{z^2}{2n}}{1 + \frac{z^2}{n}} \pm
+        \frac{z}{1 + \frac{z^2}{n}} \sqrt{\frac{\hat p (1 - \hat p)}{n} + \frac{z^2}{4 n^2}}
+
+    Unlike the normal-approximation (Wald) interval it stays inside [0, 1] and does not
+    collapse to a point at 0/n or n/n, which matters with a handful of seeds (0/5 gives
+    [0, 0.43]).
+
+    Parameters
+    ----------
+    successes : int
+        :math:`k`, with :math:`0 \le k \le n`.
+    trials : int
+        :math:`n \ge 1`.
+    confidence : float
+        Coverage :math:`c` in (0, 1).
+
+    Returns
+    -------
+    Interval
+        ``low`` and ``high``, clipped to [0, 1] against round-off.
+
+    References
+    ----------
+    .. [1] E. B. Wilson, "Probable inference, the law of succession, and statistical
+       inference", Journal of the American Statistical Association 22 (1927) 209-212.
+    """
+    from statistics import NormalDist
+
+    confidence = _check_confidence(confidence)
+    if isinstance(trials, bool) or int(trials) != trials or trials < 1:
+        raise ValueError(f"trials: expected a positive integer, found {trials!r}")
+    if isinstance(successes, bool) or int(successes) != successes or not 0 <= successes <= trials:
+        raise ValueError(f"successes: expected an integer in [0, {trials}], found {successes!r}")
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    n = float(trials)
+    rate = successes / n
+    shrink = 1.0 + z * z / n
+    centre = (rate + z * z / (2.0 * n)) / shrink
+    half = z / shrink * math.sqrt(rate * (1.0 - rate) / n + z * z / (4.0 * n * n))
+    return Interval(max(0.0, centre - half), min(1.0, centre + half))

@@ -1,0 +1,739 @@
+r"""The DDPG ablation: which of the authors' DDPG choices decide whether DDPG learns a swing-up.
+
+A grid of *settings* x controllers x systems x seeds (issue 20). Each setting is a set of
+:class:`~leoc.ddpg.DDPGConfig` overrides relative to leoc's defaults, derived from the one
+place that holds the authors' values (:data:`~leoc.ddpg.AUTHORS_DDPG`,
+:func:`~leoc.ddpg.authors_ddpg_overrides`, ``AUTHORS.rules_for``), never from numbers of its own:
+
+===================  ==========================================================================
+setting              DDPGConfig fields, relative to leoc's defaults
+===================  ==========================================================================
+``leoc``             none (leoc's defaults)
+``authors``          the authors' full DDPG setup, :func:`~leoc.ddpg.authors_ddpg_overrides`
+                     (every field below, plus their precision relevance, unclipped actor
+                     output and, on the cart-pole baseline, actor learning rate 1e-4), and all
+                     their step rules (``AUTHORS.rules_for(system)``: the -100 exit and the
+                     reward on the next state; the pendulum's gym 0.17 integrator)
+``exploration``      OU noise in physical units, theta 0.2, sigma 1.0, never reset
+                     (``noise_units``, ``ou_theta``, ``ou_sigma``, ``noise_reset``)
+``initial_collect``  1000 steps from the noisy policy before the first update
+                     (``warmup``, ``learning_starts``)
+``critic``           Huber TD loss; critic obs -> 400 -> concat(physical action) -> 300;
+                     TF-Agents' initialisation with last layers U(+/-0.003), for actor and
+                     critic (``critic_loss``, ``critic_action_layer``, ``critic_action_units``,
+                     ``hidden_init``, ``last_layer_init``)
+``exit_penalty``     the authors' exit rule for that system: -100 once on leaving the track,
+                     the reward of the next state (the ``exit_penalty`` and
+                     ``reward_on_next_state`` fields of ``AUTHORS.rules_for(system)``); on the
+                     pendulum, which has no track, they are leoc's, so the setting is left out
+                     there (:func:`setting_applies`)
+``model_selection``  the best evaluation of the last third on 3 episodes
+                     (``model_selection``, ``eval_episodes``)
+===================  ==========================================================================
+
+Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
+``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
+baseline, the hybrid with the paper's relevance and the hybrid with the ROA relevance; systems:
+the cart-pole and the mountain car, with the pendulum as the control.
+
+Success, and the controller it is measured on
+---------------------------------------------
+A run *succeeds at budget T* when the controller it would deliver had its budget been T
+holds the operating point (:meth:`~leoc.systems.System.hold_step`) in every one of
+:data:`TEST_EPISODES` held-out swing-up episodes. One run of budget :math:`T_{max}` gives
+that for every evaluated budget :math:`T \le T_{max}`, honestly:
+
+* SB3's DDPG with a constant learning rate does not depend on the total budget, so the first
+  T steps of the long run *are* the run of budget T (a test checks it);
+* the held-out episodes (:class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback`) evaluate
+  the actor at every evaluation step on starts seeded ``seed + 30000 + k``, on leoc's system
+  (leoc's step rules, whatever rules the setting trains under: every cell faces the same
+  test); they feed nothing back into training or selection;
+* the delivered controller at T follows the setting's model selection
+  (:func:`delivered_steps`): with ``"final"`` the actor at step T; with ``"best_last_third"``
+  the actor of the best *selection* evaluation (the trainer's own ``eval_episodes`` episodes,
+  under the setting's rules, as the run itself selects) after
+  :func:`~leoc.ddpg.callbacks.last_third_start` of T. Its held-out episodes then measure it
+  without the optimism of having been chosen on them.
+
+"The actor at step T" is the one the trainer's learning curve evaluates at step T (before
+that step's gradient update; the saved ``model.zip`` has one update more). Beside it, each
+cell also reports the optimistic *prefix* criterion of ``benchmarks/bench_ddpg_seeds.py``:
+some held-out evaluation up to T held in every episode ("reached by T"), which counts a run
+that learnt and then forgot.
+
+Folder layout::
+
+    OUT/plan.json                                     the plan (budgets, evaluation intervals,
+                                                      held-out episodes, overrides), pinned by
+                                                      the first invocation, and the last command
+    OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/train/   train_ddpg's run folder
+    OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/train.log   the run's progress lines
+    OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/result.json written last, atomically: done
+
+The sweep (:func:`leoc.experiments.sweep.sweep`) skips a run whose ``result.json`` exists, so
+an interrupted grid continues where it stopped, locally or on a Ray cluster.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from leoc.ddpg.callbacks import last_third_start
+from leoc.ddpg.config import (
+    AUTHORS_DDPG,
+    AUTHORS_EVAL_INTERVAL,
+    DEFAULT_TOTAL_STEPS,
+    TOTAL_STEPS_BY_SYSTEM,
+    DDPGConfig,
+    authors_ddpg_overrides,
+)
+from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
+from leoc.experiments.variants import AUTHORS
+from leoc.io import read_json_object, write_json_atomic
+from leoc.systems.base import DEFAULT_RULES
+
+#: The settings of the grid, in table order (see the module docstring).
+SETTINGS = (
+    "leoc",
+    "authors",
+    "exploration",
+    "initial_collect",
+    "critic",
+    "exit_penalty",
+    "model_selection",
+)
+#: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
+SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
+    "exploration": ("noise_units", "ou_theta", "ou_sigma", "noise_reset"),
+    "initial_collect": ("warmup", "learning_starts"),
+    "critic": (
+        "critic_loss",
+        "critic_action_layer",
+        "critic_action_units",
+        "hidden_init",
+        "last_layer_init",
+    ),
+    "model_selection": ("model_selection", "eval_episodes"),
+}
+#: The :class:`~leoc.systems.StepRules` fields of the ``exit_penalty`` setting.
+EXIT_RULE_FIELDS = ("exit_penalty", "reward_on_next_state")
+#: One line per setting, for tables and figure legends.
+SETTING_LABELS = {
+    "leoc": "leoc's defaults",
+    "authors": "authors' full setup",
+    "exploration": "+ authors' OU exploration",
+    "initial_collect": "+ 1000 initial noisy steps",
+    "critic": "+ Huber, critic shape, TF-Agents init",
+    "exit_penalty": "+ authors' exit rule",
+    "model_selection": "+ best of last third",
+}
+#: The controllers of the grid (``leoc reproduce`` names).
+ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
+#: The systems of the grid: the two that fail, then the pendulum as the control.
+ABLATION_SYSTEMS = ("cartpole", "mountaincar", "pendulum")
+#: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
+FULL_SEEDS = 5
+#: Seeds per single-factor setting when none are given (add more where a cell is undecided).
+SINGLE_FACTOR_SEEDS = 3
+#: Held-out swing-up episodes of the success test.
+TEST_EPISODES = 5
+#: Seed offset of the held-out starts (evaluation: 10000, exploration noise: 20000).
+TEST_SEED_OFFSET = 30_000
+#: Name of a run's result, written last (its presence marks the run done).
+RESULT_FILE = "result.json"
+#: Name of a run's log (progress lines).
+LOG_FILE = "train.log"
+#: The plan pinned by the first invocation on a folder.
+PLAN_FILE = "plan.json"
+#: Subfolder of a run folder holding :func:`~leoc.ddpg.train_ddpg`'s files.
+TRAIN_DIR = "train"
+# Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.
+# profiles.PAPER_RUN_SECONDS over the paper's budgets); the ETA's prior before runs finish.
+FALLBACK_SECONDS_PER_KSTEP = 12.0
+# Decimals of the held-out returns in a record (they are reported, not tested on).
+RETURN_DECIMALS = 3
+#: Evaluation interval of a system the authors did not run (environment steps).
+DEFAULT_INTERVAL = 500
+#: Fields a run's identity fixes: the plan's overrides may not set them.
+PLAN_FIELDS = ("system", "algo", "hybrid", "relevance", "total_steps", "eval_interval")
+
+
+# ----------------------------------------------------------------------------------- settings
+def setting_overrides(
+    setting: str, system: str, hybrid: bool, budget: int | None = None
+) -> dict[str, Any]:
+    """The :class:`~leoc.ddpg.DDPGConfig` overrides of ``setting`` on ``system``, relative to
+    leoc's defaults (see the module table).
+
+    Parameters
+    ----------
+    setting : str
+        One of :data:`SETTINGS`.
+    system : str
+        System name.
+    hybrid : bool
+        Whether the run trains a hybrid (the authors' cart-pole baseline has its own actor
+        learning rate).
+    budget : int, optional
+        The run's environment steps (the authors' setup sets ``total_steps`` to it).
+
+    Returns
+    -------
+    dict
+        A fresh dict; empty for ``leoc`` and for a setting that changes nothing on ``system``.
+    """
+    if setting not in SETTINGS:
+        raise ValueError(f"setting: expected one of {SETTINGS}, found {setting!r}")
+    if setting == "leoc":
+        return {}
+    if setting == "authors":
+        overrides = authors_ddpg_overrides(system, hybrid, budget)
+        rules = AUTHORS.rules_for(system)
+        if rules != DEFAULT_RULES:
+            overrides["step_rules"] = dataclasses.asdict(rules)
+        return overrides
+    if setting == "exit_penalty":
+        rules = AUTHORS.rules_for(system)
+        changed = {
+            name: getattr(rules, name)
+            for name in EXIT_RULE_FIELDS
+            if getattr(rules, name) != getattr(DEFAULT_RULES, name)
+        }
+        return {"step_rules": changed} if changed else {}
+    return {name: AUTHORS_DDPG[name] for name in SINGLE_FACTOR_FIELDS[setting]}
+
+
+def setting_applies(setting: str, system: str) -> bool:
+    """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` always
+    applies); a setting that does not is left out of the grid there, as a copy of ``leoc``."""
+    return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
+
+
+def default_seeds(setting: str) -> tuple[int, ...]:
+    """Seeds of ``setting`` when none are given: ``0 .. 4`` for ``leoc`` and ``authors``,
+    ``0 .. 2`` for a single-factor setting."""
+    count = FULL_SEEDS if setting in ("leoc", "authors") else SINGLE_FACTOR_SEEDS
+    return tuple(range(count))
+
+
+class AblationSpec(NamedTuple):
+    """One run of the grid: a controller of a system, under a setting, for one seed."""
+
+    system: str
+    controller: str
+    setting: str
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """Run folder path ``SYSTEM/CONTROLLER/SETTING/seedN`` under ``OUT/runs``."""
+        return f"{self.system}/{self.controller}/{self.setting}/seed{self.seed}"
+
+    @property
+    def hybrid(self) -> bool:
+        """Whether the controller is a hybrid."""
+        return "_hybrid" in self.controller
+
+    @property
+    def relevance(self) -> str:
+        """``roa`` for ``ddpg_hybrid_roa``, else ``paper``."""
+        return "roa" if self.controller.endswith("_roa") else "paper"
+
+
+def grid_specs(
+    systems: Sequence[str] = ABLATION_SYSTEMS,
+    controllers: Sequence[str] = ABLATION_CONTROLLERS,
+    settings: Sequence[str] = SETTINGS,
+    seeds: Sequence[int] | None = None,
+) -> list[AblationSpec]:
+    """The runs of a grid, the costliest system first (cart-pole), settings in table order.
+
+    Parameters
+    ----------
+    systems, controllers, settings : sequence of str
+        Subsets of :data:`ABLATION_SYSTEMS` (or any registered system),
+        :data:`ABLATION_CONTROLLERS` and :data:`SETTINGS`.
+    seeds : sequence of int, optional
+        The seeds of every setting; default :func:`default_seeds` per setting.
+
+    Returns
+    -------
+    list of AblationSpec
+        Without the settings that do not apply to a system (:func:`setting_applies`).
+    """
+    from leoc.systems import system_names
+
+    known = system_names()
+    for name, values, allowed in (
+        ("systems", systems, known),
+        ("controllers", controllers, ABLATION_CONTROLLERS),
+        ("settings", settings, SETTINGS),
+    ):
+        unknown = [value for value in values if value not in allowed]
+        if unknown:
+            raise ValueError(f"{name}: unknown {unknown}; expected some of {tuple(allowed)}")
+    if seeds is not None and any(int(seed) != seed or seed < 0 for seed in seeds):
+        raise ValueError(f"seeds: expected non-negative integers, found {list(seeds)}")
+    ordered = sorted(systems, key=lambda name: -TOTAL_STEPS_BY_SYSTEM.get(name, 0))
+    return [
+        AblationSpec(system, controller, setting, int(seed))
+        for system in ordered
+        for setting in settings
+        if setting_applies(setting, system)
+        for controller in controllers
+        for seed in (default_seeds(setting) if seeds is None else seeds)
+    ]
+
+
+# --------------------------------------------------------------------------------------- plan
+def _json_form(value: Any) -> Any:
+    """``value`` as JSON reads it back (tuples become lists), for comparisons."""
+    return json.loads(json.dumps(value))
+
+
+@dataclasses.dataclass(frozen=True)
+class AblationPlan:
+    """What every run of one ablation folder shares.
+
+    Attributes
+    ----------
+    budgets : mapping system -> int
+        Environment steps of each run (default: the paper's, 10k / 15k / 10k); a budget is a
+        multiple of the evaluation interval, so that it is an evaluated step.
+    eval_intervals : mapping system -> int
+        Environment steps between evaluations (default: the authors', 200 / 300 / 200, which
+        the ``model_selection`` setting selects among); every evaluated step is a budget of
+        the success table.
+    test_episodes : int
+        Held-out swing-up episodes per evaluation (:data:`TEST_EPISODES`).
+    overrides : mapping
+        :class:`~leoc.ddpg.DDPGConfig` fields set in every cell (e.g. small networks for a
+        smoke run); none may be a field that a setting switches or that
+        :data:`PLAN_FIELDS` names.
+    """
+
+    budgets: Mapping[str, int] = dataclasses.field(default_factory=dict)
+    eval_intervals: Mapping[str, int] = dataclasses.field(default_factory=dict)
+    test_episodes: int = TEST_EPISODES
+    overrides: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, values in (("budgets", self.budgets), ("eval_intervals", self.eval_intervals)):
+            for system, value in values.items():
+                if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                    raise ValueError(
+                        f"{name}: expected positive integers, found {system}={value!r}"
+                    )
+        episodes = self.test_episodes
+        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+            raise ValueError(f"test_episodes: expected a positive integer, found {episodes!r}")
+        clash = sorted(set(self.overrides) & (set(PLAN_FIELDS) | switched_fields()))
+        if clash:
+            raise ValueError(
+                f"overrides: {clash} are set by the grid (a setting switches them, or they fix "
+                "the run); override other DDPGConfig fields only"
+            )
+        for system in set(self.budgets) | set(self.eval_intervals):
+            budget, interval = self.budget_for(system), self.eval_interval_for(system)
+            if budget % interval:
+                raise ValueError(
+                    f"budgets: expected a multiple of the evaluation interval on {system} "
+                    f"({interval}), found {budget}"
+                )
+
+    def budget_for(self, system: str) -> int:
+        """Environment steps of a run on ``system``."""
+        return int(self.budgets.get(system, TOTAL_STEPS_BY_SYSTEM.get(system, DEFAULT_TOTAL_STEPS)))
+
+    def eval_interval_for(self, system: str) -> int:
+        """Environment steps between two evaluations on ``system``."""
+        return int(
+            self.eval_intervals.get(system, AUTHORS_EVAL_INTERVAL.get(system, DEFAULT_INTERVAL))
+        )
+
+    def config_overrides(self, spec: AblationSpec) -> dict[str, Any]:
+        """Keyword overrides of ``spec``'s :class:`~leoc.ddpg.DDPGConfig` (for
+        :func:`~leoc.ddpg.train_ddpg`): the setting's, then the plan's."""
+        budget = self.budget_for(spec.system)
+        return {
+            **setting_overrides(spec.setting, spec.system, spec.hybrid, budget),
+            "relevance": spec.relevance,
+            "total_steps": budget,
+            "eval_interval": self.eval_interval_for(spec.system),
+            **self.overrides,
+        }
+
+    def config(self, spec: AblationSpec) -> DDPGConfig:
+        """The :class:`~leoc.ddpg.DDPGConfig` of ``spec``."""
+        overrides = self.config_overrides(spec)
+        return DDPGConfig.for_system(spec.system, "ddpg", hybrid=spec.hybrid, **overrides)
+
+    def pinned(self, systems: Sequence[str]) -> dict[str, Any]:
+        """JSON form of the plan for ``systems`` (what a folder's :data:`PLAN_FILE` pins)."""
+        return _json_form(
+            {
+                "budgets": {name: self.budget_for(name) for name in systems},
+                "eval_intervals": {name: self.eval_interval_for(name) for name in systems},
+                "test_episodes": self.test_episodes,
+                "overrides": dict(self.overrides),
+            }
+        )
+
+
+def switched_fields() -> set[str]:
+    """Every :class:`~leoc.ddpg.DDPGConfig` field some setting sets to a value other than
+    leoc's default, on some system of :data:`ABLATION_SYSTEMS` and controller."""
+    fields = {"step_rules"}
+    for system in ABLATION_SYSTEMS:
+        for hybrid in (False, True):
+            defaults = DDPGConfig.for_system(system, hybrid=hybrid).as_dict()
+            for setting in SETTINGS:
+                for name, value in setting_overrides(setting, system, hybrid).items():
+                    if _json_form(value) != _json_form(defaults[name]):
+                        fields.add(name)
+    return fields - {"total_steps", "eval_interval"}
+
+
+def merge_plan(stored: Mapping[str, Any], plan: AblationPlan, systems: Sequence[str]) -> dict:
+    """The folder's pinned plan extended by ``plan`` for ``systems``; raises if they differ.
+
+    Parameters
+    ----------
+    stored : mapping
+        The folder's pinned plan (:meth:`AblationPlan.pinned`; empty for a new folder).
+    plan : AblationPlan
+    systems : sequence of str
+
+    Returns
+    -------
+    dict
+        The pinned plan to write back.
+
+    Raises
+    ------
+    ValueError
+        When ``plan`` gives a system another budget or evaluation interval than the folder's
+        runs have, or other held-out episodes or overrides: its runs would not be comparable.
+    """
+    new = plan.pinned(systems)
+    merged = _json_form(dict(stored)) if stored else {**new, "budgets": {}, "eval_intervals": {}}
+    for name in ("test_episodes", "overrides"):
+        if merged.get(name) != new[name]:
+            raise ValueError(
+                f"out: the folder's runs have {name} {merged.get(name)!r}, this invocation "
+                f"{new[name]!r}; use another folder"
+            )
+    for name in ("budgets", "eval_intervals"):
+        for system, value in new[name].items():
+            found = merged[name].setdefault(system, value)
+            if found != value:
+                raise ValueError(
+                    f"out: the folder's {system} runs have {name} {found}, this invocation "
+                    f"{value}; use another folder"
+                )
+    return merged
+
+
+# ----------------------------------------------------------------------------------- one run
+def held_out_starts(system: Any, seed: int, episodes: int) -> Any:
+    """``(episodes, S)`` held-out swing-up starts of the run seeded ``seed``:
+    ``System.sample_start(default_rng(seed + 30000 + k))``, disjoint from the trainer's
+    evaluation starts (``seed + 10000 + k``)."""
+    import numpy as np
+
+    return np.stack(
+        [
+            system.sample_start(np.random.default_rng(seed + TEST_SEED_OFFSET + k), "swing_up")
+            for k in range(episodes)
+        ]
+    )
+
+
+def _evaluations(curve: Sequence[Mapping[str, Any]], held_out: Sequence[Mapping[str, Any]]):
+    """The trainer's evaluations joined with the held-out ones, step by step."""
+    steps = [int(row["steps"]) for row in curve]
+    if steps != [int(row["steps"]) for row in held_out]:
+        raise RuntimeError(
+            f"held-out evaluations at steps {[row['steps'] for row in held_out]} do not match "
+            f"the learning curve's {steps}"
+        )
+    return [
+        {
+            "steps": int(row["steps"]),
+            "selection_return": float(row["mean_return"]),
+            "selection_held_fraction": float(row["held_fraction"]),
+            "test_returns": [round(float(value), RETURN_DECIMALS) for value in test["returns"]],
+            "test_hold_steps": list(test["hold_steps"]),
+        }
+        for row, test in zip(curve, held_out, strict=True)
+    ]
+
+
+def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str, Any]:
+    """Train one run of the grid and return its record (the sweep writes it to
+    :data:`RESULT_FILE`).
+
+    Trains with :func:`~leoc.ddpg.train_ddpg` into ``RUN/train`` (progress lines to
+    ``RUN/train.log``), with a :class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback` on
+    leoc's system at the trainer's evaluation steps.
+
+    Returns
+    -------
+    dict
+        ``key``, ``system``, ``controller``, ``setting``, ``seed``, ``budget``,
+        ``eval_interval``, ``learning_starts``, ``model_selection``, ``test_episodes``,
+        ``config`` (the DDPGConfig), ``evaluations`` (per step: ``selection_return``,
+        ``selection_held_fraction``, ``test_returns``, ``test_hold_steps``),
+        ``selected_steps`` (the trainer's own choice at the full budget), wall seconds and
+        library versions.
+    """
+    import torch
+
+    from leoc.ddpg.callbacks import HeldOutEvaluationCallback
+    from leoc.ddpg.train import train_ddpg
+    from leoc.experiments.reproduce import WORKER_THREADS, versions
+    from leoc.systems import make_system
+
+    run_dir = default_run_dir(out_dir, spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(WORKER_THREADS)
+    config = plan.config(spec)
+    test_system = make_system(spec.system)  # leoc's rules: the same test for every setting
+    held_out = HeldOutEvaluationCallback(
+        test_system,
+        held_out_starts(test_system, spec.seed, plan.test_episodes),
+        config.eval_interval,
+    )
+    started = time.perf_counter()
+    with (
+        open(run_dir / LOG_FILE, "a", buffering=1) as log,
+        contextlib.redirect_stdout(log),
+        contextlib.redirect_stderr(log),
+    ):
+        print(f"== {spec.key}: {config.total_steps} steps", flush=True)
+        result = train_ddpg(
+            spec.system,
+            "ddpg",
+            hybrid=spec.hybrid,
+            seed=spec.seed,
+            run_dir=run_dir / TRAIN_DIR,
+            progress="lines",
+            callbacks=[held_out],
+            **plan.config_overrides(spec),
+        )
+        print(f"trained in {time.perf_counter() - started:.1f} s", flush=True)
+    return {
+        **spec._asdict(),
+        "key": spec.key,
+        "budget": config.total_steps,
+        "eval_interval": config.eval_interval,
+        "learning_starts": config.learning_starts,
+        "model_selection": config.model_selection,
+        "test_episodes": plan.test_episodes,
+        "config": config.as_dict(),
+        "evaluations": _evaluations(result.curve, held_out.rows),
+        "selected_steps": result.summary.get("selected_steps"),
+        "wall_seconds": time.perf_counter() - started,
+        "versions": versions(),
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class AblationRunner:
+    """The sweep's unit of work: ``runner(spec, out_dir)`` calls :func:`run_cell` with the
+    plan (a picklable callable for worker processes and Ray tasks).
+
+    Attributes
+    ----------
+    plan : AblationPlan
+    """
+
+    plan: AblationPlan
+
+    def __call__(self, spec: AblationSpec, out_dir: Path) -> dict[str, Any]:
+        return run_cell(spec, self.plan, Path(out_dir))
+
+
+# ------------------------------------------------------------------------ success at a budget
+class RunOutcome(NamedTuple):
+    """What one run gives at one budget T.
+
+    Attributes
+    ----------
+    delivered_steps : int
+        Step of the evaluation whose actor the run delivers at T (:func:`delivered_steps`).
+    success : bool
+        The delivered actor held the operating point in every held-out episode.
+    reached : bool
+        Some held-out evaluation at a step <= T held in every episode (the optimistic prefix
+        criterion).
+    """
+
+    delivered_steps: int
+    success: bool
+    reached: bool
+
+
+def delivered_steps(
+    steps: Sequence[int],
+    selection_returns: Sequence[float],
+    budget: int,
+    model_selection: str,
+    learning_starts: int,
+) -> int:
+    """Step of the evaluation whose actor a run of budget ``budget`` delivers.
+
+    ``"final"``: ``budget`` itself. ``"best_last_third"``: among the evaluations at steps
+    ``s`` with :func:`~leoc.ddpg.callbacks.last_third_start` ``(budget, learning_starts) < s
+    <= budget``, the one with the strictly highest selection return (the earliest on ties), as
+    :class:`~leoc.ddpg.LearningCurveCallback` selects; ``budget`` when the window holds none.
+
+    Parameters
+    ----------
+    steps : sequence of int
+        Evaluation steps of the run, increasing; ``budget`` must be one of them.
+    selection_returns : sequence of float
+        Mean return of the trainer's evaluation at each step (what the run selects on).
+    budget : int
+    model_selection : {"final", "best_last_third"}
+    learning_starts : int
+        The run's ``learning_starts`` (the selection window counts updates after it).
+
+    Returns
+    -------
+    int
+    """
+    if budget not in steps:
+        raise ValueError(f"budget: expected an evaluated step {list(steps)}, found {budget}")
+    if model_selection == "final":
+        return int(budget)
+    if model_selection != "best_last_third":
+        raise ValueError(
+            f"model_selection: expected 'final' or 'best_last_third', found {model_selection!r}"
+        )
+    start = last_third_start(budget, learning_starts)
+    best_steps, best_return = int(budget), float("-inf")
+    for step, value in zip(steps, selection_returns, strict=True):
+        if start < step <= budget and value > best_return:
+            best_steps, best_return = int(step), float(value)
+    return best_steps
+
+
+def all_held(hold_steps: Sequence[int | None]) -> bool:
+    """Whether every episode held the operating point (False for no episode at all)."""
+    return bool(hold_steps) and all(step is not None for step in hold_steps)
+
+
+def run_outcome(record: Mapping[str, Any], budget: int) -> RunOutcome:
+    """:class:`RunOutcome` of a run's record (:func:`run_cell`) at ``budget``."""
+    evaluations = record["evaluations"]
+    steps = [int(row["steps"]) for row in evaluations]
+    delivered = delivered_steps(
+        steps,
+        [row["selection_return"] for row in evaluations],
+        budget,
+        record["model_selection"],
+        int(record["learning_starts"]),
+    )
+    by_step = {int(row["steps"]): row for row in evaluations}
+    reached = any(
+        all_held(row["test_hold_steps"]) for row in evaluations if int(row["steps"]) <= budget
+    )
+    return RunOutcome(delivered, all_held(by_step[delivered]["test_hold_steps"]), reached)
+
+
+# ------------------------------------------------------------------------------------ driving
+def expected_seconds(plan: AblationPlan) -> Callable[[AblationSpec], float]:
+    """A run's expected wall time for the sweep's ETA: results/paper's measured DDPG cost of
+    its system and controller, scaled to the plan's budget."""
+    from leoc.experiments.profiles import PAPER_RUN_SECONDS
+
+    def cost(spec: AblationSpec) -> float:
+        budget = plan.budget_for(spec.system)
+        measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{spec.controller}")
+        paper = TOTAL_STEPS_BY_SYSTEM.get(spec.system)
+        if measured is None or paper is None:
+            return FALLBACK_SECONDS_PER_KSTEP * budget / 1000.0
+        return measured * budget / paper
+
+    return cost
+
+
+def run_ablation(
+    out_dir: str | Path,
+    specs: Sequence[AblationSpec],
+    plan: AblationPlan | None = None,
+    *,
+    backend: str = "local",
+    jobs: int | None = None,
+    address: str | None = None,
+    echo: Callable[[str], None] = print,
+    command: str = "",
+) -> SweepResult:
+    """Run (or continue) the runs ``specs`` of an ablation folder.
+
+    Parameters
+    ----------
+    out_dir : path
+        The folder (see the module docstring); created if missing.
+    specs : sequence of AblationSpec
+        :func:`grid_specs` or any subset; runs already done are skipped.
+    plan : AblationPlan, optional
+        Budgets, intervals, held-out episodes, overrides (default: :class:`AblationPlan`'s).
+        The folder's first invocation pins it per system; a later one must agree.
+    backend, jobs, address
+        As :func:`leoc.experiments.sweep.sweep`.
+    echo : callable
+        Receives the progress lines.
+    command : str
+        The command line, recorded in :data:`PLAN_FILE`.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    ValueError
+        When ``plan`` disagrees with the folder's pinned plan, or an option is out of range.
+    """
+    from leoc.experiments.eta import trainer_progress
+
+    plan = plan or AblationPlan()
+    out = Path(out_dir)
+    check_backend(backend, address)  # before anything is written
+    systems = sorted({spec.system for spec in specs})
+    stored = read_json_object(out / PLAN_FILE, echo, "ablation plan") or {}
+    pinned = merge_plan(stored.get("plan", {}), plan, systems)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / PLAN_FILE, {"plan": pinned, "command": command}, indent=2)
+    return sweep(
+        list(specs),
+        AblationRunner(plan),
+        out,
+        backend=backend,
+        jobs=jobs,
+        address=address,
+        done_file=RESULT_FILE,
+        log_file=LOG_FILE,
+        echo=echo,
+        expected_seconds=expected_seconds(plan),
+        progress_of=trainer_progress,
+    )
+
+
+def read_records(out_dir: str | Path, echo: Callable[[str], None] = print) -> list[dict]:
+    """Every finished run's record in an ablation folder, in key order."""
+    records = []
+    for path in sorted(Path(out_dir).glob(f"runs/*/*/*/seed*/{RESULT_FILE}")):
+        record = read_json_object(path, echo, "result")
+        if record is not None:
+            records.append(record)
+    return records

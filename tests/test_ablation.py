@@ -1,0 +1,394 @@
+"""The DDPG ablation harness: its grid, its success test, its resume and its publishing."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from leoc.ddpg.config import (
+    AUTHORS_CARTPOLE_BASELINE_ACTOR_LR,
+    AUTHORS_DDPG,
+    DDPGConfig,
+)
+from leoc.experiments.ablation import (
+    ABLATION_CONTROLLERS,
+    RESULT_FILE,
+    SETTINGS,
+    AblationPlan,
+    AblationSpec,
+    delivered_steps,
+    grid_specs,
+    merge_plan,
+    read_records,
+    run_ablation,
+    run_cell,
+    run_outcome,
+)
+from leoc.experiments.ablation_report import (
+    TABLE_FILES,
+    publish_ablation,
+    success_rates,
+)
+from leoc.experiments.stats import wilson_interval
+from leoc.experiments.variants import AUTHORS
+from leoc.systems import StepRules
+
+# What each single-factor setting is meant to switch (issue 20), written out here rather than
+# read from the module under test.
+INTENDED = {
+    "exploration": {"noise_units", "ou_theta", "ou_sigma", "noise_reset"},
+    "initial_collect": {"warmup", "learning_starts"},
+    "critic": {
+        "critic_loss",
+        "critic_action_layer",
+        "critic_action_units",
+        "hidden_init",
+        "last_layer_init",
+    },
+    "model_selection": {"model_selection", "eval_episodes"},
+}
+# The authors' numbers as the issue states them (a second, independent source).
+ISSUE_VALUES = {
+    "ou_theta": 0.2,
+    "ou_sigma": 1.0,
+    "noise_units": "physical",
+    "noise_reset": False,
+    "learning_starts": 1000,
+    "warmup": "policy",
+    "critic_loss": "huber",
+    "critic_action_layer": 1,
+    "critic_action_units": "physical",
+    "hidden_init": "tf_agents",
+    "last_layer_init": 0.003,
+    "model_selection": "best_last_third",
+    "eval_episodes": 3,
+}
+TINY = {"actor_hidden": [16, 16], "critic_hidden": [16, 16], "batch_size": 16}
+
+
+def _differences(first: DDPGConfig, second: DDPGConfig) -> dict[str, tuple]:
+    one, two = dataclasses.asdict(first), dataclasses.asdict(second)
+    return {name: (one[name], two[name]) for name in one if one[name] != two[name]}
+
+
+CELLS = [
+    (setting, system, controller)
+    for setting in SETTINGS
+    for system in ("cartpole", "mountaincar", "pendulum")
+    for controller in ABLATION_CONTROLLERS
+    if not (setting == "exit_penalty" and system == "pendulum")
+]
+
+
+@pytest.mark.parametrize(("setting", "system", "controller"), CELLS)
+def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_values(
+    setting, system, controller
+) -> None:
+    plan = AblationPlan()
+    config = plan.config(AblationSpec(system, controller, setting, 0))
+    leoc = plan.config(AblationSpec(system, controller, "leoc", 0))
+    # leoc's cell is DDPGConfig's defaults, at the paper's budget and the authors' interval
+    expected_leoc = DDPGConfig.for_system(
+        system,
+        hybrid=controller != "ddpg_baseline",
+        relevance="roa" if controller.endswith("roa") else "paper",
+        eval_interval={"cartpole": 300}.get(system, 200),
+    )
+    assert leoc == expected_leoc
+    differences = _differences(config, leoc)
+    if setting == "leoc":
+        assert differences == {}
+    elif setting in INTENDED:
+        assert set(differences) == INTENDED[setting]
+        for name in differences:
+            assert getattr(config, name) == AUTHORS_DDPG[name] == ISSUE_VALUES[name]
+    elif setting == "exit_penalty":
+        assert set(differences) == {"step_rules"}
+        rules, authors = StepRules(**config.step_rules), AUTHORS.rules_for(system)
+        assert rules.exit_penalty == authors.exit_penalty == -100.0
+        assert rules.reward_on_next_state is authors.reward_on_next_state is True
+        assert rules.legacy_integrator is False
+    else:  # the authors' full setup: every field of AUTHORS_DDPG that is not leoc's, + rules
+        defaults = dataclasses.asdict(leoc)
+        expected = {
+            name
+            for name, value in AUTHORS_DDPG.items()
+            if json.dumps(value) != json.dumps(defaults[name])
+        } | {"step_rules"}
+        if system == "cartpole" and controller == "ddpg_baseline":
+            expected.add("actor_learning_rate")
+            assert config.actor_learning_rate == AUTHORS_CARTPOLE_BASELINE_ACTOR_LR == 1e-4
+        assert set(differences) == expected
+        assert INTENDED["exploration"] | INTENDED["critic"] <= expected
+        assert StepRules(**config.step_rules) == AUTHORS.rules_for(system)
+        for name in expected - {"step_rules", "actor_learning_rate"}:
+            assert getattr(config, name) == AUTHORS_DDPG[name]
+
+
+def test_the_grid_has_the_issues_seeds_and_no_exit_penalty_on_the_pendulum() -> None:
+    specs = grid_specs()
+    keys = {spec.key for spec in specs}
+    assert len(keys) == len(specs)
+    by_cell: dict[tuple, set] = {}
+    for spec in specs:
+        by_cell.setdefault((spec.system, spec.controller, spec.setting), set()).add(spec.seed)
+    for (system, _, setting), seeds in by_cell.items():
+        assert seeds == set(range(5 if setting in ("leoc", "authors") else 3))
+        assert not (system == "pendulum" and setting == "exit_penalty")
+    # 3 systems x 3 controllers x (5 + 5 + 5 x 3) seeds, less the pendulum's exit penalty
+    assert len(specs) == 3 * 3 * 25 - 3 * 3
+    assert {s.seed for s in grid_specs(["pendulum"], seeds=[7, 8])} == {7, 8}
+    with pytest.raises(ValueError, match="settings"):
+        grid_specs(settings=["huber"])
+
+
+def test_the_plan_refuses_overrides_of_what_the_grid_switches_and_off_grid_budgets() -> None:
+    with pytest.raises(ValueError, match="ou_sigma"):
+        AblationPlan(overrides={"ou_sigma": 0.5})
+    with pytest.raises(ValueError, match="total_steps"):
+        AblationPlan(overrides={"total_steps": 500})
+    with pytest.raises(ValueError, match="multiple of the evaluation interval"):
+        AblationPlan(budgets={"cartpole": 1000})  # the cart-pole evaluates every 300 steps
+    assert AblationPlan(budgets={"cartpole": 1200}).budget_for("cartpole") == 1200
+
+
+def test_a_folder_refuses_a_second_budget_for_a_system_but_takes_a_new_system() -> None:
+    stored = merge_plan({}, AblationPlan(budgets={"pendulum": 600}), ["pendulum"])
+    assert stored["budgets"] == {"pendulum": 600}
+    extended = merge_plan(stored, AblationPlan(), ["cartpole"])
+    assert extended["budgets"] == {"pendulum": 600, "cartpole": 15000}
+    with pytest.raises(ValueError, match="pendulum runs have budgets 600"):
+        merge_plan(stored, AblationPlan(budgets={"pendulum": 800}), ["pendulum"])
+    with pytest.raises(ValueError, match="overrides"):
+        merge_plan(stored, AblationPlan(overrides=TINY), ["pendulum"])
+
+
+def test_wilson_interval_against_its_closed_form() -> None:
+    z = 1.959963984540054  # the standard normal's 97.5% quantile
+    # 4/5 by hand: centre (0.8 + z^2/10) / (1 + z^2/5), half-width
+    # z / (1 + z^2/5) * sqrt(0.8 * 0.2 / 5 + z^2 / 100)
+    shrink = 1 + z**2 / 5
+    centre = (0.8 + z**2 / 10) / shrink
+    half = z / shrink * math.sqrt(0.8 * 0.2 / 5 + z**2 / 100)
+    low, high = wilson_interval(4, 5)
+    assert low == pytest.approx(centre - half, abs=1e-12)
+    assert high == pytest.approx(centre + half, abs=1e-12)
+    assert (round(low, 4), round(high, 4)) == (0.3755, 0.9638)  # the published value
+    # 0/n and n/n: [0, z^2/(n + z^2)] and [n/(n + z^2), 1]
+    assert wilson_interval(0, 5) == pytest.approx((0.0, z**2 / (5 + z**2)), abs=1e-12)
+    assert wilson_interval(5, 5) == pytest.approx((5 / (5 + z**2), 1.0), abs=1e-12)
+    with pytest.raises(ValueError, match="successes"):
+        wilson_interval(6, 5)
+    with pytest.raises(ValueError, match="trials"):
+        wilson_interval(0, 0)
+
+
+# ---------------------------------------------------------------------- scripted records
+def _record(
+    system: str = "cartpole",
+    controller: str = "ddpg_baseline",
+    setting: str = "leoc",
+    seed: int = 0,
+    budget: int = 3000,
+    interval: int = 300,
+    held_at: tuple[int, ...] = (),
+    returns: dict[int, float] | None = None,
+    model_selection: str = "final",
+    learning_starts: int = 200,
+    episodes: int = 5,
+) -> dict:
+    """A run's record: the held-out episodes all hold at the steps in ``held_at``; the
+    selection returns are ``returns`` where given, else -1000."""
+    returns = returns or {}
+    evaluations = [
+        {
+            "steps": step,
+            "selection_return": returns.get(step, -1000.0),
+            "selection_held_fraction": 0.0,
+            "test_returns": [-100.0] * episodes,
+            "test_hold_steps": [50] * episodes if step in held_at else [50, None] + [50] * 3,
+        }
+        for step in range(0, budget + 1, interval)
+    ]
+    spec = AblationSpec(system, controller, setting, seed)
+    return {
+        **spec._asdict(),
+        "key": spec.key,
+        "budget": budget,
+        "eval_interval": interval,
+        "learning_starts": learning_starts,
+        "model_selection": model_selection,
+        "test_episodes": episodes,
+        "config": {},
+        "evaluations": evaluations,
+        "selected_steps": None,
+        "wall_seconds": 100.0 + seed,
+        "versions": {},
+    }
+
+
+def test_the_delivered_controller_is_the_final_one_or_the_best_of_the_last_third() -> None:
+    steps = list(range(0, 3001, 300))
+    returns = {1500: -10.0, 2400: -300.0, 2700: -200.0, 3000: -200.0}
+    values = [returns.get(step, -1000.0) for step in steps]
+    assert delivered_steps(steps, values, 3000, "final", 1000) == 3000
+    # window after 1000 + int(2000 * 2 / 3) = 2333: 2400, 2700, 3000; 1500 is the best but
+    # outside; 2700 and 3000 tie, the earliest wins (the trainer's strict comparison)
+    assert delivered_steps(steps, values, 3000, "best_last_third", 1000) == 2700
+    # budget 1800: window after 1000 + int(800 * 2 / 3) = 1533, so only 1800
+    assert delivered_steps(steps, values, 1800, "best_last_third", 1000) == 1800
+    # budget 2100: window after 1733: 1800, 2100 (both -1000: the earliest)
+    assert delivered_steps(steps, values, 2100, "best_last_third", 1000) == 1800
+    with pytest.raises(ValueError, match="evaluated step"):
+        delivered_steps(steps, values, 2000, "final", 1000)
+
+
+def test_success_at_a_budget_is_the_delivered_controllers_held_out_test() -> None:
+    # learnt at 1200, forgot after 1500, relearnt at 2700 only
+    record = _record(held_at=(1200, 1500, 2700))
+    assert run_outcome(record, 900) == (900, False, False)
+    assert run_outcome(record, 1200) == (1200, True, True)
+    assert run_outcome(record, 1800) == (1800, False, True)  # forgot: reached, not delivered
+    assert run_outcome(record, 3000) == (3000, False, True)
+    # the same run selecting the best of the last third delivers the step-2700 actor at 3000
+    selecting = _record(
+        held_at=(1200, 1500, 2700),
+        returns={2700: -150.0},
+        model_selection="best_last_third",
+        learning_starts=1000,
+    )
+    assert run_outcome(selecting, 3000) == (2700, True, True)
+    # one episode that does not hold is a failure
+    assert run_outcome(_record(held_at=()), 3000).success is False
+
+
+def _synthetic_folder(root: Path) -> list[dict]:
+    """A finished ablation folder: cart-pole baseline leoc (2 of 3 hold from 1500 on),
+    authors (1 of 3 from 2700 on), pendulum hybrid leoc (3 of 3 from 600)."""
+    records = []
+    for seed in range(3):
+        records.append(_record(seed=seed, held_at=tuple(range(1500, 3001, 300)) * (seed < 2)))
+        records.append(
+            _record(setting="authors", seed=seed, held_at=(2700, 3000) if seed == 0 else ())
+        )
+        records.append(
+            _record(
+                "pendulum",
+                "ddpg_hybrid",
+                seed=seed,
+                budget=1000,
+                interval=200,
+                held_at=(600, 800, 1000),
+            )
+        )
+    for record in records:
+        path = root / "runs" / record["key"] / RESULT_FILE
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps(record))
+    return records
+
+
+def test_success_rates_and_the_published_tables_from_a_synthetic_folder(tmp_path) -> None:
+    records = _synthetic_folder(tmp_path / "runs-folder")
+    rates = {(c.system, c.controller, c.setting, c.budget): c for c in success_rates(records)}
+    leoc = rates[("cartpole", "ddpg_baseline", "leoc", 1500)]
+    assert (leoc.successes, leoc.seeds, leoc.reached) == (2, 3, 2)
+    assert (leoc.low, leoc.high) == wilson_interval(2, 3)
+    assert rates[("cartpole", "ddpg_baseline", "leoc", 1200)].successes == 0
+    assert rates[("cartpole", "ddpg_baseline", "authors", 3000)].successes == 1
+    assert rates[("pendulum", "ddpg_hybrid", "leoc", 400)].successes == 0
+    assert ("pendulum", "ddpg_hybrid", "leoc", 0) not in rates  # budget 0 is no budget
+
+    dest = tmp_path / "published"
+    markdown = publish_ablation(tmp_path / "runs-folder", dest, every=1500).read_text()
+    # the runs stopped at 3000 steps: the headline table is at 3000, and says so
+    assert "### cartpole, at 3000 steps (runs shorter than the paper's 15000)" in markdown
+    assert "| leoc's defaults | 2/3 [0.21, 0.94] | 2/3 |" in markdown
+    assert "| authors' full setup | 1/3 [0.06, 0.79] | 1/3 |" in markdown
+    assert "| controller | setting | 1500 | 3000 |" in markdown
+    assert "| DDPG baseline | leoc's defaults | 2/3 | 2/3 |" in markdown
+    assert "| DDPG baseline | authors' full setup | 0/3 | 1/3 |" in markdown
+    # the pendulum's runs end at 1000 steps: no multiple of 1500, so the last budget only
+    assert "### pendulum, at 1000 steps (runs shorter than the paper's 10000)" in markdown
+    assert "| controller | setting | 1000 |" in markdown
+    assert "| DDPG hybrid | leoc's defaults | 3/3 |" in markdown
+    csv_lines = (dest / "success_vs_budget.csv").read_text().splitlines()
+    assert csv_lines[0] == (
+        "system,controller,setting,budget,successes,seeds,rate,wilson_low,wilson_high,reached"
+    )
+    assert "cartpole,ddpg_baseline,leoc,1500,2,3,0.6667,0.2077,0.9385,2" in csv_lines
+    assert len(read_records(dest)) == len(records)  # the records travel, the models do not
+    # deterministic: publishing the published folder again gives the same bytes
+    before = {name: (dest / name).read_bytes() for name in TABLE_FILES}
+    publish_ablation(dest, every=1500)
+    assert {name: (dest / name).read_bytes() for name in TABLE_FILES} == before
+
+
+def test_the_figure_reads_cleanly_for_the_full_grid() -> None:
+    from leoc.evaluation.plots import layout_problems
+    from leoc.evaluation.plots.ablation import draw_success_vs_budget
+    from leoc.experiments.ablation_report import figure_caption, figure_curves
+
+    records = [
+        _record(
+            system, controller, setting, seed, 3000, 300, held_at=tuple(range(seed * 900, 3001))
+        )
+        for system in ("cartpole", "mountaincar", "pendulum")
+        for controller in ABLATION_CONTROLLERS
+        for setting in SETTINGS
+        for seed in range(3)
+    ]
+    rates = success_rates(records)
+    figure = draw_success_vs_budget(
+        figure_curves(rates), {"cartpole": 15000}, caption=figure_caption(rates)
+    )
+    assert layout_problems(figure) == []
+    assert len(figure.axes) == 9
+
+
+# ----------------------------------------------------------------------------- real runs
+PLAN = AblationPlan(budgets={"pendulum": 400}, eval_intervals={"pendulum": 100}, overrides=TINY)
+
+
+def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> None:
+    specs = [
+        AblationSpec("pendulum", "ddpg_baseline", "leoc", 0),
+        AblationSpec("pendulum", "ddpg_baseline", "exploration", 0),
+    ]
+    quiet: list[str] = []
+    plan = dataclasses.replace(PLAN, budgets={"pendulum": 200})  # no update: resume only
+    first = run_ablation(tmp_path, specs, plan, jobs=1, echo=quiet.append)
+    assert set(first.results) == {spec.key for spec in specs} and not first.failed
+    kept = tmp_path / "runs" / specs[0].key / RESULT_FILE
+    killed = tmp_path / "runs" / specs[1].key / RESULT_FILE
+    kept_bytes = kept.read_bytes()
+    killed.unlink()  # as if the worker died before the result was written
+    second = run_ablation(tmp_path, specs, plan, jobs=1, echo=quiet.append)
+    assert second.skipped == (specs[0].key,)
+    assert set(second.results) == {specs[1].key}
+    assert kept.read_bytes() == kept_bytes
+    assert len(read_records(tmp_path)) == 2
+    publish_ablation(tmp_path)  # the tables beside the runs leave the pinned plan alone
+    with pytest.raises(ValueError, match="budgets"):
+        run_ablation(tmp_path, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
+
+
+def test_a_short_run_is_the_prefix_of_a_long_one_and_selection_matches_the_trainer(
+    tmp_path,
+) -> None:
+    spec = AblationSpec("pendulum", "ddpg_hybrid", "model_selection", 1)
+    long = run_cell(spec, PLAN, tmp_path / "long")
+    short_plan = dataclasses.replace(PLAN, budgets={"pendulum": 300})
+    short = run_cell(spec, short_plan, tmp_path / "short")
+    # 100 gradient updates happen before step 300 (learning_starts 200): the short run's
+    # evaluations are the long run's, so one long run gives every shorter budget
+    assert short["evaluations"] == long["evaluations"][: len(short["evaluations"])]
+    for record in (long, short):
+        steps = [row["steps"] for row in record["evaluations"]]
+        assert steps == list(range(0, record["budget"] + 1, 100))
+        delivered = run_outcome(record, record["budget"]).delivered_steps
+        assert delivered == (record["selected_steps"] or record["budget"])
