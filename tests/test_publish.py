@@ -59,5 +59,12 @@ def test_publish_refuses_a_destination_inside_the_source(tmp_path) -> None:
 
 @pytest.mark.parametrize("published", PUBLISHED, ids=[p.name for p in PUBLISHED])
 def test_committed_results_regenerate_byte_for_byte(published, tmp_path) -> None:
-    """`leoc plot` on the committed numbers gives the committed report and CSVs exactly."""
+    """`leoc plot` on the committed numbers gives the committed report and CSVs exactly.
+
+    Every published folder's numbers are copied beside it, so that a companion recorded in
+    meta.json (``compare``, a relative path such as ``../paper-authors``) resolves as in
+    ``results/``."""
+    for other in PUBLISHED:
+        if other != published:
+            _numbers_only(other, tmp_path / other.name)
     _regenerates_byte_for_byte(published, tmp_path / published.name)
