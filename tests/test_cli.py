@@ -13,6 +13,7 @@ import pytest
 from leoc.cli import main
 from leoc.control import design_lqr
 from leoc.systems import make_system
+from leoc.systems.base import StepRules
 
 
 def test_lqr_json_matches_the_library(capsys) -> None:
@@ -186,3 +187,54 @@ def test_a_closed_pipe_ends_without_traceback(command) -> None:
     _, errors = process.communicate(timeout=120)
     assert b"Traceback" not in errors and b"BrokenPipeError" not in errors
     assert process.returncode in (0, 128 + signal.SIGPIPE)
+
+
+def _pilco_run_folder(folder, step_rules: dict) -> None:
+    """A PILCO hybrid run folder trained (here: initialised) under ``step_rules``."""
+    import torch
+
+    from leoc.pilco.checkpoint import save_controller
+    from leoc.pilco.config import PilcoConfig
+    from leoc.pilco.policy import build_policy
+
+    config = PilcoConfig.for_system("pendulum", hybrid=True, step_rules=step_rules)
+    system = make_system("pendulum").with_rules(StepRules(**step_rules))
+    policy = build_policy(system, config, torch.Generator().manual_seed(0))
+    folder.mkdir()
+    (folder / "config.json").write_text(json.dumps(config.to_dict()))
+    save_controller(folder, config, policy.state_dict(), None)
+
+
+def test_a_run_folder_is_simulated_on_the_plant_it_was_trained_on(tmp_path, capsys) -> None:
+    """A run trained under the authors' pendulum rules (gym 0.17's integrator) is simulated on
+    that plant unless told otherwise, and another variant's plant is refused; the two plants
+    give different records, so the default can be told apart from leoc's."""
+    authors = tmp_path / "authors"
+    _pilco_run_folder(authors, {"legacy_integrator": True})
+    args = ["simulate", str(authors), "--metrics", "authors", "--json"]
+    assert main(args) == 0
+    default = json.loads(capsys.readouterr().out)
+    assert main([*args, "--variant", "authors"]) == 0
+    explicit = json.loads(capsys.readouterr().out)
+    assert default["variant"] == "authors"
+    assert default["deviation"] == explicit["deviation"]
+    assert main([*args, "--variant", "leoc"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--variant: the controller in" in line and "use authors" in line
+
+    leoc_run = tmp_path / "leoc"
+    _pilco_run_folder(leoc_run, {})
+    assert main(["simulate", str(leoc_run), "--metrics", "authors", "--json"]) == 0
+    on_leoc_plant = json.loads(capsys.readouterr().out)
+    assert on_leoc_plant["variant"] == "leoc"
+    # Same policy (same seed), another integrator: the records differ.
+    assert on_leoc_plant["deviation"] != default["deviation"]
+
+
+def test_roa_refuses_a_controller_trained_on_another_plant(tmp_path, capsys) -> None:
+    authors = tmp_path / "authors"
+    _pilco_run_folder(authors, {"legacy_integrator": True})
+    args = ["roa", "pendulum", "--controller", str(authors), "--samples", "500", "--starts", "4"]
+    assert main(args) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--controller:" in line and "legacy_integrator': True" in line

@@ -74,10 +74,22 @@ ROA_PLOT_MARGIN = 1.25
 
 def _roa_controllers(args: argparse.Namespace, system, design) -> dict:
     """The LQR (at the design's period) and every ``--controller`` run folder, by label."""
+    import dataclasses
+
     from leoc.control import lqr_closed_loop
+    from leoc.experiments.controllers import trained_step_rules
+    from leoc.systems.base import StepRules
 
     controllers = {f"LQR (period {design.action_repeat})": lqr_closed_loop(design)}
+    leoc_rules = dataclasses.asdict(StepRules())
     for spec in args.controller or []:
+        trained = dataclasses.asdict(StepRules(**trained_step_rules(spec)))
+        if trained != leoc_rules:
+            raise ValueError(
+                f"--controller: {spec!r} was trained under the step rules {trained}; 'leoc roa' "
+                f"certifies and samples leoc's plant ({leoc_rules}), on which it was not "
+                "trained; use 'leoc simulate' (it runs a controller on its own plant)"
+            )
         controllers[Path(spec).name] = load_controller(spec, args.system)
     return controllers
 

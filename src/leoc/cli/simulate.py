@@ -65,9 +65,10 @@ def add_parser(commands: Any) -> None:
     simulate.add_argument(
         "--variant",
         choices=VARIANT_NAMES,
-        default="leoc",
         help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
-        "u_max with a sin squash, their env rules); default leoc",
+        "u_max with a sin squash, their env rules); default leoc, or for a run folder the "
+        "variant whose step rules it was trained under (another is refused: it would simulate "
+        "a different plant)",
     )
     simulate.add_argument(
         "--metrics",
@@ -163,6 +164,44 @@ def controller_label(spec: str, period: int) -> str:
     return parts[-1]
 
 
+def simulated_variant(target: Target, requested: str | None) -> str:
+    """The variant whose plant ``target`` is simulated on: ``requested`` (default leoc) for the
+    LQR; for a run folder, the variant whose step rules for its system are the ones it was
+    trained under (a trained controller is measured on the plant it was trained on).
+
+    Raises
+    ------
+    ValueError
+        ``requested`` names a variant with other step rules than the run's, or no variant has
+        the run's rules.
+    """
+    import dataclasses
+
+    from leoc.experiments.controllers import trained_step_rules
+    from leoc.experiments.variants import VARIANTS
+    from leoc.systems.base import StepRules
+
+    if target.controller == LINEAR:
+        return requested or "leoc"
+    trained = dataclasses.asdict(StepRules(**trained_step_rules(target.controller)))
+    matching = [
+        name
+        for name, variant in VARIANTS.items()
+        if dataclasses.asdict(variant.rules_for(target.system)) == trained
+    ]
+    if requested is None and matching:
+        return matching[0]
+    if requested in matching:
+        return requested
+    found = f"the {requested} variant's" if requested else "no variant has them; leoc's"
+    raise ValueError(
+        f"--variant: the controller in {target.controller!r} was trained under the step rules "
+        f"{trained} on {target.system}; {found} differ, and simulating it there would measure "
+        f"another plant than the one it was trained on"
+        + (f" (leave --variant out, or use {' or '.join(matching)})" if matching else "")
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from leoc.evaluation.rollout import control_period, response_test
     from leoc.experiments.variants import get_variant
@@ -170,6 +209,7 @@ def run(args: argparse.Namespace) -> int:
     if args.band is not None and args.metrics == "authors":
         raise ValueError("--band: the authors' metrics fix the band (pi/180); leave --band out")
     target = resolve_target(args.target, args.controller)
+    args.variant = simulated_variant(target, args.variant)
     variant = get_variant(args.variant)
     system = variant.system(target.system)
     controller = load_controller(

@@ -8,6 +8,7 @@ and the per-run folder ``OUT/runs/SYSTEM/CONTROLLER/seedN`` that ``leoc reproduc
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -40,6 +41,29 @@ def trained_system(run_dir: str | Path) -> str:
     if not isinstance(name, str):
         raise ValueError(f"run folder: {folder / 'config.json'} names no system")
     return name
+
+
+def trained_step_rules(run_dir: str | Path) -> dict[str, Any]:
+    """The step rules (:class:`~leoc.systems.StepRules` fields) the controller in ``run_dir``
+    was trained under, from its config; ``{}`` (leoc's rules) when the config records none.
+
+    Raises
+    ------
+    ValueError
+        The recorded rules are not a dict of StepRules fields (the message names the file).
+    """
+    from leoc.systems.base import StepRules
+
+    folder = trainer_dir(run_dir)
+    rules = read_config(folder).get("step_rules") or {}
+    try:
+        StepRules(**rules)
+    except TypeError as error:
+        raise ValueError(
+            f"run folder: {folder / 'config.json'} records step_rules {rules!r}, which are not "
+            f"StepRules fields ({error})"
+        ) from error
+    return dict(rules)
 
 
 def load_trained_controller(run_dir: str | Path, system: str | None = None) -> torch.nn.Module:
