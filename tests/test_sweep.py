@@ -352,5 +352,5 @@ def test_trainer_progress_reads_ddpg_and_pilco_lines() -> None:
 
     line = "[ddpg] step 2500/10000 (25%), 98 steps/s, last evaluation: return -812.3, held 0%"
     assert trainer_progress(line) == 0.25
-    assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") == pytest.approx(6 / 20)
+    assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") == pytest.approx(2 / 4)
     assert trainer_progress("== pendulum/linear/seed0 (quick profile)") is None

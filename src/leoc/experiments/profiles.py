@@ -125,35 +125,35 @@ PAPER_RUN_SECONDS = {
     "mountaincar/pilco_hybrid": 264.0,
     "mountaincar/pilco_hybrid_roa": 270.0,
 }
-# The quick profile's run costs [s], derived from the paper profile's: each kind's evaluation
-# time (wall - training) plus its training time scaled by the quick budget (DDPG: steps; PILCO:
-# iterations), then every trained kind scaled by 1.204 so that the 18 default runs dealt to 2
-# workers take the 740 s the whole quick profile measured on an idle 2-core machine (README).
+# The quick profile's run costs [s]: each default run's wall time in one invocation on an idle
+# 2-core AMD EPYC (`leoc reproduce --profile quick --jobs 2`, leoc commit e66f953, 522 s in
+# all); the ROA hybrids, which the quick profile does not run by default, are their paper-
+# relevance hybrid's time scaled by the ratio of the two in the paper profile.
 QUICK_RUN_SECONDS = {
     "pendulum/linear": 4.0,
-    "pendulum/linear_pilco": 5.0,
-    "pendulum/ddpg_baseline": 69.0,
-    "pendulum/ddpg_hybrid": 74.0,
-    "pendulum/ddpg_hybrid_roa": 82.0,
-    "pendulum/pilco_baseline": 138.0,
-    "pendulum/pilco_hybrid": 147.0,
-    "pendulum/pilco_hybrid_roa": 142.0,
-    "cartpole/linear": 5.0,
-    "cartpole/linear_pilco": 5.0,
-    "cartpole/ddpg_baseline": 127.0,
-    "cartpole/ddpg_hybrid": 104.0,
-    "cartpole/ddpg_hybrid_roa": 124.0,
-    "cartpole/pilco_baseline": 181.0,
-    "cartpole/pilco_hybrid": 224.0,
-    "cartpole/pilco_hybrid_roa": 231.0,
+    "pendulum/linear_pilco": 4.0,
+    "pendulum/ddpg_baseline": 66.0,
+    "pendulum/ddpg_hybrid": 79.0,
+    "pendulum/ddpg_hybrid_roa": 88.0,
+    "pendulum/pilco_baseline": 103.0,
+    "pendulum/pilco_hybrid": 132.0,
+    "pendulum/pilco_hybrid_roa": 128.0,
+    "cartpole/linear": 8.0,
+    "cartpole/linear_pilco": 10.0,
+    "cartpole/ddpg_baseline": 101.0,
+    "cartpole/ddpg_hybrid": 93.0,
+    "cartpole/ddpg_hybrid_roa": 111.0,
+    "cartpole/pilco_baseline": 79.0,
+    "cartpole/pilco_hybrid": 109.0,
+    "cartpole/pilco_hybrid_roa": 112.0,
     "mountaincar/linear": 4.0,
-    "mountaincar/linear_pilco": 5.0,
-    "mountaincar/ddpg_baseline": 74.0,
-    "mountaincar/ddpg_hybrid": 91.0,
-    "mountaincar/ddpg_hybrid_roa": 106.0,
-    "mountaincar/pilco_baseline": 90.0,
-    "mountaincar/pilco_hybrid": 101.0,
-    "mountaincar/pilco_hybrid_roa": 102.0,
+    "mountaincar/linear_pilco": 4.0,
+    "mountaincar/ddpg_baseline": 77.0,
+    "mountaincar/ddpg_hybrid": 74.0,
+    "mountaincar/ddpg_hybrid_roa": 86.0,
+    "mountaincar/pilco_baseline": 50.0,
+    "mountaincar/pilco_hybrid": 44.0,
+    "mountaincar/pilco_hybrid_roa": 44.0,
 }
 
 #: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
