@@ -347,10 +347,11 @@ def test_eta_deals_the_queue_to_the_first_free_worker() -> None:
     assert estimate_remaining([], [Running(10.0, 30.0)], [], 1) == 1.0
 
 
-def test_trainer_progress_reads_ddpg_and_pilco_lines() -> None:
+def test_trainer_progress_reads_ddpg_lines_and_not_pilco_lines() -> None:
     from leoc.experiments.eta import trainer_progress
 
     line = "[ddpg] step 2500/10000 (25%), 98 steps/s, last evaluation: return -812.3, held 0%"
     assert trainer_progress(line) == 0.25
-    assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") == pytest.approx(2 / 4)
+    # PILCO's iterations do not cost alike: its line is no measure of the time done
+    assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") is None
     assert trainer_progress("== pendulum/linear/seed0 (quick profile)") is None
