@@ -501,6 +501,21 @@ class DDPGConfig:
                 values[key] = tuple(int(width) for width in values[key])
         return cls(system=name, algo=algo, **values)
 
+    def hybrid_kwargs(self) -> dict[str, Any]:
+        """The hybrid's design options of this config, as keywords of
+        :func:`leoc.ddpg.policies.hybrid_policy_kwargs` (for the TD3/DDPG and the SAC hybrid
+        alike; each algorithm adds its own, e.g. TD3's ``clip_output``)."""
+        return {
+            "lambda_init": self.lambda_init,
+            "learn_lambda": self.learn_lambda,
+            "relevance_parametrisation": self.relevance_parametrisation,
+            "lqr_method": self.lqr_method,
+            "relevance": self.relevance,
+            "rho_in_fraction": self.roa_rho_fraction,
+            "width_init": self.roa_width,
+            "learn_width": self.learn_width,
+        }
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly dict (tuples become lists)."""
         data = dataclasses.asdict(self)

@@ -455,18 +455,7 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
     policy: Any = SACPolicy
     if config.hybrid:
         policy = HybridSACPolicy
-        policy_kwargs = hybrid_policy_kwargs(
-            system,
-            lambda_init=config.lambda_init,
-            learn_lambda=config.learn_lambda,
-            relevance_parametrisation=config.relevance_parametrisation,
-            lqr_method=config.lqr_method,
-            relevance=config.relevance,
-            rho_in_fraction=config.roa_rho_fraction,
-            width_init=config.roa_width,
-            learn_width=config.learn_width,
-            **policy_kwargs,
-        )
+        policy_kwargs = hybrid_policy_kwargs(system, **config.hybrid_kwargs(), **policy_kwargs)
     return LeocSAC(
         policy,
         env,

@@ -91,15 +91,8 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
         policy = HybridTD3Policy
         policy_kwargs = hybrid_policy_kwargs(
             system,
-            lambda_init=config.lambda_init,
-            learn_lambda=config.learn_lambda,
-            relevance_parametrisation=config.relevance_parametrisation,
             clip_output=config.actor_output_clip,
-            lqr_method=config.lqr_method,
-            relevance=config.relevance,
-            rho_in_fraction=config.roa_rho_fraction,
-            width_init=config.roa_width,
-            learn_width=config.learn_width,
+            **config.hybrid_kwargs(),
             **policy_kwargs,
         )
     common: dict[str, Any] = {
