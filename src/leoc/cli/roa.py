@@ -78,17 +78,17 @@ def _roa_controllers(args: argparse.Namespace, system, design) -> dict:
 
     from leoc.control import lqr_closed_loop
     from leoc.experiments.controllers import trained_step_rules
-    from leoc.systems.base import StepRules
+    from leoc.systems.base import DEFAULT_RULES
 
     controllers = {f"LQR (period {design.action_repeat})": lqr_closed_loop(design)}
-    leoc_rules = dataclasses.asdict(StepRules())
     for spec in args.controller or []:
-        trained = dataclasses.asdict(StepRules(**trained_step_rules(spec)))
-        if trained != leoc_rules:
+        rules = trained_step_rules(spec)
+        if rules != DEFAULT_RULES:
             raise ValueError(
-                f"--controller: {spec!r} was trained under the step rules {trained}; 'leoc roa' "
-                f"certifies and samples leoc's plant ({leoc_rules}), on which it was not "
-                "trained; use 'leoc simulate' (it runs a controller on its own plant)"
+                f"--controller: {spec!r} was trained under the step rules "
+                f"{dataclasses.asdict(rules)}; 'leoc roa' certifies and samples leoc's plant "
+                f"({dataclasses.asdict(DEFAULT_RULES)}), on which it was not trained; use 'leoc "
+                "simulate' (it runs a controller on its own plant)"
             )
         controllers[Path(spec).name] = load_controller(spec, args.system)
     return controllers

@@ -179,20 +179,16 @@ def simulated_variant(target: Target, requested: str | None) -> str:
 
     from leoc.experiments.controllers import trained_step_rules
     from leoc.experiments.variants import VARIANTS
-    from leoc.systems.base import StepRules
 
     if target.controller == LINEAR:
         return requested or "leoc"
-    trained = dataclasses.asdict(StepRules(**trained_step_rules(target.controller)))
-    matching = [
-        name
-        for name, variant in VARIANTS.items()
-        if dataclasses.asdict(variant.rules_for(target.system)) == trained
-    ]
+    rules = trained_step_rules(target.controller)
+    matching = [name for name, v in VARIANTS.items() if v.rules_for(target.system) == rules]
     if requested is None and matching:
         return matching[0]
     if requested in matching:
         return requested
+    trained = dataclasses.asdict(rules)
     found = f"the {requested} variant's" if requested else "no variant has them; leoc's"
     raise ValueError(
         f"--variant: the controller in {target.controller!r} was trained under the step rules "

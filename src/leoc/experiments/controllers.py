@@ -8,11 +8,14 @@ and the per-run folder ``OUT/runs/SYSTEM/CONTROLLER/seedN`` that ``leoc reproduc
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import torch
 
 from leoc.training import read_config
+
+if TYPE_CHECKING:
+    from leoc.systems.base import StepRules
 
 PILCO_MARKER = "controller.pt"
 DDPG_MARKER = "model.zip"
@@ -43,27 +46,26 @@ def trained_system(run_dir: str | Path) -> str:
     return name
 
 
-def trained_step_rules(run_dir: str | Path) -> dict[str, Any]:
-    """The step rules (:class:`~leoc.systems.StepRules` fields) the controller in ``run_dir``
-    was trained under, from its config; ``{}`` (leoc's rules) when the config records none.
+def trained_step_rules(run_dir: str | Path) -> StepRules:
+    """The step rules the controller in ``run_dir`` was trained under, from its config
+    (leoc's rules when the config records none).
 
     Raises
     ------
     ValueError
-        The recorded rules are not a dict of StepRules fields (the message names the file).
+        The recorded rules are not StepRules fields (the message names the file).
     """
     from leoc.systems.base import StepRules
 
     folder = trainer_dir(run_dir)
     rules = read_config(folder).get("step_rules") or {}
     try:
-        StepRules(**rules)
+        return StepRules(**rules)
     except TypeError as error:
         raise ValueError(
             f"run folder: {folder / 'config.json'} records step_rules {rules!r}, which are not "
             f"StepRules fields ({error})"
         ) from error
-    return dict(rules)
 
 
 def load_trained_controller(run_dir: str | Path, system: str | None = None) -> torch.nn.Module:
