@@ -52,12 +52,7 @@ TINY_RUN = {
 }
 
 
-@pytest.fixture(autouse=True)
-def _single_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 def _hybrid_model(system_name: str, algo=DDPG, learn_lambda: bool = True, seed: int = 0, **kw):

@@ -46,12 +46,7 @@ LAST_LAYER_LIMIT = 0.003
 AUTHORS_OU_STD = math.sqrt(OU_STDDEV**2 / (1.0 - (1.0 - OU_DAMPING) ** 2))  # 1.6667
 
 
-@pytest.fixture(autouse=True)
-def _single_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 # ------------------------------------------------------------------------------------- config

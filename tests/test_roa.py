@@ -36,12 +36,7 @@ CHECK_STARTS = 1000
 CONVERGED_V_FRACTION = 1e-6  # V at the end of an episode, relative to rho: converged
 
 
-@pytest.fixture(autouse=True)
-def _single_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @functools.cache
