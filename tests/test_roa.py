@@ -183,3 +183,29 @@ def test_certified_set_check_and_plot(tmp_path):
     assert path.is_file() and path.stat().st_size > 0
     with pytest.raises(ValueError, match="expected 10x10 slice starts"):
         plot_basins(system, certificate, {"LQR": basin}, (0, 1), 10, tmp_path / "x.png")
+
+
+def test_lqr_certificates_are_cached_per_system_design_and_options():
+    from leoc.control import roa
+
+    system = make_system("pendulum")
+    design = design_lqr(system)
+    options = {"samples": 2000, "seed": 3, "prove": False}
+    roa._CERTIFICATES.clear()
+    first = certify_lqr(system, design, **options)
+    # The same certificate, computed without the cache (an explicit controller bypasses it).
+    direct = certify_level(
+        system, design.P, lqr_closed_loop(design), action_repeat=design.action_repeat, **options
+    )
+    assert first.rho == direct.rho and first.rounds == direct.rounds
+    # A rebuilt system and design hit the cache; callers get copies they may change.
+    first.P[0, 0] = -1.0
+    again = certify_lqr(make_system("pendulum"), design_lqr(make_system("pendulum")), **options)
+    assert len(roa._CERTIFICATES) == 1
+    np.testing.assert_array_equal(again.P, design.P)
+    assert again.rho == direct.rho
+    # Anything the certificate depends on changes the key: a system parameter, an option.
+    heavier = make_system("pendulum", mass=2.0)
+    assert certify_lqr(heavier, design, **options).rho != direct.rho
+    assert certify_lqr(system, design, **{**options, "seed": 4}).rho != direct.rho
+    assert len(roa._CERTIFICATES) == 3
