@@ -392,3 +392,35 @@ def test_a_short_run_is_the_prefix_of_a_long_one_and_selection_matches_the_train
         assert steps == list(range(0, record["budget"] + 1, 100))
         delivered = run_outcome(record, record["budget"]).delivered_steps
         assert delivered == (record["selected_steps"] or record["budget"])
+
+
+def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> None:
+    specs = grid_specs(controllers=["sac_hybrid_roa", "ddpg_hybrid"], seeds=[0])
+    sac = [spec for spec in specs if spec.controller == "sac_hybrid_roa"]
+    # leoc's defaults everywhere, the authors' exit rule where there is a track
+    assert {(s.system, s.setting) for s in sac} == {
+        ("cartpole", "leoc"),
+        ("cartpole", "exit_penalty"),
+        ("mountaincar", "leoc"),
+        ("mountaincar", "exit_penalty"),
+        ("pendulum", "leoc"),
+    }
+    assert len([s for s in specs if s.controller == "ddpg_hybrid"]) == 3 * 7 - 1
+    plan = AblationPlan()
+    for spec in sac:
+        config = plan.config(spec)
+        assert spec.algo == "sac" and config.algo == "sac" and config.relevance == "roa"
+        expected = DDPGConfig.for_system(
+            spec.system, "sac", hybrid=True, relevance="roa", eval_interval=config.eval_interval
+        )
+        assert _differences(expected, config).keys() <= {"step_rules"}
+        assert bool(_differences(expected, config)) == (spec.setting == "exit_penalty")
+
+
+def test_a_short_sac_run_is_the_prefix_of_a_long_one(tmp_path) -> None:
+    spec = AblationSpec("pendulum", "sac_hybrid", "leoc", 2)
+    long = run_cell(spec, PLAN, tmp_path / "long")
+    short = run_cell(spec, dataclasses.replace(PLAN, budgets={"pendulum": 300}), tmp_path / "s")
+    assert long["config"]["algo"] == "sac"
+    assert short["evaluations"] == long["evaluations"][: len(short["evaluations"])]
+    assert [row["steps"] for row in long["evaluations"]] == [0, 100, 200, 300, 400]

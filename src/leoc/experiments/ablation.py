@@ -31,6 +31,11 @@ setting              DDPGConfig fields, relative to leoc's defaults
                      (``model_selection``, ``eval_episodes``)
 ===================  ==========================================================================
 
+SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
+its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
+are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
+also measures SAC's success rate against the budget.
+
 Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
 ``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
 baseline, the hybrid with the paper's relevance and the hybrid with the ROA relevance; systems:
@@ -134,8 +139,14 @@ SETTING_LABELS = {
     "exit_penalty": "+ authors' exit rule",
     "model_selection": "+ best of last third",
 }
-#: The controllers of the grid (``leoc reproduce`` names).
+#: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
+#: The SAC controllers the harness also runs (not in the default grid).
+SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
+#: Every controller the harness runs, in table order.
+GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS
+#: The settings that apply to SAC: the others switch DDPG/TD3 fields SAC does not have.
+SAC_SETTINGS = ("leoc", "exit_penalty")
 #: The systems of the grid: the two that fail, then the pendulum as the control.
 ABLATION_SYSTEMS = ("cartpole", "mountaincar", "pendulum")
 #: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
@@ -157,6 +168,9 @@ TRAIN_DIR = "train"
 # Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.
 # profiles.PAPER_RUN_SECONDS over the paper's budgets); the ETA's prior before runs finish.
 FALLBACK_SECONDS_PER_KSTEP = 12.0
+# SAC's wall time over DDPG's on the same run (`python benchmarks/bench_sac.py`: 30.1 s against
+# 11.1 s for 1000 steps of the pendulum hybrids; batch 256 against 100).
+SAC_COST_FACTOR = 2.7
 # Decimals of the held-out returns in a record (they are reported, not tested on).
 RETURN_DECIMALS = 3
 #: Evaluation interval of a system the authors did not run (environment steps).
@@ -210,10 +224,18 @@ def setting_overrides(
     return {name: AUTHORS_DDPG[name] for name in SINGLE_FACTOR_FIELDS[setting]}
 
 
-def setting_applies(setting: str, system: str) -> bool:
+def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline") -> bool:
     """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` always
-    applies); a setting that does not is left out of the grid there, as a copy of ``leoc``."""
+    applies) and exists for ``controller``'s algorithm (SAC: :data:`SAC_SETTINGS`); a setting
+    that does not is left out of the grid there."""
+    if controller_algo(controller) == "sac" and setting not in SAC_SETTINGS:
+        return False
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
+
+
+def controller_algo(controller: str) -> str:
+    """``"sac"`` for the SAC controllers, ``"ddpg"`` for the DDPG ones."""
+    return "sac" if controller.startswith("sac_") else "ddpg"
 
 
 def default_seeds(setting: str) -> tuple[int, ...]:
@@ -237,13 +259,18 @@ class AblationSpec(NamedTuple):
         return f"{self.system}/{self.controller}/{self.setting}/seed{self.seed}"
 
     @property
+    def algo(self) -> str:
+        """The learner: ``"ddpg"`` or ``"sac"`` (:func:`controller_algo`)."""
+        return controller_algo(self.controller)
+
+    @property
     def hybrid(self) -> bool:
         """Whether the controller is a hybrid."""
         return "_hybrid" in self.controller
 
     @property
     def relevance(self) -> str:
-        """``roa`` for ``ddpg_hybrid_roa``, else ``paper``."""
+        """``roa`` for the ``*_hybrid_roa`` controllers, else ``paper``."""
         return "roa" if self.controller.endswith("_roa") else "paper"
 
 
@@ -259,21 +286,22 @@ def grid_specs(
     ----------
     systems, controllers, settings : sequence of str
         Subsets of :data:`ABLATION_SYSTEMS` (or any registered system),
-        :data:`ABLATION_CONTROLLERS` and :data:`SETTINGS`.
+        :data:`GRID_CONTROLLERS` and :data:`SETTINGS`.
     seeds : sequence of int, optional
         The seeds of every setting; default :func:`default_seeds` per setting.
 
     Returns
     -------
     list of AblationSpec
-        Without the settings that do not apply to a system (:func:`setting_applies`).
+        Without the settings that do not apply to a system or a controller's algorithm
+        (:func:`setting_applies`).
     """
     from leoc.systems import system_names
 
     known = system_names()
     for name, values, allowed in (
         ("systems", systems, known),
-        ("controllers", controllers, ABLATION_CONTROLLERS),
+        ("controllers", controllers, GRID_CONTROLLERS),
         ("settings", settings, SETTINGS),
     ):
         unknown = [value for value in values if value not in allowed]
@@ -286,8 +314,8 @@ def grid_specs(
         AblationSpec(system, controller, setting, int(seed))
         for system in ordered
         for setting in settings
-        if setting_applies(setting, system)
         for controller in controllers
+        if setting_applies(setting, system, controller)
         for seed in (default_seeds(setting) if seeds is None else seeds)
     ]
 
@@ -373,7 +401,7 @@ class AblationPlan:
     def config(self, spec: AblationSpec) -> DDPGConfig:
         """The :class:`~leoc.ddpg.DDPGConfig` of ``spec``."""
         overrides = self.config_overrides(spec)
-        return DDPGConfig.for_system(spec.system, "ddpg", hybrid=spec.hybrid, **overrides)
+        return DDPGConfig.for_system(spec.system, spec.algo, hybrid=spec.hybrid, **overrides)
 
     def pinned(self, systems: Sequence[str]) -> dict[str, Any]:
         """JSON form of the plan for ``systems`` (what a folder's :data:`PLAN_FILE` pins)."""
@@ -520,7 +548,7 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
         print(f"== {spec.key}: {config.total_steps} steps", flush=True)
         result = train_ddpg(
             spec.system,
-            "ddpg",
+            spec.algo,
             hybrid=spec.hybrid,
             seed=spec.seed,
             run_dir=run_dir / TRAIN_DIR,
@@ -652,16 +680,19 @@ def run_outcome(record: Mapping[str, Any], budget: int) -> RunOutcome:
 # ------------------------------------------------------------------------------------ driving
 def expected_seconds(plan: AblationPlan) -> Callable[[AblationSpec], float]:
     """A run's expected wall time for the sweep's ETA: results/paper's measured DDPG cost of
-    its system and controller, scaled to the plan's budget."""
+    its system and controller, scaled to the plan's budget (SAC: the DDPG controller's cost
+    times :data:`SAC_COST_FACTOR`)."""
     from leoc.experiments.profiles import PAPER_RUN_SECONDS
 
     def cost(spec: AblationSpec) -> float:
         budget = plan.budget_for(spec.system)
-        measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{spec.controller}")
+        factor = SAC_COST_FACTOR if spec.algo == "sac" else 1.0
+        controller = spec.controller.replace("sac_", "ddpg_", 1)
+        measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{controller}")
         paper = TOTAL_STEPS_BY_SYSTEM.get(spec.system)
         if measured is None or paper is None:
-            return FALLBACK_SECONDS_PER_KSTEP * budget / 1000.0
-        return measured * budget / paper
+            return factor * FALLBACK_SECONDS_PER_KSTEP * budget / 1000.0
+        return factor * measured * budget / paper
 
     return cost
 

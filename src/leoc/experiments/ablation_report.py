@@ -1,4 +1,4 @@
-"""The DDPG ablation's table and figure, from the runs' records, deterministic.
+"""The DDPG ablation's (and SAC's seeds') table and figure, from the runs' records, deterministic.
 
 :func:`publish_ablation` reads every finished run of an ablation folder
 (:mod:`leoc.experiments.ablation`), copies the records, logs and ``plan.json`` (not the
@@ -25,13 +25,14 @@ from typing import Any, NamedTuple
 
 from leoc.ddpg.config import TOTAL_STEPS_BY_SYSTEM
 from leoc.experiments.ablation import (
-    ABLATION_CONTROLLERS,
     ABLATION_SYSTEMS,
+    GRID_CONTROLLERS,
     LOG_FILE,
     PLAN_FILE,
     RESULT_FILE,
     SETTING_LABELS,
     SETTINGS,
+    controller_algo,
     read_records,
     run_outcome,
 )
@@ -64,8 +65,8 @@ SUCCESS_TEXT = (
     "step T; for the settings that select, the best of the last third of T on the trainer's "
     "own evaluation episodes) holds the operating point in every one of its held-out "
     "swing-up episodes (starts seeded seed + 30000 + k, on leoc's system, never used for "
-    "training or selection). One run per seed gives every budget up to its own: DDPG's "
-    "training does not depend on the total budget. 'Reached' counts the runs where some "
+    "training or selection). One run per seed gives every budget up to its own: DDPG's and "
+    "SAC's training do not depend on the total budget. 'Reached' counts the runs where some "
     "held-out evaluation up to T held in every episode (optimistic: a run that learnt and "
     "then forgot counts). Interval: Wilson score, 95%."
 )
@@ -136,7 +137,7 @@ def group_records(records: Iterable[Mapping[str, Any]]) -> dict[tuple[str, str, 
     for record in records:
         cells.setdefault(_cell_key(record), []).append(record)
     systems = _order((k[0] for k in cells), ABLATION_SYSTEMS)
-    controllers = _order((k[1] for k in cells), ABLATION_CONTROLLERS)
+    controllers = _order((k[1] for k in cells), GRID_CONTROLLERS)
     settings = _order((k[2] for k in cells), SETTINGS)
     rank = {name: i for i, name in enumerate([*systems, *controllers, *settings])}
     ordered = sorted(cells, key=lambda k: (rank[k[0]], rank[k[1]], rank[k[2]]))
@@ -218,7 +219,7 @@ def headline_tables(rates: Sequence[CellRate]) -> list[str]:
     for system in _order({c.system for c in rates}, ABLATION_SYSTEMS):
         budget = headline_budget(rates, system)
         cells = [c for c in rates if c.system == system]
-        controllers = _order({c.controller for c in cells}, ABLATION_CONTROLLERS)
+        controllers = _order({c.controller for c in cells}, GRID_CONTROLLERS)
         settings = _order({c.setting for c in cells}, SETTINGS)
         if budget == paper_budget(system):
             lines += [f"### {system}, at the paper's budget ({budget} steps)", ""]
@@ -266,7 +267,7 @@ def budget_tables(rates: Sequence[CellRate], every: int = DEFAULT_TABLE_EVERY) -
         columns = budget_columns({c.budget for c in cells}, every, paper_budget(system))
         lines += [f"### {system}: success against budget (steps)", ""]
         rows = []
-        for controller in _order({c.controller for c in cells}, ABLATION_CONTROLLERS):
+        for controller in _order({c.controller for c in cells}, GRID_CONTROLLERS):
             for setting in _order({c.setting for c in cells}, SETTINGS):
                 if not any(c.controller == controller and c.setting == setting for c in cells):
                     continue
@@ -304,14 +305,16 @@ def runs_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
 def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_TABLE_EVERY) -> str:
     """The whole ``ablation.md`` text."""
     rates = success_rates(records)
+    algos = sorted({controller_algo(str(record["controller"])).upper() for record in records})
+    learners = " and ".join(algos) or "DDPG"
     lines = [
-        "# DDPG ablation: how often DDPG learns the swing-up",
+        f"# {learners} over seeds: how often {learners} learns the swing-up",
         "",
         SUCCESS_TEXT,
         "",
         "Settings: leoc's defaults; the authors' full DDPG setup (nrjc/LEOC); leoc's defaults "
-        "with one of the authors' choices switched on (leoc.experiments.ablation). "
-        f"{len(records)} runs.",
+        "with one of the authors' choices switched on (leoc.experiments.ablation; SAC takes "
+        f"leoc's defaults and the authors' exit rule only). {len(records)} runs.",
         "",
         "## Success at the paper's budget",
         "",
