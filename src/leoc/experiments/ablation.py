@@ -168,8 +168,8 @@ TRAIN_DIR = "train"
 # Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.
 # profiles.PAPER_RUN_SECONDS over the paper's budgets); the ETA's prior before runs finish.
 FALLBACK_SECONDS_PER_KSTEP = 12.0
-# SAC's wall time over DDPG's on the same run (`python benchmarks/bench_sac.py`: 30.1 s against
-# 11.1 s for 1000 steps of the pendulum hybrids; batch 256 against 100).
+#: SAC's wall time over DDPG's on the same run, for the ETA (``python benchmarks/bench_sac.py``:
+#: 30.1 s against 11.1 s for 1000 steps of the pendulum hybrids; batch 256 against 100).
 SAC_COST_FACTOR = 2.7
 # Decimals of the held-out returns in a record (they are reported, not tested on).
 RETURN_DECIMALS = 3
