@@ -44,13 +44,21 @@ CONTROLLERS = (
 FRAMEWORKS = ("ddpg", "sac", "pilco")
 """The learners of ``leoc reproduce``'s trained controllers (each controller's name starts with
 one), in report order."""
+
+
+def controller_framework(controller: str) -> str:
+    """The learner a controller name starts with (``ddpg``, ``sac``, ``pilco``), or ``linear``
+    for the linear references (``linear``, ``linear_pilco``)."""
+    return controller.split("_")[0]
+
+
 REQUEST_ONLY_FRAMEWORKS = ("sac",)
 """Learners whose controllers ``leoc reproduce`` runs only when ``--controllers`` names them
 (the paper has no SAC)."""
 DEFAULT_CONTROLLERS = tuple(
     name
     for name in CONTROLLERS
-    if not name.endswith("_roa") and name.split("_")[0] not in REQUEST_ONLY_FRAMEWORKS
+    if not name.endswith("_roa") and controller_framework(name) not in REQUEST_ONLY_FRAMEWORKS
 )
 """What ``leoc reproduce`` runs unless ``--controllers`` says otherwise: the paper's controllers
 and the two linear references (the ROA-relevance hybrids and SAC's controllers are added on

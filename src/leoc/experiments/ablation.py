@@ -102,6 +102,7 @@ from leoc.ddpg.config import (
 from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
 from leoc.experiments.variants import AUTHORS
 from leoc.io import read_json_object, write_json_atomic
+from leoc.names import controller_framework
 from leoc.systems.base import DEFAULT_RULES
 
 #: The settings of the grid, in table order (see the module docstring).
@@ -228,14 +229,9 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` always
     applies) and exists for ``controller``'s algorithm (SAC: :data:`SAC_SETTINGS`); a setting
     that does not is left out of the grid there."""
-    if controller_algo(controller) == "sac" and setting not in SAC_SETTINGS:
+    if controller_framework(controller) == "sac" and setting not in SAC_SETTINGS:
         return False
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
-
-
-def controller_algo(controller: str) -> str:
-    """``"sac"`` for the SAC controllers, ``"ddpg"`` for the DDPG ones."""
-    return "sac" if controller.startswith("sac_") else "ddpg"
 
 
 def default_seeds(setting: str) -> tuple[int, ...]:
@@ -260,8 +256,8 @@ class AblationSpec(NamedTuple):
 
     @property
     def algo(self) -> str:
-        """The learner: ``"ddpg"`` or ``"sac"`` (:func:`controller_algo`)."""
-        return controller_algo(self.controller)
+        """The learner: ``"ddpg"`` or ``"sac"`` (:func:`leoc.names.controller_framework`)."""
+        return controller_framework(self.controller)
 
     @property
     def hybrid(self) -> bool:

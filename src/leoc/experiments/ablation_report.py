@@ -32,13 +32,13 @@ from leoc.experiments.ablation import (
     RESULT_FILE,
     SETTING_LABELS,
     SETTINGS,
-    controller_algo,
     read_records,
     run_outcome,
 )
 from leoc.experiments.profiles import CONTROLLER_LABELS
 from leoc.experiments.stats import CONFIDENCE, wilson_interval
 from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
+from leoc.names import controller_framework
 
 #: Files :func:`publish_ablation` writes (the text ones are compared byte for byte by the tests).
 TABLE_FILES = ("ablation.md", "success_vs_budget.csv", "ablation.json")
@@ -305,7 +305,7 @@ def runs_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
 def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_TABLE_EVERY) -> str:
     """The whole ``ablation.md`` text."""
     rates = success_rates(records)
-    algos = sorted({controller_algo(str(record["controller"])).upper() for record in records})
+    algos = sorted({controller_framework(str(record["controller"])).upper() for record in records})
     learners = " and ".join(algos) or "DDPG"
     lines = [
         f"# {learners} over seeds: how often {learners} learns the swing-up",

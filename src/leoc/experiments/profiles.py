@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, NamedTuple
 
-from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS
+from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework
 from leoc.systems import SYSTEM_NAMES, system_names
 
 # Every controller, in report order, and the default set (the paper's controllers and the two
@@ -234,7 +234,7 @@ class RunSpec(NamedTuple):
     @property
     def framework(self) -> str:
         """``linear``, ``ddpg``, ``sac`` or ``pilco``."""
-        return "linear" if self.controller in LINEAR_CONTROLLERS else self.controller.split("_")[0]
+        return controller_framework(self.controller)
 
     @property
     def hybrid(self) -> bool:
