@@ -45,6 +45,7 @@ from collections.abc import Sequence
 from leoc.experiments.ablation import (
     ABLATION_CONTROLLERS,
     ABLATION_SYSTEMS,
+    ALL_SETTINGS,
     GRID_CONTROLLERS,
     SAC_COST_FACTOR,
     SETTINGS,
@@ -81,7 +82,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--systems", nargs="+", default=list(ABLATION_SYSTEMS))
-    parser.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=SETTINGS)
+    parser.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=ALL_SETTINGS)
     parser.add_argument(
         "--controllers", nargs="+", default=list(ABLATION_CONTROLLERS), choices=GRID_CONTROLLERS
     )

@@ -16,6 +16,7 @@ from leoc.ddpg.config import (
 )
 from leoc.experiments.ablation import (
     ABLATION_CONTROLLERS,
+    ALL_SETTINGS,
     RESULT_FILE,
     SETTINGS,
     AblationPlan,
@@ -339,7 +340,7 @@ def test_the_figure_reads_cleanly_for_the_full_grid() -> None:
         )
         for system in ("cartpole", "mountaincar", "pendulum")
         for controller in ABLATION_CONTROLLERS
-        for setting in SETTINGS
+        for setting in ALL_SETTINGS
         for seed in range(3)
     ]
     rates = success_rates(records)
@@ -424,3 +425,30 @@ def test_a_short_sac_run_is_the_prefix_of_a_long_one(tmp_path) -> None:
     assert long["config"]["algo"] == "sac"
     assert short["evaluations"] == long["evaluations"][: len(short["evaluations"])]
     assert [row["steps"] for row in long["evaluations"]] == [0, 100, 200, 300, 400]
+
+
+@pytest.mark.parametrize("system", ["cartpole", "mountaincar", "pendulum"])
+@pytest.mark.parametrize("controller", ["ddpg_baseline", "ddpg_hybrid_roa"])
+def test_all_factors_has_every_single_factor_and_each_all_but_leaves_out_exactly_one(
+    system, controller
+) -> None:
+    plan = AblationPlan()
+    leoc = plan.config(AblationSpec(system, controller, "leoc", 0))
+    everything = plan.config(AblationSpec(system, controller, "all_factors", 0))
+    fields = set().union(*INTENDED.values())
+    has_track = system != "pendulum"
+    # all five choices at once, with the authors' values, and nothing else
+    assert set(_differences(everything, leoc)) == fields | ({"step_rules"} if has_track else set())
+    for name in fields:
+        assert getattr(everything, name) == ISSUE_VALUES[name]
+    for factor in ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection"):
+        setting = f"all_but_{factor}"
+        specs = grid_specs([system], [controller], [setting], seeds=[0])
+        if factor == "exit_penalty" and not has_track:
+            assert specs == []  # the same as all_factors there: left out
+            continue
+        left = plan.config(specs[0])
+        missing = INTENDED.get(factor, {"step_rules"})
+        assert set(_differences(left, everything)) == missing
+        for name in missing:  # back at leoc's value
+            assert getattr(left, name) == getattr(leoc, name)

@@ -31,6 +31,12 @@ setting              DDPGConfig fields, relative to leoc's defaults
                      (``model_selection``, ``eval_episodes``)
 ===================  ==========================================================================
 
+Where no single choice is enough, combinations decide which are needed
+(:data:`COMBINED_SETTINGS`, not in the default grid): ``all_factors`` is leoc's defaults with
+all five choices above switched on at once (unlike ``authors``, it keeps leoc's relevance,
+clipped actor output, actor learning rate and the pendulum's integrator), and
+``all_but_FACTOR`` is ``all_factors`` with one of them left at leoc's value.
+
 SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
@@ -115,6 +121,12 @@ SETTINGS = (
     "exit_penalty",
     "model_selection",
 )
+#: The single-factor settings: one authors' choice each, on leoc's defaults.
+FACTORS = ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection")
+#: Combinations of the factors: all of them, and all but one (leave-one-out).
+COMBINED_SETTINGS = ("all_factors", *(f"all_but_{factor}" for factor in FACTORS))
+#: Every setting the harness runs: the default grid's, then the combinations.
+ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
 SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
     "exploration": ("noise_units", "ou_theta", "ou_sigma", "noise_reset"),
@@ -139,6 +151,8 @@ SETTING_LABELS = {
     "critic": "+ Huber, critic shape, TF-Agents init",
     "exit_penalty": "+ authors' exit rule",
     "model_selection": "+ best of last third",
+    "all_factors": "+ all five choices",
+    **{f"all_but_{factor}": f"+ all five but {factor.replace('_', ' ')}" for factor in FACTORS},
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
@@ -190,7 +204,7 @@ def setting_overrides(
     Parameters
     ----------
     setting : str
-        One of :data:`SETTINGS`.
+        One of :data:`ALL_SETTINGS`.
     system : str
         System name.
     hybrid : bool
@@ -204,10 +218,17 @@ def setting_overrides(
     dict
         A fresh dict; empty for ``leoc`` and for a setting that changes nothing on ``system``.
     """
-    if setting not in SETTINGS:
-        raise ValueError(f"setting: expected one of {SETTINGS}, found {setting!r}")
+    if setting not in ALL_SETTINGS:
+        raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
     if setting == "leoc":
         return {}
+    if setting in COMBINED_SETTINGS:
+        left_out = setting.removeprefix("all_but_") if setting != "all_factors" else None
+        overrides: dict[str, Any] = {}
+        for factor in FACTORS:
+            if factor != left_out:
+                overrides.update(setting_overrides(factor, system, hybrid, budget))
+        return overrides
     if setting == "authors":
         overrides = authors_ddpg_overrides(system, hybrid, budget)
         rules = AUTHORS.rules_for(system)
@@ -231,12 +252,14 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     that does not is left out of the grid there."""
     if controller_framework(controller) == "sac" and setting not in SAC_SETTINGS:
         return False
+    if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
+        return setting_applies(setting.removeprefix("all_but_"), system, controller)
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
 
 
 def default_seeds(setting: str) -> tuple[int, ...]:
     """Seeds of ``setting`` when none are given: ``0 .. 4`` for ``leoc`` and ``authors``,
-    ``0 .. 2`` for a single-factor setting."""
+    ``0 .. 2`` for a single-factor or combined setting."""
     count = FULL_SEEDS if setting in ("leoc", "authors") else SINGLE_FACTOR_SEEDS
     return tuple(range(count))
 
@@ -282,7 +305,8 @@ def grid_specs(
     ----------
     systems, controllers, settings : sequence of str
         Subsets of :data:`ABLATION_SYSTEMS` (or any registered system),
-        :data:`GRID_CONTROLLERS` and :data:`SETTINGS`.
+        :data:`GRID_CONTROLLERS` and :data:`ALL_SETTINGS` (default: the grid's
+        :data:`SETTINGS`).
     seeds : sequence of int, optional
         The seeds of every setting; default :func:`default_seeds` per setting.
 
@@ -298,7 +322,7 @@ def grid_specs(
     for name, values, allowed in (
         ("systems", systems, known),
         ("controllers", controllers, GRID_CONTROLLERS),
-        ("settings", settings, SETTINGS),
+        ("settings", settings, ALL_SETTINGS),
     ):
         unknown = [value for value in values if value not in allowed]
         if unknown:
@@ -418,7 +442,7 @@ def switched_fields() -> set[str]:
     for system in ABLATION_SYSTEMS:
         for hybrid in (False, True):
             defaults = DDPGConfig.for_system(system, hybrid=hybrid).as_dict()
-            for setting in SETTINGS:
+            for setting in ALL_SETTINGS:
                 for name, value in setting_overrides(setting, system, hybrid).items():
                     if _json_form(value) != _json_form(defaults[name]):
                         fields.add(name)

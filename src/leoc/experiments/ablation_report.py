@@ -26,12 +26,12 @@ from typing import Any, NamedTuple
 from leoc.ddpg.config import TOTAL_STEPS_BY_SYSTEM
 from leoc.experiments.ablation import (
     ABLATION_SYSTEMS,
+    ALL_SETTINGS,
     GRID_CONTROLLERS,
     LOG_FILE,
     PLAN_FILE,
     RESULT_FILE,
     SETTING_LABELS,
-    SETTINGS,
     read_records,
     run_outcome,
 )
@@ -138,7 +138,7 @@ def group_records(records: Iterable[Mapping[str, Any]]) -> dict[tuple[str, str, 
         cells.setdefault(_cell_key(record), []).append(record)
     systems = _order((k[0] for k in cells), ABLATION_SYSTEMS)
     controllers = _order((k[1] for k in cells), GRID_CONTROLLERS)
-    settings = _order((k[2] for k in cells), SETTINGS)
+    settings = _order((k[2] for k in cells), ALL_SETTINGS)
     rank = {name: i for i, name in enumerate([*systems, *controllers, *settings])}
     ordered = sorted(cells, key=lambda k: (rank[k[0]], rank[k[1]], rank[k[2]]))
     return {key: sorted(cells[key], key=lambda r: int(r["seed"])) for key in ordered}
@@ -220,7 +220,7 @@ def headline_tables(rates: Sequence[CellRate]) -> list[str]:
         budget = headline_budget(rates, system)
         cells = [c for c in rates if c.system == system]
         controllers = _order({c.controller for c in cells}, GRID_CONTROLLERS)
-        settings = _order({c.setting for c in cells}, SETTINGS)
+        settings = _order({c.setting for c in cells}, ALL_SETTINGS)
         if budget == paper_budget(system):
             lines += [f"### {system}, at the paper's budget ({budget} steps)", ""]
         else:
@@ -268,7 +268,7 @@ def budget_tables(rates: Sequence[CellRate], every: int = DEFAULT_TABLE_EVERY) -
         lines += [f"### {system}: success against budget (steps)", ""]
         rows = []
         for controller in _order({c.controller for c in cells}, GRID_CONTROLLERS):
-            for setting in _order({c.setting for c in cells}, SETTINGS):
+            for setting in _order({c.setting for c in cells}, ALL_SETTINGS):
                 if not any(c.controller == controller and c.setting == setting for c in cells):
                     continue
                 found = [at.get((system, controller, setting, b)) for b in columns]
@@ -402,7 +402,10 @@ def write_tables(
     ]
     summary = {
         "definition": SUCCESS_TEXT,
-        "settings": {name: SETTING_LABELS[name] for name in SETTINGS},
+        "settings": {
+            name: SETTING_LABELS.get(name, name)
+            for name in _order({str(r["setting"]) for r in records}, ALL_SETTINGS)
+        },
         "paper_budgets": {s: paper_budget(s) for s in sorted({c.system for c in rates})},
         "cells": cell_series(rates),
         "runs": runs,

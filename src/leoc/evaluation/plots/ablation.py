@@ -17,7 +17,7 @@ from leoc.evaluation.plots.common import (
     save_figure,
 )
 
-#: Colour of each ablation setting (:data:`leoc.experiments.ablation.SETTINGS`).
+#: Colour of each ablation setting (:data:`leoc.experiments.ablation.ALL_SETTINGS`).
 SETTING_COLOURS = {
     "leoc": "#222222",
     "authors": "#d62728",
@@ -26,9 +26,17 @@ SETTING_COLOURS = {
     "critic": "#2ca02c",
     "exit_penalty": "#9467bd",
     "model_selection": "#8c564b",
+    "all_factors": "#17becf",
 }
+# "all but X" takes X's colour, dash-dotted.
+SETTING_COLOURS.update(
+    {f"all_but_{name}": SETTING_COLOURS[name] for name in list(SETTING_COLOURS)[2:7]}
+)
 # The two reference settings are drawn thicker (leoc solid, the authors' dashed).
-SETTING_STYLES = {"authors": "--"}
+SETTING_STYLES = {
+    "authors": "--",
+    **{name: "-." for name in SETTING_COLOURS if name.startswith("all_but_")},
+}
 REFERENCE_WIDTH = 2.2
 LINE_WIDTH = 1.3
 MARKERS_PER_LINE = 10
