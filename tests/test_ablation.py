@@ -452,3 +452,18 @@ def test_all_factors_has_every_single_factor_and_each_all_but_leaves_out_exactly
         assert set(_differences(left, everything)) == missing
         for name in missing:  # back at leoc's value
             assert getattr(left, name) == getattr(leoc, name)
+
+
+@pytest.mark.parametrize("system", ["cartpole", "mountaincar", "pendulum"])
+def test_all_safe_exit_keeps_the_next_state_reward_and_leoc_exit_that_never_pays(system) -> None:
+    plan = AblationPlan()
+    specs = grid_specs([system], ["ddpg_hybrid"], ["all_safe_exit"], seeds=[0])
+    if system == "pendulum":  # the authors take the pendulum's reward before the step: left out
+        assert specs == []
+        return
+    safe = plan.config(specs[0])
+    without = plan.config(AblationSpec(system, "ddpg_hybrid", "all_but_exit_penalty", 0))
+    assert _differences(safe, without) == {"step_rules": ({"reward_on_next_state": True}, {})}
+    rules = StepRules(**safe.step_rules)
+    assert rules.exit_penalty is None  # leoc's exit, which never pays
+    assert rules.reward_on_next_state == AUTHORS.rules_for(system).reward_on_next_state is True

@@ -36,6 +36,11 @@ Where no single choice is enough, combinations decide which are needed
 all five choices above switched on at once (unlike ``authors``, it keeps leoc's relevance,
 clipped actor output, actor learning rate and the pendulum's integrator), and
 ``all_but_FACTOR`` is ``all_factors`` with one of them left at leoc's value.
+``all_safe_exit`` splits the exit rule, the one factor leoc cannot adopt whole (the authors'
+-100 exit pays, :class:`~leoc.systems.StepRules`): ``all_but_exit_penalty`` plus the rule's
+other half, the reward of the next state, with leoc's exit that never pays. On a system
+where the authors take the reward before the step (the pendulum) it equals
+``all_but_exit_penalty`` and is left out.
 
 SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
@@ -123,8 +128,14 @@ SETTINGS = (
 )
 #: The single-factor settings: one authors' choice each, on leoc's defaults.
 FACTORS = ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection")
-#: Combinations of the factors: all of them, and all but one (leave-one-out).
-COMBINED_SETTINGS = ("all_factors", *(f"all_but_{factor}" for factor in FACTORS))
+#: Combinations of the factors: all of them, all but one (leave-one-out), and all with the
+#: exit rule's safe half only (:data:`SAFE_EXIT_SETTING`).
+SAFE_EXIT_SETTING = "all_safe_exit"
+COMBINED_SETTINGS = (
+    "all_factors",
+    *(f"all_but_{factor}" for factor in FACTORS),
+    SAFE_EXIT_SETTING,
+)
 #: Every setting the harness runs: the default grid's, then the combinations.
 ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
@@ -153,6 +164,7 @@ SETTING_LABELS = {
     "model_selection": "+ best of last third",
     "all_factors": "+ all five choices",
     **{f"all_but_{factor}": f"+ all five but {factor.replace('_', ' ')}" for factor in FACTORS},
+    SAFE_EXIT_SETTING: "+ all five, exit that never pays (reward on next state)",
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
@@ -222,6 +234,12 @@ def setting_overrides(
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
     if setting == "leoc":
         return {}
+    if setting == SAFE_EXIT_SETTING:
+        overrides = setting_overrides("all_but_exit_penalty", system, hybrid, budget)
+        exit_rules = setting_overrides("exit_penalty", system, hybrid, budget).get("step_rules", {})
+        if "reward_on_next_state" in exit_rules:
+            overrides["step_rules"] = {"reward_on_next_state": exit_rules["reward_on_next_state"]}
+        return overrides
     if setting in COMBINED_SETTINGS:
         left_out = setting.removeprefix("all_but_") if setting != "all_factors" else None
         overrides: dict[str, Any] = {}
@@ -254,6 +272,9 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
         return False
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
         return setting_applies(setting.removeprefix("all_but_"), system, controller)
+    if setting == SAFE_EXIT_SETTING:  # a copy of all_but_exit_penalty where no rule changes
+        exit_rules = setting_overrides("exit_penalty", system, hybrid=False).get("step_rules", {})
+        return "reward_on_next_state" in exit_rules
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
 
 

@@ -32,10 +32,13 @@ SETTING_COLOURS = {
 SETTING_COLOURS.update(
     {f"all_but_{name}": SETTING_COLOURS[name] for name in list(SETTING_COLOURS)[2:7]}
 )
+# all_safe_exit: the exit rule's colour, dotted (it keeps half of that rule).
+SETTING_COLOURS["all_safe_exit"] = SETTING_COLOURS["exit_penalty"]
 # The two reference settings are drawn thicker (leoc solid, the authors' dashed).
 SETTING_STYLES = {
     "authors": "--",
     **{name: "-." for name in SETTING_COLOURS if name.startswith("all_but_")},
+    "all_safe_exit": ":",
 }
 REFERENCE_WIDTH = 2.2
 LINE_WIDTH = 1.3
