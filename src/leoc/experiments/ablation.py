@@ -128,9 +128,10 @@ SETTINGS = (
 )
 #: The single-factor settings: one authors' choice each, on leoc's defaults.
 FACTORS = ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection")
+#: The combined setting that keeps the exit rule's safe half only (the module docstring).
+SAFE_EXIT_SETTING = "all_safe_exit"
 #: Combinations of the factors: all of them, all but one (leave-one-out), and all with the
 #: exit rule's safe half only (:data:`SAFE_EXIT_SETTING`).
-SAFE_EXIT_SETTING = "all_safe_exit"
 COMBINED_SETTINGS = (
     "all_factors",
     *(f"all_but_{factor}" for factor in FACTORS),
@@ -300,7 +301,7 @@ class AblationSpec(NamedTuple):
 
     @property
     def algo(self) -> str:
-        """The learner: ``"ddpg"`` or ``"sac"`` (:func:`leoc.names.controller_framework`)."""
+        """The learner: ``"ddpg"`` or ``"sac"`` (``leoc.names.controller_framework``)."""
         return controller_framework(self.controller)
 
     @property
