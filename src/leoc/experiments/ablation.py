@@ -274,8 +274,7 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
         return setting_applies(setting.removeprefix("all_but_"), system, controller)
     if setting == SAFE_EXIT_SETTING:  # a copy of all_but_exit_penalty where no rule changes
-        exit_rules = setting_overrides("exit_penalty", system, hybrid=False).get("step_rules", {})
-        return "reward_on_next_state" in exit_rules
+        return "step_rules" in setting_overrides(setting, system, hybrid=False)
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
 
 

@@ -12,7 +12,7 @@ from leoc.systems import SYSTEM_NAMES, system_names
 # linear references; the ROA-relevance hybrids are added on request) live in leoc.names, where
 # the command line reads them without importing torch.
 LINEAR_CONTROLLERS = ("linear", "linear_pilco")
-TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in ("linear", "linear_pilco"))
+TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in LINEAR_CONTROLLERS)
 # The linear reference of each framework: the LQR designed and run at that framework's control
 # period (DDPG and SAC act every simulator step, PILCO holds each action for ``action_repeat``
 # steps).
