@@ -201,15 +201,18 @@ def _record(
     model_selection: str = "final",
     learning_starts: int = 200,
     episodes: int = 5,
+    selection_held: dict[int, float] | None = None,
 ) -> dict:
     """A run's record: the held-out episodes all hold at the steps in ``held_at``; the
-    selection returns are ``returns`` where given, else -1000."""
+    selection returns are ``returns`` where given, else -1000; the selection episodes' held
+    shares ``selection_held`` where given, else 0."""
     returns = returns or {}
+    selection_held = selection_held or {}
     evaluations = [
         {
             "steps": step,
             "selection_return": returns.get(step, -1000.0),
-            "selection_held_fraction": 0.0,
+            "selection_held_fraction": selection_held.get(step, 0.0),
             "test_returns": [-100.0] * episodes,
             "test_hold_steps": [50] * episodes if step in held_at else [50, None] + [50] * 3,
         }
@@ -327,6 +330,51 @@ def test_success_rates_and_the_published_tables_from_a_synthetic_folder(tmp_path
     before = {name: (dest / name).read_bytes() for name in TABLE_FILES}
     publish_ablation(dest, every=1500)
     assert {name: (dest / name).read_bytes() for name in TABLE_FILES} == before
+
+
+def test_model_selection_rules_re_apply_to_the_recorded_runs(tmp_path) -> None:
+    from leoc.experiments.ablation_report import reselection_rows
+
+    # learnt at 1200 (selection and held-out episodes all hold), forgot after; the return
+    # peaks at 2700 in the last third, where one held-out episode falls
+    learnt_and_forgot = {
+        "held_at": (1200,),
+        "returns": {1200: -300.0, 2700: -150.0},
+        "selection_held": {1200: 1.0, 2700: 2 / 3},
+        "model_selection": "best_last_third",
+        "learning_starts": 1000,
+    }
+    records = [_record(seed=seed, **learnt_and_forgot) for seed in range(2)]
+    late = {
+        "held_at": (3000,),
+        "returns": {3000: -100.0},
+        "selection_held": {3000: 1.0},
+        "model_selection": "best_last_third",
+    }
+    records.append(_record(seed=2, **late))
+    outcomes = {
+        rule: [run_outcome(r, 3000, rule) for r in records]
+        for rule in ("final", "best_last_third", "best_held", None)
+    }
+    assert [o.delivered_steps for o in outcomes["best_held"]] == [1200, 1200, 3000]
+    assert [o.delivered_steps for o in outcomes["best_last_third"]] == [2700, 2700, 3000]
+    assert outcomes[None] == outcomes["best_last_third"]  # the run's own rule
+    assert [o.success for o in outcomes["final"]] == [False, False, True]
+    # budget 1500: the runs of budget 1500 could not have selected 2700
+    assert run_outcome(records[0], 1500, "best_held").delivered_steps == 1200
+    (row,) = reselection_rows(records, {"cartpole": 3000})
+    assert (row["final"], row["best_last_third"], row["best_held"], row["reached"]) == (1, 1, 3, 3)
+    assert (row["own_rule"], row["seeds"], row["budget"]) == ("best_last_third", 3, 3000)
+    folder = tmp_path / "runs-folder"
+    for record in records:
+        path = folder / "runs" / record["key"] / RESULT_FILE
+        path.parent.mkdir(parents=True)
+        path.write_text(json.dumps(record))
+    markdown = publish_ablation(folder).read_text()
+    assert (
+        "| DDPG baseline | leoc's defaults | best return, last third | 1/3 | 1/3 | 3/3 | 3/3 |"
+        in markdown
+    )
 
 
 def test_the_figure_reads_cleanly_for_the_full_grid() -> None:

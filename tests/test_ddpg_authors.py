@@ -28,13 +28,14 @@ from leoc.ddpg import (
     physical_policy,
 )
 from leoc.ddpg.algorithms import HUBER_DELTA, critic_loss_fn
-from leoc.ddpg.callbacks import last_third_start
+from leoc.ddpg.callbacks import last_third_start, selection_key, selection_start
 from leoc.ddpg.config import AUTHORS_DDPG, authors_ddpg_overrides
 from leoc.ddpg.policies import LeocTD3Policy, SplitCritic
 from leoc.ddpg.train import NOISE_SEED_OFFSET, exploration_noise, train_ddpg
+from leoc.experiments.ablation import delivered_steps
 from leoc.policies import PrecisionRelevance
 from leoc.systems import make_env, make_system
-from leoc.training import evaluate_episodes, evaluation_starts
+from leoc.training import Evaluation, evaluate_episodes, evaluation_starts
 
 SMALL_NET = [32, 32]
 F64_ATOL = 1e-12
@@ -411,6 +412,13 @@ class _StubModel:
         self.actor = nn.Linear(1, 1, bias=False)
 
 
+def _evaluation(mean_return: float, held: float, episodes: int = 3) -> Evaluation:
+    """An evaluation of ``episodes`` episodes, the first ``round(held * episodes)`` held."""
+    n_held = round(held * episodes)
+    hold_steps = [10] * n_held + [None] * (episodes - n_held)
+    return Evaluation(mean_return, 0.0, [mean_return] * episodes, hold_steps)
+
+
 def test_best_of_last_third_picks_the_authors_checkpoint():
     total, starts, interval = 11_000, 1_000, 200
     callback = LearningCurveCallback(
@@ -431,7 +439,7 @@ def test_best_of_last_third_picks_the_authors_checkpoint():
     for step in steps:
         with torch.no_grad():
             callback.model.actor.weight.fill_(step)  # the actor "at" this evaluation
-        callback._consider_for_selection(step, returns[step])
+        callback._consider_for_selection(step, _evaluation(returns[step], held=0.0))
     # dao/trainer.py written out: evaluation at iteration i = step - 1000 is a candidate when
     # i > int(num_iterations / 3 * 2); the saved policy is the first strict maximum.
     iterations = total - starts
@@ -442,12 +450,57 @@ def test_best_of_last_third_picks_the_authors_checkpoint():
     assert float(callback.model.actor.weight.detach()) == float(best)
 
 
+def test_best_held_prefers_holding_to_return_over_the_whole_run():
+    callback = LearningCurveCallback(
+        None,
+        np.zeros((1, 1)),
+        100,
+        progress=False,
+        model_selection="best_held",
+        selection_start=selection_start("best_held", 1200, 300),
+    )
+    callback.model = _StubModel()
+    # step: (mean return, held share of 3 episodes); 300 holds all three early (before the
+    # last third), 600 has the best return but drops an episode, 900 ties 300 later
+    history = {
+        0: (-900.0, 0.0),
+        300: (-120.0, 1.0),
+        600: (-50.0, 2 / 3),
+        900: (-120.0, 1.0),
+        1200: (-400.0, 1 / 3),
+    }
+    for step, (value, held) in history.items():
+        with torch.no_grad():
+            callback.model.actor.weight.fill_(step)
+        callback._consider_for_selection(step, _evaluation(value, held))
+    expected = max(history, key=lambda s: (history[s][1], history[s][0], -s))
+    assert expected == 300 and callback.selected_steps == 300
+    callback.restore_selected()
+    assert float(callback.model.actor.weight.detach()) == 300.0
+    # the ablation's re-selection applies the same rule to recorded evaluations
+    steps = list(history)
+    values = [history[s][0] for s in steps]
+    held = [history[s][1] for s in steps]
+    assert delivered_steps(steps, values, 1200, "best_held", 300, held) == 300
+    assert delivered_steps(steps, values, 1200, "best_last_third", 300, held) == 1200
+    assert delivered_steps(steps, values, 600, "best_held", 300, held) == 300
+
+
+def test_selection_rules_reject_unknown_names():
+    with pytest.raises(ValueError, match="model_selection"):
+        selection_key("best", -1.0, 1.0)
+    with pytest.raises(ValueError, match="model_selection"):
+        LearningCurveCallback(None, np.zeros((1, 1)), 100, model_selection="best_return")
+    with pytest.raises(ValueError, match="held_fractions"):
+        delivered_steps([0, 100], [-1.0, -2.0], 100, "best_held", 0)
+
+
 def test_final_selection_keeps_the_last_actor():
     callback = LearningCurveCallback(None, np.zeros((1, 1)), 100, progress=False)
     callback.model = _StubModel()
     with torch.no_grad():
         callback.model.actor.weight.fill_(7.0)
-    callback._consider_for_selection(900, 0.0)
+    callback._consider_for_selection(900, _evaluation(0.0, held=1.0))
     callback.restore_selected()
     assert callback.selected_steps is None
     assert float(callback.model.actor.weight.detach()) == 7.0
@@ -479,3 +532,24 @@ def test_tiny_authors_run_returns_the_selected_controller(tmp_path):
     replay = evaluate_episodes(system, result.policy, evaluation_starts(system, 2, 1))
     assert replay.mean_return == best["mean_return"]  # the returned controller is that actor
     assert isinstance(result.model.critic, SplitCritic)
+
+
+def test_tiny_best_held_run_returns_the_selected_controller(tmp_path):
+    tiny = {
+        "total_steps": 300,
+        "learning_starts": 100,
+        "eval_interval": 50,
+        "eval_episodes": 2,
+        "actor_hidden": (16, 16),
+        "critic_hidden": (16, 16),
+        "model_selection": "best_held",
+    }
+    result = train_ddpg("pendulum", hybrid=True, seed=3, run_dir=tmp_path, progress=False, **tiny)
+    best = max(
+        result.curve, key=lambda row: (row["held_fraction"], row["mean_return"], -row["steps"])
+    )
+    assert result.summary["selected_steps"] == best["steps"]
+    system = make_system("pendulum")
+    replay = evaluate_episodes(system, result.policy, evaluation_starts(system, 3, 2))
+    assert replay.mean_return == best["mean_return"]  # the returned controller is that actor
+    assert replay.held_fraction == best["held_fraction"]

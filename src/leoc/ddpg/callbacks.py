@@ -11,7 +11,12 @@ Model selection (``MODEL_SELECTIONS`` of :mod:`leoc.ddpg.config`): ``"final"`` (
 end of training, the actor of the best evaluation (strictly highest mean return, the earliest on
 ties) among those after :func:`last_third_start`, as nrjc/LEOC's ``dao/trainer.py`` does
 (``DDPGTrainer.train`` saves the policy when ``iteration > int(num_iterations / 3 * 2)`` and the
-evaluation return beats the best so far; that saved policy is their controller).
+evaluation return beats the best so far; that saved policy is their controller);
+``"best_held"`` restores the actor of the evaluation, any of the run, that held the operating point
+in the largest share of its episodes, the highest mean return among those (the earliest on ties):
+the success test of a swing-up is holding, and a return alone can prefer a fast swing that falls
+over to a slower one that holds. :func:`selection_key` and :func:`selection_start` are the rule,
+shared with the ablation's re-selection (:func:`leoc.experiments.ablation.delivered_steps`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,8 @@ __all__ = [
     "HeldOutEvaluationCallback",
     "LearningCurveCallback",
     "last_third_start",
+    "selection_key",
+    "selection_start",
 ]
 
 PROGRESS_REFRESH_STEPS = 50  # tqdm update granularity (keeps per-step overhead negligible)
@@ -51,6 +58,29 @@ def last_third_start(total_steps: int, learning_starts: int) -> int:
     """
     updates = max(total_steps - learning_starts, 0)
     return learning_starts + int(updates * SELECTION_FRACTION)
+
+
+def selection_key(model_selection: str, mean_return: float, held_fraction: float) -> tuple:
+    """What model selection ``model_selection`` maximises over its candidate evaluations (the
+    earliest wins ties): ``(mean_return,)`` for ``"best_last_third"``, ``(held_fraction,
+    mean_return)`` for ``"best_held"``; ``"final"`` selects nothing (``()``)."""
+    if model_selection not in MODEL_SELECTIONS:
+        raise ValueError(
+            f"model_selection: expected one of {MODEL_SELECTIONS}, found {model_selection!r}"
+        )
+    if model_selection == "best_held":
+        return (float(held_fraction), float(mean_return))
+    if model_selection == "best_last_third":
+        return (float(mean_return),)
+    return ()
+
+
+def selection_start(model_selection: str, total_steps: int, learning_starts: int) -> int:
+    """Evaluations at steps strictly after this one are candidates of ``model_selection``:
+    :func:`last_third_start` for ``"best_last_third"``, every evaluation (-1) otherwise."""
+    if model_selection == "best_last_third":
+        return last_third_start(total_steps, learning_starts)
+    return -1
 
 
 class LearningCurveCallback(BaseCallback):
@@ -73,10 +103,11 @@ class LearningCurveCallback(BaseCallback):
         algorithm's name in the brackets: ``label``).
     total_steps : int
         Length of the progress bar.
-    model_selection : {"final", "best_last_third"}
+    model_selection : {"final", "best_last_third", "best_held"}
         Which actor the model holds at the end of training (see the module docstring).
     selection_start : int
-        Evaluations at steps strictly after this one are ``"best_last_third"`` candidates.
+        Evaluations at steps strictly after this one are selection candidates
+        (:func:`selection_start`).
     label : str
         The learner's name in the progress lines (``ddpg``, ``td3``, ``sac``).
 
@@ -88,7 +119,8 @@ class LearningCurveCallback(BaseCallback):
         Physical-units copy of the actor at the best evaluation.
     best_return : float
     selected_steps : int or None
-        Step of the evaluation whose actor was restored (``"best_last_third"``), else None.
+        Step of the evaluation whose actor was restored (``"best_last_third"``,
+        ``"best_held"``), else None.
     """
 
     def __init__(
@@ -121,7 +153,7 @@ class LearningCurveCallback(BaseCallback):
         self.selection_start = int(selection_start)
         self.label = label
         self.selected_steps: int | None = None
-        self._selected_return = float("-inf")
+        self._selected_key: tuple | None = None
         self._selected_actor: dict[str, Any] | None = None
         self._bar: Any = None
         self._bar_position = 0
@@ -193,7 +225,7 @@ class LearningCurveCallback(BaseCallback):
             if self.save_best is not None:
                 self.save_best(self.model)
         self._last = result
-        self._consider_for_selection(steps, result.mean_return)
+        self._consider_for_selection(steps, result)
         if self._bar is not None:
             self._bar.set_postfix(
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"
@@ -203,16 +235,17 @@ class LearningCurveCallback(BaseCallback):
         return result
 
     def restore_selected(self) -> None:
-        """Load the selected actor into the model (``"best_last_third"``; no-op otherwise)."""
+        """Load the selected actor into the model (no-op with ``"final"``)."""
         if self._selected_actor is not None:
             self.model.actor.load_state_dict(self._selected_actor)
 
-    def _consider_for_selection(self, steps: int, mean_return: float) -> None:
+    def _consider_for_selection(self, steps: int, result: Evaluation) -> None:
         """Keep a copy of the actor if this evaluation is the best candidate so far."""
-        if self.model_selection != "best_last_third" or steps <= self.selection_start:
+        if self.model_selection == "final" or steps <= self.selection_start:
             return
-        if mean_return > self._selected_return:
-            self._selected_return = mean_return
+        key = selection_key(self.model_selection, result.mean_return, result.held_fraction)
+        if self._selected_key is None or key > self._selected_key:
+            self._selected_key = key
             self.selected_steps = steps
             self._selected_actor = copy.deepcopy(self.model.actor.state_dict())
 

@@ -51,7 +51,7 @@ WARMUPS = ("uniform", "policy")
 CRITIC_LOSSES = ("mse", "huber")
 CRITIC_ACTION_UNITS = ("normalised", "physical")
 HIDDEN_INITS = ("torch", "tf_agents")
-MODEL_SELECTIONS = ("final", "best_last_third")
+MODEL_SELECTIONS = ("final", "best_last_third", "best_held")
 
 # ------------------------------------------------------------------------------------------- SAC
 #: :meth:`DDPGConfig.for_system` defaults of ``algo="sac"`` where SAC's differ from the paper's
@@ -288,9 +288,11 @@ class DDPGConfig:
         Environment steps between two evaluations.
     eval_episodes : int
         Deterministic swing-up episodes per evaluation, on a separate environment instance.
-    model_selection : {"final", "best_last_third"}
-        The run's controller: the actor at the end of training (leoc), or the one of the best
-        evaluation after two thirds of the updates (the authors').
+    model_selection : {"final", "best_last_third", "best_held"}
+        The run's controller: the actor at the end of training (leoc), the one of the best
+        evaluation (mean return) after two thirds of the updates (the authors'), or the one of
+        the evaluation that held the operating point in the largest share of its episodes,
+        the highest mean return among those (any evaluation of the run; the earliest on ties).
     sac_entropy_coef : "auto", "auto_<init>" or float
         SAC's entropy coefficient alpha: learned to reach ``sac_target_entropy`` (``"auto"``,
         starting at 1; ``"auto_0.1"`` starting at 0.1) or fixed (a positive number). SAC only.

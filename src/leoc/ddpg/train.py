@@ -7,7 +7,9 @@ Run folder: the trainer contract of :mod:`leoc.training` (every file written ato
     model.zip           SB3 save of the final model: the run's controller (model selection:
                         the final policy, as for PILCO, by default; with
                         ``model_selection="best_last_third"`` its actor is the one of the best
-                        evaluation in the last third of the updates, the authors' rule)
+                        evaluation in the last third of the updates, the authors' rule; with
+                        ``"best_held"`` the one of the evaluation that held in the most
+                        episodes, best return among those)
     best_model.zip      SB3 save of the model with the best evaluation mean return (kept for
                         users who want it; ``load_ddpg_controller(run, which="best")``)
     curve.json          learning curve + summary (held/reached steps, final and best returns)
@@ -32,7 +34,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import LearningCurveCallback, last_third_start
+from leoc.ddpg.callbacks import LearningCurveCallback, selection_start
 from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import SeededOUNoise
 from leoc.ddpg.physical import physical_policy
@@ -234,7 +236,9 @@ def train_ddpg(
         progress=progress,
         total_steps=config.total_steps,
         model_selection=config.model_selection,
-        selection_start=last_third_start(config.total_steps, config.learning_starts),
+        selection_start=selection_start(
+            config.model_selection, config.total_steps, config.learning_starts
+        ),
         label=algo,
     )
     model.learn(

@@ -101,11 +101,12 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.ddpg.callbacks import last_third_start
+from leoc.ddpg.callbacks import selection_key, selection_start
 from leoc.ddpg.config import (
     AUTHORS_DDPG,
     AUTHORS_EVAL_INTERVAL,
     DEFAULT_TOTAL_STEPS,
+    MODEL_SELECTIONS,
     TOTAL_STEPS_BY_SYSTEM,
     DDPGConfig,
     authors_ddpg_overrides,
@@ -656,6 +657,7 @@ def delivered_steps(
     budget: int,
     model_selection: str,
     learning_starts: int,
+    held_fractions: Sequence[float] | None = None,
 ) -> int:
     """Step of the evaluation whose actor a run of budget ``budget`` delivers.
 
@@ -663,6 +665,9 @@ def delivered_steps(
     ``s`` with :func:`~leoc.ddpg.callbacks.last_third_start` ``(budget, learning_starts) < s
     <= budget``, the one with the strictly highest selection return (the earliest on ties), as
     :class:`~leoc.ddpg.LearningCurveCallback` selects; ``budget`` when the window holds none.
+    ``"best_held"``: among all evaluations up to ``budget``, the one whose selection episodes
+    held in the largest share, the highest selection return among those (the earliest on
+    ties); :func:`~leoc.ddpg.callbacks.selection_key` is the rule of both.
 
     Parameters
     ----------
@@ -671,9 +676,12 @@ def delivered_steps(
     selection_returns : sequence of float
         Mean return of the trainer's evaluation at each step (what the run selects on).
     budget : int
-    model_selection : {"final", "best_last_third"}
+    model_selection : {"final", "best_last_third", "best_held"}
     learning_starts : int
-        The run's ``learning_starts`` (the selection window counts updates after it).
+        The run's ``learning_starts`` (the last-third window counts updates after it).
+    held_fractions : sequence of float, optional
+        Share of the trainer's evaluation episodes that held at each step (required by
+        ``"best_held"``).
 
     Returns
     -------
@@ -681,17 +689,22 @@ def delivered_steps(
     """
     if budget not in steps:
         raise ValueError(f"budget: expected an evaluated step {list(steps)}, found {budget}")
+    if model_selection not in MODEL_SELECTIONS:
+        raise ValueError(
+            f"model_selection: expected one of {MODEL_SELECTIONS}, found {model_selection!r}"
+        )
     if model_selection == "final":
         return int(budget)
-    if model_selection != "best_last_third":
-        raise ValueError(
-            f"model_selection: expected 'final' or 'best_last_third', found {model_selection!r}"
-        )
-    start = last_third_start(budget, learning_starts)
-    best_steps, best_return = int(budget), float("-inf")
-    for step, value in zip(steps, selection_returns, strict=True):
-        if start < step <= budget and value > best_return:
-            best_steps, best_return = int(step), float(value)
+    if held_fractions is None:
+        if model_selection == "best_held":
+            raise ValueError("held_fractions: expected one per step for 'best_held', found None")
+        held_fractions = [0.0] * len(steps)
+    start = selection_start(model_selection, budget, learning_starts)
+    best_steps, best_key = int(budget), None
+    for step, value, held in zip(steps, selection_returns, held_fractions, strict=True):
+        key = selection_key(model_selection, value, held)
+        if start < step <= budget and (best_key is None or key > best_key):
+            best_steps, best_key = int(step), key
     return best_steps
 
 
@@ -700,16 +713,21 @@ def all_held(hold_steps: Sequence[int | None]) -> bool:
     return bool(hold_steps) and all(step is not None for step in hold_steps)
 
 
-def run_outcome(record: Mapping[str, Any], budget: int) -> RunOutcome:
-    """:class:`RunOutcome` of a run's record (:func:`run_cell`) at ``budget``."""
+def run_outcome(
+    record: Mapping[str, Any], budget: int, model_selection: str | None = None
+) -> RunOutcome:
+    """:class:`RunOutcome` of a run's record (:func:`run_cell`) at ``budget``, delivered by the
+    run's own model selection or, given ``model_selection``, re-selected by that rule from the
+    same evaluations (the held-out test episodes play no part in any rule)."""
     evaluations = record["evaluations"]
     steps = [int(row["steps"]) for row in evaluations]
     delivered = delivered_steps(
         steps,
         [row["selection_return"] for row in evaluations],
         budget,
-        record["model_selection"],
+        model_selection or record["model_selection"],
         int(record["learning_starts"]),
+        [row["selection_held_fraction"] for row in evaluations],
     )
     by_step = {int(row["steps"]): row for row in evaluations}
     reached = any(

@@ -6,7 +6,8 @@ trained models) to the destination when it is another folder, and writes there::
 
     ablation.md             the tables: success k/n with a Wilson 95% interval per system x
                             controller x setting at the paper's budget, the optimistic "reached
-                            by" counts beside, and success against budget
+                            by" counts beside, success under each model selection rule
+                            re-applied to the same runs, and success against budget
     success_vs_budget.csv   one row per system, controller, setting and evaluated budget
     ablation.json           the same rows, each run's outcome at its budget, the definitions
     success_vs_budget.png   success rate against budget, one panel per system and controller
@@ -23,7 +24,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.ddpg.config import TOTAL_STEPS_BY_SYSTEM
+from leoc.ddpg.config import MODEL_SELECTIONS, TOTAL_STEPS_BY_SYSTEM
 from leoc.experiments.ablation import (
     ABLATION_SYSTEMS,
     ALL_SETTINGS,
@@ -242,6 +243,91 @@ def headline_tables(rates: Sequence[CellRate]) -> list[str]:
     return lines
 
 
+#: Names of the model selection rules in the re-selection table.
+SELECTION_LABELS = {
+    "final": "final actor",
+    "best_last_third": "best return, last third",
+    "best_held": "most held, then return",
+}
+RESELECTION_TEXT = (
+    "Each run records, at every evaluation, the return and held share of the trainer's own "
+    "selection episodes beside the held-out episodes, so any model selection rule re-applies "
+    "to the same runs without training again; the held-out episodes take no part in any rule. "
+    "'own rule': the one the setting trains with (the success counts above). 'final actor': "
+    "leoc's rule before issue 20; 'best return, last third': the authors'; 'most held, then "
+    "return': the evaluation, any of the run, whose selection episodes held in the largest "
+    "share, the highest return among those. The last rule was written after looking at the "
+    "cart-pole and mountain-car runs, so its lead over the others there is in-sample."
+)
+
+
+def reselection_rows(
+    records: Sequence[Mapping[str, Any]], budgets: Mapping[str, int]
+) -> list[dict[str, Any]]:
+    """Success counts of each model selection rule re-applied to each cell's runs, at
+    ``budgets[system]`` (the headline budget): one dict per cell with ``system``,
+    ``controller``, ``setting``, ``budget``, ``own_rule``, ``seeds``, ``reached`` and one count
+    per rule of :data:`~leoc.ddpg.config.MODEL_SELECTIONS`."""
+    rows = []
+    for (system, controller, setting), runs in group_records(records).items():
+        budget = budgets[system]
+        if any(budget not in {int(e["steps"]) for e in run["evaluations"]} for run in runs):
+            continue
+        own = sorted({str(run["model_selection"]) for run in runs})
+        row: dict[str, Any] = {
+            "system": system,
+            "controller": controller,
+            "setting": setting,
+            "budget": budget,
+            "own_rule": "/".join(own),
+            "seeds": len(runs),
+            "reached": sum(run_outcome(run, budget).reached for run in runs),
+        }
+        for rule in MODEL_SELECTIONS:
+            row[rule] = sum(run_outcome(run, budget, rule).success for run in runs)
+        rows.append(row)
+    return rows
+
+
+def reselection_tables(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Markdown: per system, successes under each model selection rule (:func:`reselection_rows`)
+    with their sums over the system's cells."""
+    lines: list[str] = []
+    for system in _order({row["system"] for row in rows}, ABLATION_SYSTEMS):
+        mine = [row for row in rows if row["system"] == system]
+        lines += [f"### {system}, at {mine[0]['budget']} steps", ""]
+        header = ["controller", "setting", "own rule"]
+        header += [SELECTION_LABELS.get(rule, rule) for rule in MODEL_SELECTIONS] + ["reached"]
+        table = [
+            [
+                CONTROLLER_LABELS.get(row["controller"], row["controller"]),
+                SETTING_LABELS.get(row["setting"], row["setting"]),
+                SELECTION_LABELS.get(row["own_rule"], row["own_rule"]),
+                *(f"{row[rule]}/{row['seeds']}" for rule in [*MODEL_SELECTIONS, "reached"]),
+            ]
+            for row in mine
+        ]
+        total = sum(row["seeds"] for row in mine)
+        table.append(
+            [
+                "**all cells**",
+                "",
+                "",
+                *(
+                    f"**{sum(row[rule] for row in mine)}/{total}**"
+                    for rule in [*MODEL_SELECTIONS, "reached"]
+                ),
+            ]
+        )
+        lines += [*_table(header, table), ""]
+    return lines
+
+
+def headline_budgets(rates: Sequence[CellRate]) -> dict[str, int]:
+    """:func:`headline_budget` of every system of ``rates``."""
+    return {system: headline_budget(rates, system) for system in {c.system for c in rates}}
+
+
 def budget_columns(budgets: Iterable[int], every: int, paper: int | None) -> list[int]:
     """The budgets shown as columns: at each multiple of ``every`` the largest evaluated
     budget up to it, the paper's budget and the largest evaluated one."""
@@ -319,6 +405,11 @@ def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_T
         "## Success at the paper's budget",
         "",
         *headline_tables(rates),
+        "## Model selection re-applied to the same runs",
+        "",
+        RESELECTION_TEXT,
+        "",
+        *reselection_tables(reselection_rows(records, headline_budgets(rates))),
         "## Success against budget",
         "",
         *budget_tables(rates, every),
@@ -408,6 +499,7 @@ def write_tables(
         },
         "paper_budgets": {s: paper_budget(s) for s in sorted({c.system for c in rates})},
         "cells": cell_series(rates),
+        "reselection": reselection_rows(records, headline_budgets(rates)),
         "runs": runs,
     }
     write_json_atomic(out / "ablation.json", summary, indent=1)
