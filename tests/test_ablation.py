@@ -515,3 +515,25 @@ def test_all_safe_exit_keeps_the_next_state_reward_and_leoc_exit_that_never_pays
     rules = StepRules(**safe.step_rules)
     assert rules.exit_penalty is None  # leoc's exit, which never pays
     assert rules.reward_on_next_state == AUTHORS.rules_for(system).reward_on_next_state is True
+
+
+@pytest.mark.parametrize("system", ["cartpole", "mountaincar", "pendulum"])
+def test_the_horizon_exit_settings_change_only_the_exit_shape(system) -> None:
+    plan = AblationPlan()
+    specs = grid_specs([system], ["ddpg_baseline"], ["horizon_exit", "all_horizon_exit"], [0])
+    if system == "pendulum":  # no track to leave: both would equal leoc / all_factors
+        assert specs == []
+        return
+    alone, combined = (plan.config(spec) for spec in specs)
+    leoc = plan.config(AblationSpec(system, "ddpg_baseline", "leoc", 0))
+    safe = plan.config(AblationSpec(system, "ddpg_baseline", "all_safe_exit", 0))
+    assert _differences(alone, leoc) == {"step_rules": ({"horizon_exit": True}, {})}
+    assert _differences(combined, safe) == {
+        "step_rules": (
+            {"reward_on_next_state": True, "horizon_exit": True},
+            {"reward_on_next_state": True},
+        )
+    }
+    for config in (alone, combined):
+        rules = StepRules(**config.step_rules)
+        assert rules.exit_penalty is None and rules.horizon_exit  # never pays (test_rollout)

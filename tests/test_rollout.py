@@ -231,3 +231,46 @@ def test_leaving_the_track_early_never_beats_doing_nothing(name) -> None:
         done = terminated or truncated
     assert terminated
     assert returns == pytest.approx(leaving.total_reward, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["cartpole", "mountaincar"])
+def test_a_horizon_exit_costs_a_whole_episode_at_any_time_and_never_pays(name) -> None:
+    """``StepRules(horizon_exit=True)``: leaving the track at any step earns the out-of-bounds
+    reward for ``episode_steps`` steps, the same in simulate and the gymnasium environment;
+    leoc's own rule charges the steps left; a rollout longer than an episode charges its own
+    steps left, so that leaving still never pays."""
+    from leoc.systems import StepRules, make_env
+
+    system = make_system(name).with_rules(StepRules(horizon_exit=True))
+    push = 1.0 if name == "cartpole" else -1.0
+
+    def pushing(obs):
+        return np.full((len(obs), 1), push * system.action_limit)
+
+    whole = system.out_of_bounds_reward * system.episode_steps
+    start = np.asarray(system.swing_up_centre)
+    for steps in (system.episode_steps, 60):  # leaving at the same step, with 200 or 60 steps
+        exit_ = rollout(system, pushing, start, steps=steps)
+        assert exit_.terminated
+        assert exit_.rewards[-1] == pytest.approx(whole, rel=1e-12)
+        leoc = rollout(make_system(name), pushing, start, steps=steps)
+        left = steps - leoc.steps
+        assert leoc.rewards[-1] == pytest.approx(system.out_of_bounds_reward * (1 + left))
+    staying = rollout(system, lambda obs: np.zeros((len(obs), 1)), start)
+    assert rollout(system, pushing, start).total_reward < staying.total_reward
+    longer = 3 * system.episode_steps
+    late = rollout(system, pushing, start, steps=longer)
+    assert late.rewards[-1] == pytest.approx(
+        system.out_of_bounds_reward * (longer - late.steps + 1), rel=1e-12
+    )
+    env = make_env(system)
+    env.reset(seed=0, options={"state": start})
+    rewards, terminated = [], False
+    while not terminated:
+        _, reward, terminated, _, _ = env.step(np.array([push * system.action_limit]))
+        rewards.append(reward)
+    np.testing.assert_allclose(rewards, rollout(system, pushing, start).rewards, rtol=1e-12)
+    with pytest.raises(ValueError, match="horizon_exit"):
+        StepRules(exit_penalty=-100.0, horizon_exit=True)
+    with pytest.raises(ValueError, match="horizon_exit"):
+        StepRules(horizon_exit=1)

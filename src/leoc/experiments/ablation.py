@@ -42,6 +42,13 @@ other half, the reward of the next state, with leoc's exit that never pays. On a
 where the authors take the reward before the step (the pendulum) it equals
 ``all_but_exit_penalty`` and is left out.
 
+Two more settings (:data:`HORIZON_EXIT_SETTINGS`) change the shape of leoc's exit, not its
+size: ``horizon_exit`` is leoc's defaults with the exit charged for a whole episode whenever
+it happens (``StepRules(horizon_exit=True)``: one reward per transition, where leoc's charges
+the steps left, which the observation does not show; it still never pays), and
+``all_horizon_exit`` is ``all_safe_exit`` with that exit. They apply where a system can leave
+its region (the cart-pole and the mountain car).
+
 SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
@@ -138,8 +145,10 @@ COMBINED_SETTINGS = (
     *(f"all_but_{factor}" for factor in FACTORS),
     SAFE_EXIT_SETTING,
 )
-#: Every setting the harness runs: the default grid's, then the combinations.
-ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS
+#: leoc's exit charged for a whole episode, alone and on ``all_safe_exit`` (module docstring).
+HORIZON_EXIT_SETTINGS = ("horizon_exit", "all_horizon_exit")
+#: Every setting the harness runs: the default grid's, the combinations, the exit shapes.
+ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS + HORIZON_EXIT_SETTINGS
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
 SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
     "exploration": ("noise_units", "ou_theta", "ou_sigma", "noise_reset"),
@@ -167,6 +176,8 @@ SETTING_LABELS = {
     "all_factors": "+ all five choices",
     **{f"all_but_{factor}": f"+ all five but {factor.replace('_', ' ')}" for factor in FACTORS},
     SAFE_EXIT_SETTING: "+ all five, exit that never pays (reward on next state)",
+    "horizon_exit": "+ exit charged for a whole episode",
+    "all_horizon_exit": "+ all five, exit charged for a whole episode (reward on next state)",
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
@@ -236,6 +247,11 @@ def setting_overrides(
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
     if setting == "leoc":
         return {}
+    if setting in HORIZON_EXIT_SETTINGS:
+        base = SAFE_EXIT_SETTING if setting == "all_horizon_exit" else "leoc"
+        overrides = setting_overrides(base, system, hybrid, budget)
+        overrides["step_rules"] = {**overrides.get("step_rules", {}), "horizon_exit": True}
+        return overrides
     if setting == SAFE_EXIT_SETTING:
         overrides = setting_overrides("all_but_exit_penalty", system, hybrid, budget)
         exit_rules = setting_overrides("exit_penalty", system, hybrid, budget).get("step_rules", {})
@@ -276,6 +292,10 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
         return setting_applies(setting.removeprefix("all_but_"), system, controller)
     if setting == SAFE_EXIT_SETTING:  # a copy of all_but_exit_penalty where no rule changes
         return "step_rules" in setting_overrides(setting, system, hybrid=False)
+    if setting in HORIZON_EXIT_SETTINGS:  # a copy of leoc / all_safe_exit with no exit
+        from leoc.systems import make_system
+
+        return make_system(system).can_leave()
     return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
 
 

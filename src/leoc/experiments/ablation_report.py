@@ -460,11 +460,16 @@ def figure_caption(rates: Sequence[CellRate]) -> str:
     counts = sorted({cell.seeds for cell in rates})
     seeds = "/".join(str(n) for n in counts)
     offset = DODGE * (len({cell.setting for cell in rates}) - 1) / 2.0
+    dodge = (
+        f"Lines are offset vertically by up to +/-{offset:.3f} so that settings at the same "
+        "rate stay visible; "
+        if offset > 0
+        else ""
+    )
     return (
         f"Fraction of seeds ({seeds} per line) whose delivered controller held the operating "
-        "point in all held-out swing-up episodes, against the training budget. Lines are "
-        f"offset vertically by up to +/-{offset:.3f} so that settings at the same rate stay "
-        "visible; dotted: the paper's budget."
+        f"point in all held-out swing-up episodes, against the training budget. {dodge}"
+        "dotted: the paper's budget."
     )
 
 

@@ -167,11 +167,19 @@ class StepRules:
         The integrator of the gym release the authors used, where a system's simulator changed
         since (the system's ``step_fn`` documents it; today the pendulum: gym 0.17's
         ``sin(theta + pi)`` form and speed clip after the position update).
+    horizon_exit : bool
+        With ``exit_penalty=None`` only. ``False`` (leoc): the exit step is charged for the
+        steps actually left, so the same exit costs about -1061 at the cart-pole's first step
+        and about -5 at its last; the observation does not show the time, so for a learner
+        the same transition has rewards two orders of magnitude apart. ``True``: it is charged
+        for a whole episode (``episode_steps`` steps, or the steps left if a longer rollout has
+        more) whenever it happens: one reward per transition, and still never paying.
     """
 
     exit_penalty: float | None = None
     reward_on_next_state: bool = False
     legacy_integrator: bool = False
+    horizon_exit: bool = False
 
     def __post_init__(self) -> None:
         penalty = self.exit_penalty
@@ -181,9 +189,14 @@ class StepRules:
             or not math.isfinite(penalty)
         ):
             raise ValueError(f"exit_penalty: expected None or a finite number, found {penalty!r}")
-        for name in ("reward_on_next_state", "legacy_integrator"):
+        for name in ("reward_on_next_state", "legacy_integrator", "horizon_exit"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected a bool, found {getattr(self, name)!r}")
+        if self.horizon_exit and penalty is not None:
+            raise ValueError(
+                "horizon_exit: expected False with a fixed exit_penalty (it charges leoc's "
+                f"exit for a whole episode), found True with exit_penalty={penalty!r}"
+            )
 
 
 DEFAULT_RULES = StepRules()
@@ -376,11 +389,15 @@ class System:
         ``leaving`` (bool ``(B,)``) marks the steps that leave the allowed region, ``steps_left``
         the steps the episode would still have run after this one. leoc's rules: the reward of
         ``(state, action)``, and :meth:`termination_reward` on an exit. Other rules may take the
-        reward after the step and charge a one-off ``exit_penalty`` (:class:`StepRules`).
+        reward after the step, charge the exit for a whole episode (``horizon_exit``) or charge
+        a one-off ``exit_penalty`` (:class:`StepRules`).
         """
         rules = self.rules
         reward = self.reward_fn(next_state if rules.reward_on_next_state else state, action)
         if rules.exit_penalty is None:
+            if rules.horizon_exit:
+                left = torch.as_tensor(steps_left, dtype=reward.dtype)
+                steps_left = torch.clamp(left, min=self.episode_steps - 1)
             exit_reward = torch.as_tensor(self.termination_reward(steps_left), dtype=reward.dtype)
         else:
             exit_reward = reward + rules.exit_penalty
@@ -643,10 +660,15 @@ class System:
             )
         self._validate_termination(label, float(reward.min()) + 0.0)  # + 0.0: no "-0"
 
+    def can_leave(self) -> bool:
+        """Whether the system has an allowed region to leave (it overrides
+        :meth:`out_of_bounds`)."""
+        return type(self).out_of_bounds is not System.out_of_bounds
+
     def _validate_termination(self, label: str, reward_at_operating_point: float) -> None:
         """A system that can leave its allowed region charges no more per step left than the
         reward at the operating point (so that leaving never pays)."""
-        if type(self).out_of_bounds is System.out_of_bounds:
+        if not self.can_leave():
             return
         penalty = self.out_of_bounds_reward
         if isinstance(penalty, bool) or not isinstance(penalty, (int, float)):

@@ -27,18 +27,25 @@ SETTING_COLOURS = {
     "exit_penalty": "#9467bd",
     "model_selection": "#8c564b",
     "all_factors": "#17becf",
+    "horizon_exit": "#e377c2",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
-    {f"all_but_{name}": SETTING_COLOURS[name] for name in list(SETTING_COLOURS)[2:7]}
+    {
+        f"all_but_{name}": SETTING_COLOURS[name]
+        for name in ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection")
+    }
 )
-# all_safe_exit: the exit rule's colour, dotted (it keeps half of that rule).
+# all_safe_exit: the exit rule's colour, dotted (it keeps half of that rule); all_horizon_exit:
+# the horizon exit's colour, dotted.
 SETTING_COLOURS["all_safe_exit"] = SETTING_COLOURS["exit_penalty"]
+SETTING_COLOURS["all_horizon_exit"] = SETTING_COLOURS["horizon_exit"]
 # The two reference settings are drawn thicker (leoc solid, the authors' dashed).
 SETTING_STYLES = {
     "authors": "--",
     **{name: "-." for name in SETTING_COLOURS if name.startswith("all_but_")},
     "all_safe_exit": ":",
+    "all_horizon_exit": ":",
 }
 REFERENCE_WIDTH = 2.2
 LINE_WIDTH = 1.3
@@ -101,7 +108,8 @@ def draw_success_vs_budget(
                     linewidth=1.0,
                     label="the paper's budget",
                 )
-            axis.set_ylim(-Y_MARGIN, 1.0 + Y_MARGIN)
+            spread = abs(_dodge(0, len(settings)))  # the widest offset of a line
+            axis.set_ylim(-Y_MARGIN - spread, 1.0 + Y_MARGIN + spread)
             axis.set_xlim(left=0.0)
             axis.set_title(f"{system}: {controller_labels.get(controller, controller)}")
             axis.set_xlabel("training budget [1000 environment steps]")
