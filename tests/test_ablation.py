@@ -537,3 +537,20 @@ def test_the_horizon_exit_settings_change_only_the_exit_shape(system) -> None:
     for config in (alone, combined):
         rules = StepRules(**config.step_rules)
         assert rules.exit_penalty is None and rules.horizon_exit  # never pays (test_rollout)
+
+
+@pytest.mark.parametrize("system", ["cartpole", "mountaincar", "pendulum"])
+def test_the_leoc_setting_is_written_out_and_is_what_the_grid_ran(system) -> None:
+    """``leoc`` is LEOC_ABLATION_BASE, written out so that a change of leoc's defaults leaves
+    the published grid reproducible. Until issue 20 switches them, those are leoc's defaults
+    (afterwards this test compares the base with the published records' configs)."""
+    from leoc.experiments.ablation import LEOC_ABLATION_BASE
+
+    for hybrid in (False, True):
+        defaults = DDPGConfig.for_system(system, hybrid=hybrid).as_dict()
+        written = DDPGConfig.for_system(system, hybrid=hybrid, **LEOC_ABLATION_BASE).as_dict()
+        assert written == defaults
+    leoc = AblationPlan().config(AblationSpec(system, "ddpg_hybrid", "leoc", 0)).as_dict()
+    assert {name: leoc[name] for name in LEOC_ABLATION_BASE} == {
+        name: written[name] for name in LEOC_ABLATION_BASE
+    }

@@ -8,7 +8,8 @@ place that holds the authors' values (:data:`~leoc.ddpg.AUTHORS_DDPG`,
 ===================  ==========================================================================
 setting              DDPGConfig fields, relative to leoc's defaults
 ===================  ==========================================================================
-``leoc``             none (leoc's defaults)
+``leoc``             none: leoc's defaults when the grid ran, written out as
+                     :data:`LEOC_ABLATION_BASE` (every setting starts from them)
 ``authors``          the authors' full DDPG setup, :func:`~leoc.ddpg.authors_ddpg_overrides`
                      (every field below, plus their precision relevance, unclipped actor
                      output and, on the cart-pole baseline, actor learning rate 1e-4), and all
@@ -101,6 +102,7 @@ an interrupted grid continues where it stopped, locally or on a Ray cluster.
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import json
 import time
@@ -162,6 +164,41 @@ SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
     ),
     "model_selection": ("model_selection", "eval_episodes"),
 }
+#: leoc's DDPG defaults, as they were when the ablation ran, of every field its settings
+#: switch (written out, not read from :class:`~leoc.ddpg.DDPGConfig`): ``leoc`` is these
+#: values and every other setting starts from them, so the published grid stays what this
+#: code runs when leoc's defaults change (issue 20 chooses new ones from this grid).
+LEOC_ABLATION_BASE: dict[str, Any] = {
+    "noise_units": "normalised",
+    "ou_theta": 0.15,
+    "ou_sigma": 0.2,
+    "noise_reset": True,
+    "warmup": "uniform",
+    "learning_starts": 200,
+    "critic_loss": "mse",
+    "critic_action_layer": 0,
+    "critic_action_units": "normalised",
+    "hidden_init": "torch",
+    "last_layer_init": None,
+    "relevance_parametrisation": "log_lambda",
+    "lambda_init": 1.0,
+    "learn_lambda": True,
+    "actor_output_clip": True,
+    "model_selection": "final",
+    "eval_episodes": 5,
+    "actor_learning_rate": 5e-4,
+    "critic_learning_rate": 1e-3,
+    "discount": 0.995,
+    "polyak": 0.05,
+    "target_update_interval": 5,
+    "buffer_size": 100_000,
+    "batch_size": 64,
+    "actor_hidden": (400, 300),
+    "critic_hidden": (400, 300),
+    "train_freq": 1,
+    "gradient_steps": 1,
+    "step_rules": {},
+}
 #: The :class:`~leoc.systems.StepRules` fields of the ``exit_penalty`` setting.
 EXIT_RULE_FIELDS = ("exit_penalty", "reward_on_next_state")
 #: One line per setting, for tables and figure legends.
@@ -221,10 +258,10 @@ PLAN_FIELDS = ("system", "algo", "hybrid", "relevance", "total_steps", "eval_int
 
 # ----------------------------------------------------------------------------------- settings
 def setting_overrides(
-    setting: str, system: str, hybrid: bool, budget: int | None = None
+    setting: str, system: str, hybrid: bool, budget: int | None = None, algo: str = "ddpg"
 ) -> dict[str, Any]:
-    """The :class:`~leoc.ddpg.DDPGConfig` overrides of ``setting`` on ``system``, relative to
-    leoc's defaults (see the module table).
+    """The :class:`~leoc.ddpg.DDPGConfig` overrides of ``setting`` on ``system``:
+    :data:`LEOC_ABLATION_BASE` with what the setting switches (see the module table).
 
     Parameters
     ----------
@@ -237,14 +274,24 @@ def setting_overrides(
         learning rate).
     budget : int, optional
         The run's environment steps (the authors' setup sets ``total_steps`` to it).
+    algo : {"ddpg", "td3", "sac"}
+        The learner: SAC keeps its own defaults (:data:`~leoc.ddpg.config.SAC_DEFAULTS`) and
+        takes only the step rules of :data:`LEOC_ABLATION_BASE`.
 
     Returns
     -------
     dict
-        A fresh dict; empty for ``leoc`` and for a setting that changes nothing on ``system``.
+        A fresh dict; :data:`LEOC_ABLATION_BASE` itself for ``leoc`` and for a setting that
+        changes nothing on ``system``.
     """
     if setting not in ALL_SETTINGS:
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
+    base = LEOC_ABLATION_BASE if algo != "sac" else {"step_rules": LEOC_ABLATION_BASE["step_rules"]}
+    return {**copy.deepcopy(base), **_switched(setting, system, hybrid, budget)}
+
+
+def _switched(setting: str, system: str, hybrid: bool, budget: int | None) -> dict[str, Any]:
+    """What ``setting`` changes on :data:`LEOC_ABLATION_BASE` (see :func:`setting_overrides`)."""
     if setting == "leoc":
         return {}
     if setting in HORIZON_EXIT_SETTINGS:
@@ -263,7 +310,7 @@ def setting_overrides(
         overrides: dict[str, Any] = {}
         for factor in FACTORS:
             if factor != left_out:
-                overrides.update(setting_overrides(factor, system, hybrid, budget))
+                overrides.update(_switched(factor, system, hybrid, budget))
         return overrides
     if setting == "authors":
         overrides = authors_ddpg_overrides(system, hybrid, budget)
@@ -291,12 +338,12 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
         return setting_applies(setting.removeprefix("all_but_"), system, controller)
     if setting == SAFE_EXIT_SETTING:  # a copy of all_but_exit_penalty where no rule changes
-        return "step_rules" in setting_overrides(setting, system, hybrid=False)
+        return bool(setting_overrides(setting, system, hybrid=False)["step_rules"])
     if setting in HORIZON_EXIT_SETTINGS:  # a copy of leoc / all_safe_exit with no exit
         from leoc.systems import make_system
 
         return make_system(system).can_leave()
-    return setting == "leoc" or bool(setting_overrides(setting, system, hybrid=False))
+    return setting == "leoc" or bool(_switched(setting, system, False, None))
 
 
 def default_seeds(setting: str) -> tuple[int, ...]:
@@ -453,7 +500,7 @@ class AblationPlan:
         :func:`~leoc.ddpg.train_ddpg`): the setting's, then the plan's."""
         budget = self.budget_for(spec.system)
         return {
-            **setting_overrides(spec.setting, spec.system, spec.hybrid, budget),
+            **setting_overrides(spec.setting, spec.system, spec.hybrid, budget, spec.algo),
             "relevance": spec.relevance,
             "total_steps": budget,
             "eval_interval": self.eval_interval_for(spec.system),
