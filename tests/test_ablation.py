@@ -309,6 +309,7 @@ def test_success_rates_and_the_published_tables_from_a_synthetic_folder(tmp_path
 
     dest = tmp_path / "published"
     markdown = publish_ablation(tmp_path / "runs-folder", dest, every=1500).read_text()
+    assert "Runs from leoc commit unknown (9 runs)." in markdown  # the records name none
     # the runs stopped at 3000 steps: the headline table is at 3000, and says so
     assert "### cartpole, at 3000 steps (runs shorter than the paper's 15000)" in markdown
     assert "| leoc's defaults | 2/3 [0.21, 0.94] | 2/3 |" in markdown
@@ -416,12 +417,14 @@ def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> N
     killed = tmp_path / "runs" / specs[1].key / RESULT_FILE
     kept_bytes = kept.read_bytes()
     killed.unlink()  # as if the worker died before the result was written
-    second = run_ablation(tmp_path, specs, plan, jobs=1, echo=quiet.append)
+    second = run_ablation(tmp_path, specs, plan, jobs=1, echo=quiet.append, command="go --on")
     assert second.skipped == (specs[0].key,)
     assert set(second.results) == {specs[1].key}
     assert kept.read_bytes() == kept_bytes
     assert len(read_records(tmp_path)) == 2
-    publish_ablation(tmp_path)  # the tables beside the runs leave the pinned plan alone
+    markdown = publish_ablation(tmp_path).read_text()  # beside the runs: the plan stays
+    commit = read_records(tmp_path)[0]["versions"].get("leoc_commit") or "unknown"
+    assert f"Runs from leoc commit {commit} (2 runs). Recorded command: `go --on`." in markdown
     with pytest.raises(ValueError, match="budgets"):
         run_ablation(tmp_path, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
 

@@ -38,7 +38,7 @@ from leoc.experiments.ablation import (
 )
 from leoc.experiments.profiles import CONTROLLER_LABELS
 from leoc.experiments.stats import CONFIDENCE, wilson_interval
-from leoc.io import write_csv_atomic, write_json_atomic, write_text_atomic
+from leoc.io import read_json_object, write_csv_atomic, write_json_atomic, write_text_atomic
 from leoc.names import controller_framework
 
 #: Files :func:`publish_ablation` writes (the text ones are compared byte for byte by the tests).
@@ -388,8 +388,26 @@ def runs_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
     return _table(header, rows)
 
 
-def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_TABLE_EVERY) -> str:
-    """The whole ``ablation.md`` text."""
+def provenance_text(records: Sequence[Mapping[str, Any]], command: str | None = None) -> str:
+    """Where the runs come from: the leoc commits their records name (run counts) and the
+    command recorded in the folder's plan (the last invocation on it), if any."""
+    commits: dict[str, int] = {}
+    for record in records:
+        commit = str(record.get("versions", {}).get("leoc_commit") or "unknown")
+        commits[commit] = commits.get(commit, 0) + 1
+    listed = ", ".join(f"{commit} ({count} runs)" for commit, count in sorted(commits.items()))
+    text = f"Runs from leoc commit {listed}."
+    if command:
+        text += f" Recorded command: `{command}`."
+    return text
+
+
+def markdown_report(
+    records: Sequence[Mapping[str, Any]],
+    every: int = DEFAULT_TABLE_EVERY,
+    command: str | None = None,
+) -> str:
+    """The whole ``ablation.md`` text (``command``: the folder's recorded invocation)."""
     rates = success_rates(records)
     algos = sorted({controller_framework(str(record["controller"])).upper() for record in records})
     learners = " and ".join(algos) or "DDPG"
@@ -401,6 +419,8 @@ def markdown_report(records: Sequence[Mapping[str, Any]], every: int = DEFAULT_T
         "Settings: leoc's defaults; the authors' full DDPG setup (nrjc/LEOC); leoc's defaults "
         "with one of the authors' choices switched on (leoc.experiments.ablation; SAC takes "
         f"leoc's defaults and the authors' exit rule only). {len(records)} runs.",
+        "",
+        provenance_text(records, command),
         "",
         "## Success at the paper's budget",
         "",
@@ -474,10 +494,13 @@ def figure_caption(rates: Sequence[CellRate]) -> str:
 
 
 def write_tables(
-    dest: str | Path, records: Sequence[Mapping[str, Any]], every: int = DEFAULT_TABLE_EVERY
+    dest: str | Path,
+    records: Sequence[Mapping[str, Any]],
+    every: int = DEFAULT_TABLE_EVERY,
+    command: str | None = None,
 ) -> Path:
-    """Write :data:`TABLE_FILES` and the figure into ``dest`` from ``records``; returns the
-    markdown's path."""
+    """Write :data:`TABLE_FILES` and the figure into ``dest`` from ``records`` (``command``:
+    the folder's recorded invocation, quoted in the markdown); returns the markdown's path."""
     from leoc.evaluation.plots.ablation import plot_success_vs_budget
 
     out = Path(dest)
@@ -509,7 +532,7 @@ def write_tables(
     }
     write_json_atomic(out / "ablation.json", summary, indent=1)
     markdown = out / "ablation.md"
-    write_text_atomic(markdown, markdown_report(records, every))
+    write_text_atomic(markdown, markdown_report(records, every, command))
     paper_budgets = {s: b for s in {c.system for c in rates} if (b := paper_budget(s))}
     plot_success_vs_budget(
         figure_curves(rates),
@@ -572,4 +595,5 @@ def publish_ablation(
         raise FileNotFoundError(f"source: no finished run ({RESULT_FILE}) in {str(source)!r}")
     if target != source_path:
         _copy_records(source_path, target)
-    return write_tables(target, records, every)
+    plan = read_json_object(source_path / PLAN_FILE, print, "ablation plan") or {}
+    return write_tables(target, records, every, plan.get("command"))
