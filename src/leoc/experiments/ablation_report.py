@@ -63,8 +63,8 @@ MAX_LOG_BYTES = 256 * 1024
 DECIMALS = 4
 SUCCESS_TEXT = (
     "A run succeeds at budget T when the controller it would deliver with budget T (the actor at "
-    "step T; for the settings that select, the best of the last third of T on the trainer's "
-    "own evaluation episodes) holds the operating point in every one of its held-out "
+    "step T; for the settings that select, the one their model selection picks among the "
+    "evaluations up to T, on the trainer's own evaluation episodes) holds the operating point in every one of its held-out "
     "swing-up episodes (starts seeded seed + 30000 + k, on leoc's system, never used for "
     "training or selection). One run per seed gives every budget up to its own: DDPG's and "
     "SAC's training do not depend on the total budget. 'Reached' counts the runs where some "
