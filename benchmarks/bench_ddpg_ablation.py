@@ -189,4 +189,6 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from leoc.cli import quiet_on_broken_pipe
+
+    raise SystemExit(quiet_on_broken_pipe(main))

@@ -116,4 +116,6 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from leoc.cli import quiet_on_broken_pipe
+
+    raise SystemExit(quiet_on_broken_pipe(main))

@@ -12,7 +12,7 @@ import argparse
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from leoc import __version__
 from leoc.cli import lqr, plot, publish, reproduce, roa, simulate, train
@@ -65,8 +65,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``leoc`` command; returns its exit status (2 for bad input). A reader that
     closes the pipe early (``leoc ... | head``) ends it quietly with the status of a process
     killed by SIGPIPE, as a shell reports it."""
+    return quiet_on_broken_pipe(lambda: _run(argv))
+
+
+def quiet_on_broken_pipe(run: Callable[[], int | None]) -> int:
+    """``run()``'s status (0 for None), or :data:`EXIT_SIGPIPE` without a traceback when the
+    reader of stdout closed it early (``... | head``); the benchmark scripts run through it
+    too."""
     try:
-        status = _run(argv)
+        status = run()
         sys.stdout.flush()
     except BrokenPipeError:
         # Point stdout at /dev/null so that the interpreter's final flush does not raise again.
@@ -74,7 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
         return EXIT_SIGPIPE
-    return status
+    return int(status or 0)
 
 
 def _run(argv: Sequence[str] | None) -> int:
@@ -94,4 +101,11 @@ def _run(argv: Sequence[str] | None) -> int:
         signal.signal(signal.SIGTERM, previous)
 
 
-__all__ = ["EXIT_SIGINT", "EXIT_SIGPIPE", "EXIT_SIGTERM", "build_parser", "main"]
+__all__ = [
+    "EXIT_SIGINT",
+    "EXIT_SIGPIPE",
+    "EXIT_SIGTERM",
+    "build_parser",
+    "main",
+    "quiet_on_broken_pipe",
+]

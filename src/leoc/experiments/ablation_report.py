@@ -64,8 +64,9 @@ DECIMALS = 4
 SUCCESS_TEXT = (
     "A run succeeds at budget T when the controller it would deliver with budget T (the actor at "
     "step T; for the settings that select, the one their model selection picks among the "
-    "evaluations up to T, on the trainer's own evaluation episodes) holds the operating point in every one of its held-out "
-    "swing-up episodes (starts seeded seed + 30000 + k, on leoc's system, never used for "
+    "evaluations up to T, on the trainer's own evaluation episodes) holds the operating point "
+    "in every one of its held-out swing-up episodes (starts seeded seed + 30000 + k, on leoc's "
+    "system, never used for "
     "training or selection). One run per seed gives every budget up to its own: DDPG's and "
     "SAC's training do not depend on the total budget. 'Reached' counts the runs where some "
     "held-out evaluation up to T held in every episode (optimistic: a run that learnt and "
