@@ -275,7 +275,7 @@ def setting_overrides(
     budget : int, optional
         The run's environment steps (the authors' setup sets ``total_steps`` to it).
     algo : {"ddpg", "td3", "sac"}
-        The learner: SAC keeps its own defaults (:data:`~leoc.ddpg.config.SAC_DEFAULTS`) and
+        The learner: SAC keeps its own defaults (:data:`~leoc.ddpg.SAC_DEFAULTS`) and
         takes only the step rules of :data:`LEOC_ABLATION_BASE`.
 
     Returns

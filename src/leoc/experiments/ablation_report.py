@@ -268,7 +268,7 @@ def reselection_rows(
     """Success counts of each model selection rule re-applied to each cell's runs, at
     ``budgets[system]`` (the headline budget): one dict per cell with ``system``,
     ``controller``, ``setting``, ``budget``, ``own_rule``, ``seeds``, ``reached`` and one count
-    per rule of :data:`~leoc.ddpg.config.MODEL_SELECTIONS`."""
+    per rule of ``leoc.ddpg.config.MODEL_SELECTIONS``."""
     rows = []
     for (system, controller, setting), runs in group_records(records).items():
         budget = budgets[system]
