@@ -506,16 +506,19 @@ def test_final_selection_keeps_the_last_actor():
     assert float(callback.model.actor.weight.detach()) == 7.0
 
 
+# A run of a few hundred steps with small networks: enough evaluations to select among.
+TINY_SELECTING_RUN = {
+    "total_steps": 300,
+    "learning_starts": 100,
+    "eval_interval": 50,
+    "actor_hidden": (16, 16),
+    "critic_hidden": (16, 16),
+}
+
+
 def test_tiny_authors_run_returns_the_selected_controller(tmp_path):
     overrides = authors_ddpg_overrides("mountaincar", hybrid=True)
-    tiny = {
-        "total_steps": 300,
-        "learning_starts": 100,
-        "eval_interval": 50,
-        "eval_episodes": 1,
-        "actor_hidden": (16, 16),
-        "critic_hidden": (16, 16),
-    }
+    tiny = {**TINY_SELECTING_RUN, "eval_episodes": 1}
     result = train_ddpg(
         "mountaincar",
         hybrid=True,
@@ -535,15 +538,7 @@ def test_tiny_authors_run_returns_the_selected_controller(tmp_path):
 
 
 def test_tiny_best_held_run_returns_the_selected_controller(tmp_path):
-    tiny = {
-        "total_steps": 300,
-        "learning_starts": 100,
-        "eval_interval": 50,
-        "eval_episodes": 2,
-        "actor_hidden": (16, 16),
-        "critic_hidden": (16, 16),
-        "model_selection": "best_held",
-    }
+    tiny = {**TINY_SELECTING_RUN, "eval_episodes": 2, "model_selection": "best_held"}
     result = train_ddpg("pendulum", hybrid=True, seed=3, run_dir=tmp_path, progress=False, **tiny)
     best = max(
         result.curve, key=lambda row: (row["held_fraction"], row["mean_return"], -row["steps"])

@@ -405,11 +405,13 @@ def provenance_text(records: Sequence[Mapping[str, Any]], command: str | None = 
 
 def markdown_report(
     records: Sequence[Mapping[str, Any]],
+    rates: Sequence[CellRate],
+    reselection: Sequence[Mapping[str, Any]],
     every: int = DEFAULT_TABLE_EVERY,
     command: str | None = None,
 ) -> str:
-    """The whole ``ablation.md`` text (``command``: the folder's recorded invocation)."""
-    rates = success_rates(records)
+    """The whole ``ablation.md`` text from ``records``, their :func:`success_rates` and
+    :func:`reselection_rows` (``command``: the folder's recorded invocation)."""
     algos = sorted({controller_framework(str(record["controller"])).upper() for record in records})
     learners = " and ".join(algos) or "DDPG"
     lines = [
@@ -430,7 +432,7 @@ def markdown_report(
         "",
         RESELECTION_TEXT,
         "",
-        *reselection_tables(reselection_rows(records, headline_budgets(rates))),
+        *reselection_tables(reselection),
         "## Success against budget",
         "",
         *budget_tables(rates, every),
@@ -507,6 +509,7 @@ def write_tables(
     out = Path(dest)
     out.mkdir(parents=True, exist_ok=True)
     rates = success_rates(records)
+    reselection = reselection_rows(records, headline_budgets(rates))
     rows = [cell.as_row() for cell in rates]
     write_csv_atomic(out / "success_vs_budget.csv", rows, CSV_COLUMNS)
     runs = [
@@ -528,12 +531,12 @@ def write_tables(
         },
         "paper_budgets": {s: paper_budget(s) for s in sorted({c.system for c in rates})},
         "cells": cell_series(rates),
-        "reselection": reselection_rows(records, headline_budgets(rates)),
+        "reselection": reselection,
         "runs": runs,
     }
     write_json_atomic(out / "ablation.json", summary, indent=1)
     markdown = out / "ablation.md"
-    write_text_atomic(markdown, markdown_report(records, every, command))
+    write_text_atomic(markdown, markdown_report(records, rates, reselection, every, command))
     paper_budgets = {s: b for s in {c.system for c in rates} if (b := paper_budget(s))}
     plot_success_vs_budget(
         figure_curves(rates),
