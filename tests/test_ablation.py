@@ -69,6 +69,25 @@ ISSUE_VALUES = {
     "eval_episodes": 3,
 }
 TINY = {"actor_hidden": [16, 16], "critic_hidden": [16, 16], "batch_size": 16}
+# leoc's defaults before issue 20 switched them, the grid's ``leoc`` setting, written out here
+# (SB3's choices: tests/test_ddpg.py checks the new defaults).
+PRE_ISSUE_20 = {
+    "noise_units": "normalised",
+    "ou_theta": 0.15,
+    "ou_sigma": 0.2,
+    "noise_reset": True,
+    "warmup": "uniform",
+    "learning_starts": 200,
+    "critic_loss": "mse",
+    "critic_action_layer": 0,
+    "critic_action_units": "normalised",
+    "hidden_init": "torch",
+    "last_layer_init": None,
+    "model_selection": "final",
+    "eval_episodes": 5,
+    "step_rules": {},
+}
+PAPER_BUDGETS = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
 
 
 def _differences(first: DDPGConfig, second: DDPGConfig) -> dict[str, tuple]:
@@ -92,12 +111,15 @@ def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_v
     plan = AblationPlan()
     config = plan.config(AblationSpec(system, controller, setting, 0))
     leoc = plan.config(AblationSpec(system, controller, "leoc", 0))
-    # leoc's cell is DDPGConfig's defaults, at the paper's budget and the authors' interval
+    # leoc's cell is DDPGConfig's defaults before issue 20, at the paper's budget and the
+    # authors' interval
     expected_leoc = DDPGConfig.for_system(
         system,
         hybrid=controller != "ddpg_baseline",
         relevance="roa" if controller.endswith("roa") else "paper",
         eval_interval={"cartpole": 300}.get(system, 200),
+        total_steps=PAPER_BUDGETS[system],
+        **PRE_ISSUE_20,
     )
     assert leoc == expected_leoc
     differences = _differences(config, leoc)
@@ -462,8 +484,17 @@ def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> N
     for spec in sac:
         config = plan.config(spec)
         assert spec.algo == "sac" and config.algo == "sac" and config.relevance == "roa"
+        # SAC's defaults before issue 20: leoc's step rules, the final actor on 5 episodes
         expected = DDPGConfig.for_system(
-            spec.system, "sac", hybrid=True, relevance="roa", eval_interval=config.eval_interval
+            spec.system,
+            "sac",
+            hybrid=True,
+            relevance="roa",
+            eval_interval=config.eval_interval,
+            total_steps=PAPER_BUDGETS[spec.system],
+            step_rules={},
+            model_selection="final",
+            eval_episodes=5,
         )
         assert _differences(expected, config).keys() <= {"step_rules"}
         assert bool(_differences(expected, config)) == (spec.setting == "exit_penalty")
@@ -542,18 +573,56 @@ def test_the_horizon_exit_settings_change_only_the_exit_shape(system) -> None:
         assert rules.exit_penalty is None and rules.horizon_exit  # never pays (test_rollout)
 
 
-@pytest.mark.parametrize("system", ["cartpole", "mountaincar", "pendulum"])
-def test_the_leoc_setting_is_written_out_and_is_what_the_grid_ran(system) -> None:
-    """``leoc`` is LEOC_ABLATION_BASE, written out so that a change of leoc's defaults leaves
-    the published grid reproducible. Until issue 20 switches them, those are leoc's defaults
-    (afterwards this test compares the base with the published records' configs)."""
-    from leoc.experiments.ablation import LEOC_ABLATION_BASE
+GRID_CONFIGS = json.loads(
+    (Path(__file__).parent / "data" / "ablation_grid_configs.json").read_text(encoding="utf-8")
+)
 
-    for hybrid in (False, True):
-        defaults = DDPGConfig.for_system(system, hybrid=hybrid).as_dict()
-        written = DDPGConfig.for_system(system, hybrid=hybrid, **LEOC_ABLATION_BASE).as_dict()
-        assert written == defaults
-    leoc = AblationPlan().config(AblationSpec(system, "ddpg_hybrid", "leoc", 0)).as_dict()
-    assert {name: leoc[name] for name in LEOC_ABLATION_BASE} == {
-        name: written[name] for name in LEOC_ABLATION_BASE
-    }
+
+@pytest.mark.parametrize(
+    "cell",
+    [
+        (setting, key)
+        for setting, cells in (("leoc", GRID_CONFIGS["leoc"]), *GRID_CONFIGS["settings"].items())
+        for key in cells
+    ],
+    ids="/".join,
+)
+def test_every_setting_builds_the_config_the_published_grid_ran(cell) -> None:
+    """The grid's configs, as the runs of commit 8221beb wrote them (tests/data), are what
+    this code builds for the same cells (the rules as StepRules): ``leoc`` is
+    LEOC_ABLATION_BASE written out, so
+    leoc's new defaults (issue 20) leave the published grid reproducible."""
+    setting, key = cell
+    system, controller = key.split("/")
+    recorded = dict(GRID_CONFIGS["leoc"][key])
+    if setting != "leoc":
+        recorded.update(GRID_CONFIGS["settings"][setting][key])
+    built = AblationPlan().config(AblationSpec(system, controller, setting, 0)).as_dict()
+    # StepRules fields added since (horizon_exit) keep their defaults: compare the rules
+    assert StepRules(**built.pop("step_rules")) == StepRules(**recorded.pop("step_rules"))
+    assert built == recorded
+
+
+def test_the_defaults_setting_is_leocs_defaults_and_differs_from_the_grids_leoc() -> None:
+    """``defaults`` runs DDPGConfig.for_system as it is (with the plan's budget and interval);
+    after issue 20 those are the ``all_safe_exit`` choices with ``best_held``, not the grid's
+    ``leoc`` (a switch that silently fell back to the old defaults fails here)."""
+    plan = AblationPlan(budgets={"cartpole": 21_000})
+    for controller, hybrid, relevance in (
+        ("ddpg_hybrid_roa", True, "roa"),
+        ("sac_baseline", False, "paper"),
+    ):
+        algo = "sac" if controller.startswith("sac") else "ddpg"
+        built = plan.config(AblationSpec("cartpole", controller, "defaults", 0))
+        assert built == DDPGConfig.for_system("cartpole", algo, hybrid=hybrid, relevance=relevance)
+    safe = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "all_safe_exit", 0))
+    defaults = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "defaults", 0))
+    assert _differences(defaults, safe) == {"model_selection": ("best_held", "best_last_third")}
+    old = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "leoc", 0))
+    assert set(_differences(defaults, old)) == (
+        INTENDED["exploration"]
+        | INTENDED["initial_collect"]
+        | INTENDED["critic"]
+        | INTENDED["model_selection"]
+        | {"step_rules"}
+    )

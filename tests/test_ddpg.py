@@ -33,7 +33,7 @@ from leoc.ddpg import (
     physical_policy,
     train_ddpg,
 )
-from leoc.systems import SYSTEM_NAMES, make_env, make_system
+from leoc.systems import SYSTEM_NAMES, StepRules, make_env, make_system
 from leoc.training import CURVE_COLUMNS
 
 SMALL_NET = [32, 32]
@@ -283,9 +283,17 @@ def test_held_steps_known_answers():
 
 
 def test_config_defaults_and_overrides():
-    assert DDPGConfig.for_system("cartpole").total_steps == 15_000
+    # leoc's budgets (issue 20: the paper's 15k / 10k did not learn on 4 of 5 seeds), the
+    # authors' evaluation intervals, the reward of the next state where there is a track
+    cartpole, car = DDPGConfig.for_system("cartpole"), DDPGConfig.for_system("mountaincar")
+    assert (cartpole.total_steps, car.total_steps) == (21_000, 20_000)
+    assert (cartpole.eval_interval, car.eval_interval) == (300, 200)
+    assert cartpole.step_rules == car.step_rules == {"reward_on_next_state": True}
+    assert StepRules(**cartpole.step_rules).exit_penalty is None  # leoc's exit: never pays
+    assert DDPGConfig.for_system("cartpole", step_rules={}).step_rules == {}  # replaced whole
     pendulum = DDPGConfig.for_system("pendulum", "td3", actor_hidden=[64, 64])
     assert pendulum.total_steps == 10_000 and pendulum.algo == "td3"
+    assert pendulum.step_rules == {} and pendulum.eval_interval == 200
     assert pendulum.actor_hidden == (64, 64)
     assert (pendulum.actor_learning_rate, pendulum.critic_learning_rate) == (5e-4, 1e-3)
     assert (pendulum.discount, pendulum.batch_size, pendulum.buffer_size) == (0.995, 64, 100_000)
@@ -326,10 +334,11 @@ def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo, monkey
     assert not any(name.endswith(".tmp") for name in files)
     config = json.loads((tmp_path / "r0" / "config.json").read_text())
     assert config["seed"] == 3 and config["hybrid"] is True and config["algo"] == algo
-    assert list(temp.iterdir()) == []  # no SB3-<date> folder in the system temp folder
+    # no SB3-<date> folder in the system temp folder (torch's own caches may go there)
+    assert not [path for path in temp.iterdir() if path.name.startswith("SB3")]
     rows = runs[0].curve
     assert set(CURVE_COLUMNS) | {"returns", "hold_steps"} <= set(rows[0])  # trainer contract
-    assert runs[0].summary["model_selection"] == "final"
+    assert runs[0].summary["model_selection"] == "best_held"
     assert [row["steps"] for row in rows] == [0, 120, 240]
     assert rows[1]["interaction_seconds"] == pytest.approx(120 * make_system("pendulum").dt)
 
@@ -503,8 +512,10 @@ def test_profiles_carry_measured_run_costs() -> None:
     spec = RunSpec("cartpole", "pilco_hybrid", 0)
     assert paper.expected_seconds(spec) == 454.0  # results/paper, median over its seeds
     assert quick.expected_seconds(spec) < paper.expected_seconds(spec)
+    # DDPG runs measured at the paper's budgets, scaled to leoc's (21k / 15k, 20k / 10k)
+    assert paper.expected_seconds(RunSpec("cartpole", "ddpg_hybrid", 0)) == pytest.approx(210.0)
     # a user's system: the mean of the same controller elsewhere
     other = RunSpec("acrobot", "ddpg_hybrid", 0)
-    assert paper.expected_seconds(other) == pytest.approx((111.0 + 150.0 + 116.0) / 3)
+    assert paper.expected_seconds(other) == pytest.approx((111.0 + 210.0 + 232.0) / 3)
     assert smoke.cost_model is None and quick.cost_model is not None
     assert smoke.expected_seconds(spec) == FALLBACK_RUN_SECONDS["pilco"]

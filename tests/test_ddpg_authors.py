@@ -34,7 +34,7 @@ from leoc.ddpg.policies import LeocTD3Policy, SplitCritic
 from leoc.ddpg.train import NOISE_SEED_OFFSET, exploration_noise, train_ddpg
 from leoc.experiments.ablation import delivered_steps
 from leoc.policies import PrecisionRelevance
-from leoc.systems import make_env, make_system
+from leoc.systems import StepRules, make_env, make_system
 from leoc.training import Evaluation, evaluate_episodes, evaluation_starts
 
 SMALL_NET = [32, 32]
@@ -75,21 +75,27 @@ def test_authors_overrides_follow_their_gin_files(system, hybrid, total, interva
     assert authors_ddpg_overrides(system, hybrid) is not AUTHORS_DDPG  # a fresh dict
 
 
-def test_new_fields_default_to_leoc_and_are_validated():
+def test_new_fields_default_to_the_ablations_choice_and_are_validated():
+    """Issue 20's defaults: the authors' exploration, initial collect and critic, best_held on
+    3 episodes; leoc's relevance and clipped output stay (the numbers as the issue states them,
+    independent of AUTHORS_DDPG)."""
     config = DDPGConfig.for_system("pendulum")
     defaults = {
-        "noise_units": "normalised",
-        "noise_reset": True,
-        "warmup": "uniform",
-        "learning_starts": 200,
-        "critic_loss": "mse",
-        "critic_action_layer": 0,
-        "critic_action_units": "normalised",
-        "hidden_init": "torch",
-        "last_layer_init": None,
+        "noise_units": "physical",
+        "ou_theta": 0.2,
+        "ou_sigma": 1.0,
+        "noise_reset": False,
+        "warmup": "policy",
+        "learning_starts": 1000,
+        "critic_loss": "huber",
+        "critic_action_layer": 1,
+        "critic_action_units": "physical",
+        "hidden_init": "tf_agents",
+        "last_layer_init": 0.003,
         "relevance_parametrisation": "log_lambda",
         "actor_output_clip": True,
-        "model_selection": "final",
+        "model_selection": "best_held",
+        "eval_episodes": 3,
     }
     assert {name: getattr(config, name) for name in defaults} == defaults
     bad = {
@@ -133,9 +139,24 @@ def test_physical_ou_noise_is_tf_agents_ou_process_and_never_resets():
     assert draws.std() == pytest.approx(AUTHORS_OU_STD, rel=0.04)
 
 
-def test_default_noise_keeps_leoc_process_and_resets():
-    env = make_env("pendulum")
+def test_default_noise_is_the_physical_process_that_never_resets():
+    """leoc's default exploration since issue 20: x <- 0.8 x + 1.0 N(0, 1) on the physical
+    action, never reset, written out; the old one (normalised, theta 0.15, sigma 0.2, reset at
+    every episode end) stays an override."""
+    system = make_system("pendulum")
+    env = make_env(system)
     noise = exploration_noise(DDPGConfig.for_system("pendulum"), env.action_space, seed=1)
+    rng = np.random.default_rng(1 + NOISE_SEED_OFFSET)
+    state = 0.0
+    for step in range(10):
+        if step == 5:
+            noise.reset()  # an episode end: the process runs on
+        state = 0.8 * state + 1.0 * rng.standard_normal()
+        np.testing.assert_allclose(noise()[0] * system.action_limit, state, rtol=1e-6)
+    old = DDPGConfig.for_system(
+        "pendulum", noise_units="normalised", ou_theta=0.15, ou_sigma=0.2, noise_reset=True
+    )
+    noise = exploration_noise(old, env.action_space, seed=1)
     rng = np.random.default_rng(1 + NOISE_SEED_OFFSET)
     state = 0.0
     for _ in range(10):
@@ -531,7 +552,11 @@ def test_tiny_authors_run_returns_the_selected_controller(tmp_path):
     window = [row for row in result.curve if row["steps"] > 100 + int(200 * 2 / 3)]
     best = max(window, key=lambda row: (row["mean_return"], -row["steps"]))
     assert result.summary["selected_steps"] == best["steps"]
-    system = make_system("mountaincar")
+    # the run evaluates under its own rules (leoc's default on the mountain car: the reward
+    # of the next state)
+    rules = StepRules(**result.config["step_rules"])
+    assert rules.reward_on_next_state
+    system = make_system("mountaincar").with_rules(rules)
     replay = evaluate_episodes(system, result.policy, evaluation_starts(system, 2, 1))
     assert replay.mean_return == best["mean_return"]  # the returned controller is that actor
     assert isinstance(result.model.critic, SplitCritic)

@@ -399,12 +399,15 @@ def test_variants_give_sac_their_lqr_and_rules_but_no_ddpg_settings():
 def test_sac_config_defaults_leave_ddpg_unchanged():
     ddpg = DDPGConfig.for_system("cartpole")
     sac = DDPGConfig.for_system("cartpole", algo="sac")
-    assert sac.total_steps == ddpg.total_steps == 15_000  # the same budgets
+    assert sac.total_steps == ddpg.total_steps == 21_000  # the same budgets
+    assert sac.step_rules == ddpg.step_rules == {"reward_on_next_state": True}  # the same rules
+    assert sac.model_selection == ddpg.model_selection == "best_held"
+    assert (sac.warmup, sac.learning_starts) == ("uniform", 200)  # SB3's start, not DDPG's
     for name, value in SAC_DEFAULTS.items():
         assert getattr(sac, name) == value
     assert (ddpg.batch_size, ddpg.polyak, ddpg.actor_learning_rate) == (64, 0.05, 5e-4)
     assert sac.actor_hidden == sac.critic_hidden == (400, 300)
-    assert sac.sac_entropy_coef == "auto" and sac.step_rules == {}
+    assert sac.sac_entropy_coef == "auto"
     assert DDPGConfig.for_system("pendulum", algo="sac", batch_size=64).batch_size == 64
     assert DDPGConfig.from_dict(sac.as_dict()) == sac
 

@@ -6,12 +6,12 @@ Use the hybrid in plain SB3::
     from leoc.ddpg import HybridTD3Policy, hybrid_policy_kwargs
     model = DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs("pendulum"))
 
-or train with the paper's settings through :func:`train_ddpg` (``leoc train SYSTEM --algo ddpg
---hybrid``). SAC's hybrid is :class:`HybridSACPolicy` (``SAC(HybridSACPolicy, env,
-policy_kwargs=hybrid_policy_kwargs("pendulum"))``, or ``leoc train SYSTEM --algo sac --hybrid``):
-its squashed mean is the same hybrid (:mod:`leoc.ddpg.sac`). The authors' TF-Agents settings
-(nrjc/LEOC) are :data:`AUTHORS_DDPG` and :func:`authors_ddpg_overrides`, overrides of
-:class:`DDPGConfig` fields.
+or train with leoc's settings (the paper's, and the choices that make DDPG learn) through
+:func:`train_ddpg` (``leoc train SYSTEM --algo ddpg --hybrid``). SAC's hybrid is
+:class:`HybridSACPolicy` (``SAC(HybridSACPolicy, env, policy_kwargs=...)``, or ``leoc train
+SYSTEM --algo sac --hybrid``): its squashed mean is the same hybrid (:mod:`leoc.ddpg.sac`).
+The authors' TF-Agents settings (nrjc/LEOC) are :data:`AUTHORS_DDPG` and
+:func:`authors_ddpg_overrides`, overrides of :class:`DDPGConfig` fields.
 """
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
@@ -19,7 +19,10 @@ from leoc.ddpg.callbacks import HeldOutEvaluationCallback, LearningCurveCallback
 from leoc.ddpg.config import (
     ALGOS,
     AUTHORS_DDPG,
+    EVAL_INTERVAL_BY_SYSTEM,
+    PAPER_TOTAL_STEPS,
     SAC_DEFAULTS,
+    STEP_RULES_BY_SYSTEM,
     TOTAL_STEPS_BY_SYSTEM,
     DDPGConfig,
     authors_ddpg_overrides,
@@ -48,7 +51,10 @@ from leoc.ddpg.train import (
 __all__ = [
     "ALGOS",
     "AUTHORS_DDPG",
+    "EVAL_INTERVAL_BY_SYSTEM",
+    "PAPER_TOTAL_STEPS",
     "SAC_DEFAULTS",
+    "STEP_RULES_BY_SYSTEM",
     "TOTAL_STEPS_BY_SYSTEM",
     "AffineOutput",
     "DDPGConfig",

@@ -32,6 +32,12 @@ setting              DDPGConfig fields, relative to leoc's defaults
                      (``model_selection``, ``eval_episodes``)
 ===================  ==========================================================================
 
+The setting ``defaults`` (:data:`DEFAULTS_SETTING`, not in the default grid) is leoc's
+defaults as the running code has them, no override: the choices issue 20 took from this grid
+(``all_safe_exit`` with the ``best_held`` selection, and 20k-step budgets on the cart-pole and
+the mountain car, :mod:`leoc.ddpg.config`). It measures those defaults in the same harness,
+for DDPG, TD3 and SAC alike.
+
 Where no single choice is enough, combinations decide which are needed
 (:data:`COMBINED_SETTINGS`, not in the default grid): ``all_factors`` is leoc's defaults with
 all five choices above switched on at once (unlike ``authors``, it keeps leoc's relevance,
@@ -116,7 +122,7 @@ from leoc.ddpg.config import (
     AUTHORS_EVAL_INTERVAL,
     DEFAULT_TOTAL_STEPS,
     MODEL_SELECTIONS,
-    TOTAL_STEPS_BY_SYSTEM,
+    PAPER_TOTAL_STEPS,
     DDPGConfig,
     authors_ddpg_overrides,
 )
@@ -149,8 +155,13 @@ COMBINED_SETTINGS = (
 )
 #: leoc's exit charged for a whole episode, alone and on ``all_safe_exit`` (module docstring).
 HORIZON_EXIT_SETTINGS = ("horizon_exit", "all_horizon_exit")
-#: Every setting the harness runs: the default grid's, the combinations, the exit shapes.
-ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS + HORIZON_EXIT_SETTINGS
+#: leoc's defaults of the code that runs it (:meth:`~leoc.ddpg.DDPGConfig.for_system`, no
+#: override), for DDPG, TD3 and SAC alike: the setting that measures the defaults issue 20
+#: chose from this grid (module docstring).
+DEFAULTS_SETTING = "defaults"
+#: Every setting the harness runs: the default grid's, the combinations, the exit shapes, and
+#: today's defaults.
+ALL_SETTINGS = SETTINGS + COMBINED_SETTINGS + HORIZON_EXIT_SETTINGS + (DEFAULTS_SETTING,)
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
 SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
     "exploration": ("noise_units", "ou_theta", "ou_sigma", "noise_reset"),
@@ -199,6 +210,14 @@ LEOC_ABLATION_BASE: dict[str, Any] = {
     "gradient_steps": 1,
     "step_rules": {},
 }
+#: SAC's defaults before issue 20 of the fields that changed since, for the SAC cells of the
+#: settings other than ``defaults``: leoc's step rules and the final actor on 5 evaluation
+#: episodes (SAC's own hyperparameters, :data:`~leoc.ddpg.SAC_DEFAULTS`, did not change).
+SAC_ABLATION_BASE: dict[str, Any] = {
+    "step_rules": {},
+    "model_selection": "final",
+    "eval_episodes": 5,
+}
 #: The :class:`~leoc.systems.StepRules` fields of the ``exit_penalty`` setting.
 EXIT_RULE_FIELDS = ("exit_penalty", "reward_on_next_state")
 #: One line per setting, for tables and figure legends.
@@ -215,6 +234,7 @@ SETTING_LABELS = {
     SAFE_EXIT_SETTING: "+ all five, exit that never pays (reward on next state)",
     "horizon_exit": "+ exit charged for a whole episode",
     "all_horizon_exit": "+ all five, exit charged for a whole episode (reward on next state)",
+    DEFAULTS_SETTING: "leoc's defaults since issue 20",
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
@@ -223,7 +243,7 @@ SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
 #: Every controller the harness runs, in table order.
 GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS
 #: The settings that apply to SAC: the others switch DDPG/TD3 fields SAC does not have.
-SAC_SETTINGS = ("leoc", "exit_penalty")
+SAC_SETTINGS = ("leoc", "exit_penalty", DEFAULTS_SETTING)
 #: The systems of the grid: the two that fail, then the pendulum as the control.
 ABLATION_SYSTEMS = ("cartpole", "mountaincar", "pendulum")
 #: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
@@ -276,17 +296,20 @@ def setting_overrides(
         The run's environment steps (the authors' setup sets ``total_steps`` to it).
     algo : {"ddpg", "td3", "sac"}
         The learner: SAC keeps its own defaults (:data:`~leoc.ddpg.SAC_DEFAULTS`) and
-        takes only the step rules of :data:`LEOC_ABLATION_BASE`.
+        takes :data:`SAC_ABLATION_BASE` as its base.
 
     Returns
     -------
     dict
         A fresh dict; :data:`LEOC_ABLATION_BASE` itself for ``leoc`` and for a setting that
-        changes nothing on ``system``.
+        changes nothing on ``system`` (:data:`SAC_ABLATION_BASE` for SAC); empty for
+        ``defaults``, which runs :meth:`~leoc.ddpg.DDPGConfig.for_system` as it is.
     """
     if setting not in ALL_SETTINGS:
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
-    base = LEOC_ABLATION_BASE if algo != "sac" else {"step_rules": LEOC_ABLATION_BASE["step_rules"]}
+    if setting == DEFAULTS_SETTING:
+        return {}
+    base = LEOC_ABLATION_BASE if algo != "sac" else SAC_ABLATION_BASE
     return {**copy.deepcopy(base), **_switched(setting, system, hybrid, budget)}
 
 
@@ -330,13 +353,15 @@ def _switched(setting: str, system: str, hybrid: bool, budget: int | None) -> di
 
 
 def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline") -> bool:
-    """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` always
-    applies) and exists for ``controller``'s algorithm (SAC: :data:`SAC_SETTINGS`); a setting
-    that does not is left out of the grid there."""
+    """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` and
+    ``defaults`` always apply) and exists for ``controller``'s algorithm (SAC:
+    :data:`SAC_SETTINGS`); a setting that does not is left out of the grid there."""
     if controller_framework(controller) == "sac" and setting not in SAC_SETTINGS:
         return False
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
         return setting_applies(setting.removeprefix("all_but_"), system, controller)
+    if setting == DEFAULTS_SETTING:
+        return True
     if setting == SAFE_EXIT_SETTING:  # a copy of all_but_exit_penalty where no rule changes
         return bool(setting_overrides(setting, system, hybrid=False)["step_rules"])
     if setting in HORIZON_EXIT_SETTINGS:  # a copy of leoc / all_safe_exit with no exit
@@ -347,9 +372,10 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
 
 
 def default_seeds(setting: str) -> tuple[int, ...]:
-    """Seeds of ``setting`` when none are given: ``0 .. 4`` for ``leoc`` and ``authors``,
+    """Seeds of ``setting`` when none are given: ``0 .. 4`` for ``leoc``, ``authors`` and
+    ``defaults``,
     ``0 .. 2`` for a single-factor or combined setting."""
-    count = FULL_SEEDS if setting in ("leoc", "authors") else SINGLE_FACTOR_SEEDS
+    count = FULL_SEEDS if setting in ("leoc", "authors", DEFAULTS_SETTING) else SINGLE_FACTOR_SEEDS
     return tuple(range(count))
 
 
@@ -418,7 +444,7 @@ def grid_specs(
             raise ValueError(f"{name}: unknown {unknown}; expected some of {tuple(allowed)}")
     if seeds is not None and any(int(seed) != seed or seed < 0 for seed in seeds):
         raise ValueError(f"seeds: expected non-negative integers, found {list(seeds)}")
-    ordered = sorted(systems, key=lambda name: -TOTAL_STEPS_BY_SYSTEM.get(name, 0))
+    ordered = sorted(systems, key=lambda name: -PAPER_TOTAL_STEPS.get(name, 0))
     return [
         AblationSpec(system, controller, setting, int(seed))
         for system in ordered
@@ -487,7 +513,7 @@ class AblationPlan:
 
     def budget_for(self, system: str) -> int:
         """Environment steps of a run on ``system``."""
-        return int(self.budgets.get(system, TOTAL_STEPS_BY_SYSTEM.get(system, DEFAULT_TOTAL_STEPS)))
+        return int(self.budgets.get(system, PAPER_TOTAL_STEPS.get(system, DEFAULT_TOTAL_STEPS)))
 
     def eval_interval_for(self, system: str) -> int:
         """Environment steps between two evaluations on ``system``."""
@@ -815,7 +841,7 @@ def expected_seconds(plan: AblationPlan) -> Callable[[AblationSpec], float]:
         factor = SAC_COST_FACTOR if spec.algo == "sac" else 1.0
         controller = spec.controller.replace("sac_", "ddpg_", 1)
         measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{controller}")
-        paper = TOTAL_STEPS_BY_SYSTEM.get(spec.system)
+        paper = PAPER_TOTAL_STEPS.get(spec.system)
         if measured is None or paper is None:
             return factor * FALLBACK_SECONDS_PER_KSTEP * budget / 1000.0
         return factor * measured * budget / paper

@@ -24,7 +24,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.ddpg.config import MODEL_SELECTIONS, TOTAL_STEPS_BY_SYSTEM
+from leoc.ddpg.config import MODEL_SELECTIONS, PAPER_TOTAL_STEPS
 from leoc.experiments.ablation import (
     ABLATION_SYSTEMS,
     ALL_SETTINGS,
@@ -181,7 +181,7 @@ def success_rates(records: Iterable[Mapping[str, Any]]) -> list[CellRate]:
 
 def paper_budget(system: str) -> int | None:
     """The paper's training budget of ``system`` (10k / 15k / 10k steps; None if unknown)."""
-    return TOTAL_STEPS_BY_SYSTEM.get(system)
+    return PAPER_TOTAL_STEPS.get(system)
 
 
 def format_rate(cell: CellRate) -> str:

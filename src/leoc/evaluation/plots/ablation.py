@@ -28,6 +28,7 @@ SETTING_COLOURS = {
     "model_selection": "#8c564b",
     "all_factors": "#17becf",
     "horizon_exit": "#e377c2",
+    "defaults": "#bcbd22",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
@@ -40,7 +41,7 @@ SETTING_COLOURS.update(
 # the horizon exit's colour, dotted.
 SETTING_COLOURS["all_safe_exit"] = SETTING_COLOURS["exit_penalty"]
 SETTING_COLOURS["all_horizon_exit"] = SETTING_COLOURS["horizon_exit"]
-# The two reference settings are drawn thicker (leoc solid, the authors' dashed).
+# The reference settings are drawn thicker (leoc and the defaults solid, the authors' dashed).
 SETTING_STYLES = {
     "authors": "--",
     **{name: "-." for name in SETTING_COLOURS if name.startswith("all_but_")},
@@ -88,7 +89,7 @@ def draw_success_vs_budget(
                     continue
                 budgets = np.asarray(lines[setting]["budgets"], float) / STEPS_PER_UNIT
                 rates = np.asarray(lines[setting]["rates"], float) + _dodge(index, len(settings))
-                reference = setting in ("leoc", "authors")
+                reference = setting in ("leoc", "authors", "defaults")
                 axis.plot(
                     budgets,
                     rates,
