@@ -27,6 +27,7 @@ from leoc.ddpg import (
     LeocDDPG,
     LeocTD3,
     SeededOUNoise,
+    build_model,
     held_and_reached,
     hybrid_policy_kwargs,
     load_ddpg_controller,
@@ -94,6 +95,37 @@ def test_identity_at_operating_point_in_physical_units(system_name):
     actor_jac = torch.autograd.functional.jacobian(lambda x: model.actor(x[None, :])[0], point32)
     np.testing.assert_allclose(
         actor_jac.double().numpy() * limit, design.W, rtol=F32_RTOL, atol=F32_ATOL
+    )
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+@pytest.mark.parametrize("system_name", SYSTEM_NAMES)
+def test_identities_hold_in_the_model_leocs_defaults_build(algo, system_name):
+    """The hybrid the trainer builds from leoc's defaults (issue 20: TF-Agents' initialisation,
+    output layers U(+/-0.003), the critic with the action after its first layer; SAC's own)
+    keeps pi(a) = G(a) and d pi/dx (a) = W, with every actor parameter moved far from its
+    initialisation."""
+    system = make_system(system_name)
+    design = design_lqr(system)  # independent reference for G(x) = W x + b
+    config = DDPGConfig.for_system(
+        system_name, algo, hybrid=True, actor_hidden=(16, 16), critic_hidden=(16, 16)
+    )
+    assert config.hidden_init == "tf_agents" and config.last_layer_init == 0.003
+    model = build_model(config, seed=0, env=make_env(system))
+    generator = torch.Generator().manual_seed(13)
+    with torch.no_grad():
+        for param in model.actor.parameters():  # H's weights, Lambda's parameter, SAC's heads
+            param.add_(torch.randn(param.shape, generator=generator))
+    policy = physical_policy(model.actor)
+    point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
+    expected = design.W @ system.operating_obs + design.b
+    value = policy(point[None, :])[0]
+    np.testing.assert_allclose(value.detach().numpy(), expected, rtol=0, atol=F64_ATOL)
+    jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None, :])[0], point)
+    np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=1e-10)
+    away = point + 0.7  # and the learned part acts away from a (the identities are not a tie)
+    assert not np.allclose(
+        policy(away[None, :])[0].detach().numpy(), design.W @ away.numpy() + design.b
     )
 
 

@@ -492,7 +492,7 @@ def figure_caption(rates: Sequence[CellRate]) -> str:
     return (
         f"Fraction of seeds ({seeds} per line) whose delivered controller held the operating "
         f"point in all held-out swing-up episodes, against the training budget. {dodge}"
-        "dotted: the paper's budget."
+        "grey vertical line: the paper's budget."
     )
 
 

@@ -129,7 +129,7 @@ def plot_success_vs_budget(
     caption: str | None = None,
 ) -> Path:
     """Success rate against training budget: one panel per system (column) and controller
-    (row), one line per ablation setting, the paper's budget dotted.
+    (row), one line per ablation setting, the paper's budget a grey vertical line.
 
     Parameters
     ----------
@@ -139,7 +139,7 @@ def plot_success_vs_budget(
     path : path
         PNG file to write (atomically).
     paper_budgets : mapping system -> int
-        Where the vertical dotted line goes (environment steps).
+        Where the grey vertical line goes (environment steps).
     setting_labels, controller_labels : mapping, optional
         Legend and title texts (default: the names).
     caption : str, optional
