@@ -626,3 +626,18 @@ def test_the_defaults_setting_is_leocs_defaults_and_differs_from_the_grids_leoc(
         | INTENDED["model_selection"]
         | {"step_rules"}
     )
+
+
+COMMITTED = sorted(
+    path.parent for path in (Path(__file__).resolve().parents[1] / "results").glob("*/ablation.md")
+)
+
+
+@pytest.mark.parametrize("published", COMMITTED, ids=[path.name for path in COMMITTED])
+def test_committed_ablation_folders_regenerate_byte_for_byte(published, tmp_path) -> None:
+    """Publishing a committed ablation folder's records again (``--publish-only``) gives its
+    tables byte for byte: the README's numbers are what the records say."""
+    dest = tmp_path / published.name
+    publish_ablation(published, dest)
+    for name in TABLE_FILES:
+        assert (dest / name).read_bytes() == (published / name).read_bytes(), name

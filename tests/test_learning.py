@@ -26,7 +26,7 @@ from leoc.experiments.ablation import (
 # (system, controller, budget, seeds that hold when measured, at least): the cart-pole baseline
 # at leoc's budget (21k), the mountain-car ROA hybrid at the paper's 10k (leoc's is 20k; the
 # hybrids learn it at 10k, the baseline does not). Measured on seeds 0-4 with the same
-# settings (results/ddpg-ablation/safe-exit-long: all_safe_exit re-selected with best_held, the
+# settings (results/ddpg-safe-exit-long: all_safe_exit re-selected with best_held, the
 # defaults' choices): 5 of 5 each. About 7 and 4 min on 2 cores.
 CASES = [
     ("cartpole", "ddpg_baseline", 21_000, 5, 4),

@@ -187,7 +187,8 @@ def train_ddpg(
     run_dir : str or Path, optional
         Output folder; default ``runs/ddpg/{system}-{algo}-{hybrid|baseline}-seed{seed}``.
     total_steps : int, optional
-        Environment steps; default per system (10k, 15k for the cart-pole).
+        Environment steps; default per system (:data:`~leoc.ddpg.TOTAL_STEPS_BY_SYSTEM`: 10k
+        for the pendulum, 21k for the cart-pole, 20k for the mountain car).
     progress : bool or "lines"
         True: a progress bar; ``"lines"``: a plain line now and then (steps done / total,
         steps per second, the last evaluation's return; for logs, ``leoc reproduce``); False:

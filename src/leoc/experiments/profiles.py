@@ -45,7 +45,7 @@ class Profile:
     pilco_iterations : dict system -> int
         PILCO iterations after the random rollouts (None entries: the PILCO default).
     ddpg_steps : dict system -> int
-        DDPG environment steps (None entries: the DDPG default, the paper's 10k / 15k); SAC's
+        DDPG environment steps (None entries: the DDPG default, 10k / 21k / 20k); SAC's
         runs get the same budgets.
     default_pilco_iterations, default_ddpg_steps : int or None
         The budgets of a system missing from the dicts (a user's registered system).
