@@ -34,9 +34,9 @@ setting              DDPGConfig fields, relative to leoc's defaults
 
 The setting ``defaults`` (:data:`DEFAULTS_SETTING`, not in the default grid) is leoc's
 defaults as the running code has them, no override: the choices issue 20 took from this grid
-(``all_safe_exit`` with the ``best_held`` selection, and 20k-step budgets on the cart-pole and
-the mountain car, :mod:`leoc.ddpg.config`). It measures those defaults in the same harness,
-for DDPG, TD3 and SAC alike.
+(``all_safe_exit`` with the ``best_held`` selection, and budgets of 21k steps on the cart-pole
+and 20k on the mountain car, :mod:`leoc.ddpg.config`). It measures those defaults in the same
+harness, for DDPG, TD3 and SAC alike.
 
 Where no single choice is enough, combinations decide which are needed
 (:data:`COMBINED_SETTINGS`, not in the default grid): ``all_factors`` is leoc's defaults with
@@ -373,8 +373,7 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
 
 def default_seeds(setting: str) -> tuple[int, ...]:
     """Seeds of ``setting`` when none are given: ``0 .. 4`` for ``leoc``, ``authors`` and
-    ``defaults``,
-    ``0 .. 2`` for a single-factor or combined setting."""
+    ``defaults``, ``0 .. 2`` for a single-factor or combined setting."""
     count = FULL_SEEDS if setting in ("leoc", "authors", DEFAULTS_SETTING) else SINGLE_FACTOR_SEEDS
     return tuple(range(count))
 
