@@ -641,3 +641,11 @@ def test_committed_ablation_folders_regenerate_byte_for_byte(published, tmp_path
     publish_ablation(published, dest)
     for name in TABLE_FILES:
         assert (dest / name).read_bytes() == (published / name).read_bytes(), name
+    # the report names the settings its runs ran, and no others
+    line = next(
+        text
+        for text in (published / "ablation.md").read_text().splitlines()
+        if text.startswith("Settings")
+    )
+    ran = {str(record["setting"]) for record in read_records(published, echo=lambda _: None)}
+    assert {name for name in ALL_SETTINGS if f"`{name}`" in line} == ran

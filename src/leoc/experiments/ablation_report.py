@@ -403,6 +403,13 @@ def provenance_text(records: Sequence[Mapping[str, Any]], command: str | None = 
     return text
 
 
+def settings_text(records: Sequence[Mapping[str, Any]]) -> str:
+    """The settings the records ran, each with its label (leoc.experiments.ablation)."""
+    names = _order({str(record["setting"]) for record in records}, ALL_SETTINGS)
+    listed = "; ".join(f"`{name}` ({SETTING_LABELS.get(name, name)})" for name in names)
+    return f"Settings (leoc.experiments.ablation): {listed}."
+
+
 def markdown_report(
     records: Sequence[Mapping[str, Any]],
     rates: Sequence[CellRate],
@@ -419,9 +426,7 @@ def markdown_report(
         "",
         SUCCESS_TEXT,
         "",
-        "Settings: leoc's defaults; the authors' full DDPG setup (nrjc/LEOC); leoc's defaults "
-        "with one of the authors' choices switched on (leoc.experiments.ablation; SAC takes "
-        f"leoc's defaults and the authors' exit rule only). {len(records)} runs.",
+        f"{settings_text(records)} {len(records)} runs.",
         "",
         provenance_text(records, command),
         "",
@@ -492,7 +497,7 @@ def figure_caption(rates: Sequence[CellRate]) -> str:
     return (
         f"Fraction of seeds ({seeds} per line) whose delivered controller held the operating "
         f"point in all held-out swing-up episodes, against the training budget. {dodge}"
-        "grey vertical line: the paper's budget."
+        "Grey vertical line: the paper's budget."
     )
 
 
