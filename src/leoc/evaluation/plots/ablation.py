@@ -29,6 +29,8 @@ SETTING_COLOURS = {
     "all_factors": "#17becf",
     "horizon_exit": "#e377c2",
     "defaults": "#bcbd22",
+    "sac_alpha_0.1": "#393b79",
+    "sac_alpha_0.01": "#ad494a",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
