@@ -159,21 +159,33 @@ HORIZON_EXIT_SETTINGS = ("horizon_exit", "all_horizon_exit")
 #: override), for DDPG, TD3 and SAC alike: the setting that measures the defaults issue 20
 #: chose from this grid (module docstring).
 DEFAULTS_SETTING = "defaults"
-#: SAC's entropy coefficient, fixed (issue 20: with SB3's automatic coefficient SAC did not
-#: learn the cart-pole): each setting is leoc's defaults (``defaults``) with
-#: ``sac_entropy_coef`` set, for the SAC controllers only.
-SAC_ENTROPY_SETTINGS: dict[str, dict[str, Any]] = {
-    "sac_alpha_0.1": {"sac_entropy_coef": 0.1},
-    "sac_alpha_0.01": {"sac_entropy_coef": 0.01},
+#: SAC's settings (issue 20: with leoc's defaults SAC did not learn the cart-pole), for the SAC
+#: controllers only: each is leoc's defaults (``defaults``) with the fields given, and a label.
+SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "sac_alpha_0.1": ("defaults, entropy coefficient 0.1 (fixed)", {"sac_entropy_coef": 0.1}),
+    "sac_alpha_0.01": ("defaults, entropy coefficient 0.01 (fixed)", {"sac_entropy_coef": 0.01}),
+    "sac_initial_collect": (
+        "defaults, 1000 initial steps from SAC's policy",
+        {"learning_starts": 1000, "warmup": "policy"},
+    ),
+    "sac_ddpg_optimiser": (
+        "defaults, DDPG's optimiser (batch 64, actor step 5e-4, targets 0.05 every 5)",
+        {
+            "batch_size": 64,
+            "actor_learning_rate": 5e-4,
+            "polyak": 0.05,
+            "target_update_interval": 5,
+        },
+    ),
 }
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,
-#: today's defaults and SAC's entropy settings.
+#: today's defaults and SAC's settings.
 ALL_SETTINGS = (
     SETTINGS
     + COMBINED_SETTINGS
     + HORIZON_EXIT_SETTINGS
     + (DEFAULTS_SETTING,)
-    + tuple(SAC_ENTROPY_SETTINGS)
+    + tuple(SAC_TUNING_SETTINGS)
 )
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
 SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
@@ -248,10 +260,7 @@ SETTING_LABELS = {
     "horizon_exit": "+ exit charged for a whole episode",
     "all_horizon_exit": "+ all five, exit charged for a whole episode (reward on next state)",
     DEFAULTS_SETTING: "leoc's defaults since issue 20",
-    **{
-        name: f"defaults, SAC entropy coefficient {fields['sac_entropy_coef']} (fixed)"
-        for name, fields in SAC_ENTROPY_SETTINGS.items()
-    },
+    **{name: label for name, (label, _) in SAC_TUNING_SETTINGS.items()},
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
@@ -260,7 +269,7 @@ SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
 #: Every controller the harness runs, in table order.
 GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS
 #: The settings that apply to SAC: the others switch DDPG/TD3 fields SAC does not have.
-SAC_SETTINGS = ("leoc", "exit_penalty", DEFAULTS_SETTING, *SAC_ENTROPY_SETTINGS)
+SAC_SETTINGS = ("leoc", "exit_penalty", DEFAULTS_SETTING, *SAC_TUNING_SETTINGS)
 #: The systems of the grid: the two that fail, then the pendulum as the control.
 ABLATION_SYSTEMS = ("cartpole", "mountaincar", "pendulum")
 #: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
@@ -326,8 +335,8 @@ def setting_overrides(
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
     if setting == DEFAULTS_SETTING:
         return {}
-    if setting in SAC_ENTROPY_SETTINGS:
-        return dict(SAC_ENTROPY_SETTINGS[setting])
+    if setting in SAC_TUNING_SETTINGS:
+        return copy.deepcopy(SAC_TUNING_SETTINGS[setting][1])
     base = LEOC_ABLATION_BASE if algo != "sac" else SAC_ABLATION_BASE
     return {**copy.deepcopy(base), **_switched(setting, system, hybrid, budget)}
 
@@ -377,7 +386,7 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     :data:`SAC_SETTINGS`); a setting that does not is left out of the grid there."""
     if controller_framework(controller) == "sac" and setting not in SAC_SETTINGS:
         return False
-    if setting in SAC_ENTROPY_SETTINGS:  # SAC's own field: not a DDPG setting
+    if setting in SAC_TUNING_SETTINGS:  # SAC's settings: not DDPG settings
         return controller_framework(controller) == "sac"
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
         return setting_applies(setting.removeprefix("all_but_"), system, controller)

@@ -31,6 +31,8 @@ SETTING_COLOURS = {
     "defaults": "#bcbd22",
     "sac_alpha_0.1": "#393b79",
     "sac_alpha_0.01": "#ad494a",
+    "sac_initial_collect": "#8c6d31",
+    "sac_ddpg_optimiser": "#7b4173",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
