@@ -30,6 +30,8 @@ from leoc.ddpg import (
     physical_policy,
     train_ddpg,
 )
+from leoc.ddpg import sac as sac_module
+from leoc.ddpg.algorithms import critic_loss_fn
 from leoc.ddpg.sac import squashed_blend_mean
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
 
@@ -351,6 +353,71 @@ def test_actor_learning_rate_and_target_update_interval():
     assert model.actor.optimizer.param_groups[0]["lr"] == pytest.approx(2e-4)
     assert model.critic.optimizer.param_groups[0]["lr"] == pytest.approx(1e-3)
     assert model.tau == model.polyak
+
+
+def _filled_sac_pair(critic_loss: str, **kw) -> list[LeocSAC]:
+    """Two identical hybrid SAC models (mountain car: it can leave, so the buffer holds an
+    exit's large reward) whose buffers hold the same 48 steps, no update yet."""
+    models = []
+    for _ in range(2):
+        system = make_system("mountaincar")
+        model = LeocSAC(
+            HybridSACPolicy,
+            make_env(system),
+            policy_kwargs=hybrid_policy_kwargs(system, net_arch=SMALL_NET),
+            learning_starts=48,
+            batch_size=16,
+            critic_loss=critic_loss,
+            seed=3,
+            device="cpu",
+            **kw,
+        )
+        model.learn(48)
+        models.append(model)
+    return models
+
+
+def _same_state(first: LeocSAC, second: LeocSAC) -> bool:
+    state_a, state_b = first.policy.state_dict(), second.policy.state_dict()
+    coefs = torch.equal(first.log_ent_coef, second.log_ent_coef)
+    return coefs and all(torch.equal(state_a[key], state_b[key]) for key in state_a)
+
+
+@pytest.mark.parametrize("interval", [1, 3])
+def test_own_sac_step_with_mse_is_sb3_bit_for_bit_and_huber_changes_the_critics(
+    interval, monkeypatch
+):
+    """``critic_loss="mse"`` runs SB3's ``SAC.train``; the own step that ``"huber"`` runs
+    (:meth:`LeocSAC._train_step`), given the MSE loss, leaves the same parameters, entropy
+    coefficient and targets, update for update, with the targets' interval counted alike."""
+    sb3, own = _filled_sac_pair("mse", target_update_interval=interval)
+    huber, _ = _filled_sac_pair("huber", target_update_interval=interval)
+    assert _same_state(sb3, own) and _same_state(sb3, huber)
+    for model in (sb3, huber):
+        _seed_global(0)
+        model.train(gradient_steps=5, batch_size=16)
+    assert not _same_state(sb3, huber)  # the Huber loss changes the update
+    own.critic_loss = "huber"  # the own step's path ...
+    monkeypatch.setattr(sac_module, "critic_loss_fn", lambda _: critic_loss_fn("mse"))  # ... MSE
+    _seed_global(0)
+    own.train(gradient_steps=5, batch_size=16)
+    assert own._n_updates == sb3._n_updates == 5
+    assert _same_state(sb3, own)
+
+
+def _seed_global(seed: int) -> None:
+    """SB3's replay buffer samples with numpy's *global* generator, SAC's actions with torch's."""
+    np.random.seed(seed)  # noqa: NPY002 (SB3's sampling uses the legacy global generator)
+    torch.manual_seed(seed)
+
+
+def test_huber_is_sacs_critic_loss_only_where_asked():
+    assert DDPGConfig.for_system("cartpole", algo="sac").critic_loss == "mse"  # SB3's SAC
+    assert DDPGConfig.for_system("cartpole", algo="sac", critic_loss="huber").critic_loss == (
+        "huber"
+    )
+    with pytest.raises(ValueError, match="critic_loss: expected one of"):
+        LeocSAC("MlpPolicy", make_env("pendulum"), critic_loss="l1")
 
 
 def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):

@@ -103,16 +103,16 @@ SAC_DEFAULTS: dict[str, Any] = {
     "target_update_interval": 1,
     "learning_starts": 200,
     "warmup": "uniform",
+    "critic_loss": "mse",
 }
 #: Fields of the DDPG/TD3 family that SAC does not use (its exploration is its own Gaussian, its
 #: critics SB3's, its action bounded by the squash): a SAC config must leave them at their
-#: defaults.
+#: defaults. SAC does use ``critic_loss`` (:class:`~leoc.ddpg.sac.LeocSAC`).
 TD3_FAMILY_FIELDS = (
     "ou_theta",
     "ou_sigma",
     "noise_units",
     "noise_reset",
-    "critic_loss",
     "critic_action_layer",
     "critic_action_units",
     "hidden_init",
@@ -285,7 +285,8 @@ class DDPGConfig:
         default).
     critic_loss : {"mse", "huber"}
         TD loss of the critic: mean Huber loss with delta 1 (the default) or mean squared error
-        (SB3).
+        (SB3). SAC uses it too; its default there is SB3's mean squared error
+        (:data:`SAC_DEFAULTS`).
     critic_action_layer : int
         Critic hidden layers before the action joins (1: after the first hidden layer,
         TF-Agents' ``CriticNetwork`` as the authors configure it, the default; 0: at the input,

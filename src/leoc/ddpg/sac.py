@@ -95,11 +95,12 @@ from typing import Any
 import torch
 from gymnasium import spaces
 from stable_baselines3 import SAC
+from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.sac.policies import LOG_STD_MAX, LOG_STD_MIN, SACPolicy
 from stable_baselines3.sac.policies import Actor as SACActor
 from torch import Tensor, nn
 
-from leoc.ddpg.algorithms import ActorRateAndWarmupMixin
+from leoc.ddpg.algorithms import ActorRateAndWarmupMixin, critic_loss_fn
 from leoc.ddpg.policies import (
     HybridActorMixin,
     check_hybrid_options,
@@ -388,8 +389,8 @@ class HybridSACPolicy(SACPolicy):
 
 
 class LeocSAC(ActorRateAndWarmupMixin, SAC):
-    """SB3's ``SAC`` plus ``actor_learning_rate``, ``warmup`` and a target update interval
-    counted over all gradient updates.
+    r"""SB3's ``SAC`` plus ``actor_learning_rate``, ``warmup``, a target update interval
+    counted over all gradient updates, and the critics' loss.
 
     Parameters
     ----------
@@ -406,6 +407,13 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
         over the gradient steps of *one* ``train`` call, so with ``train_freq=1,
         gradient_steps=1`` it would update the targets every step whatever its value; here
         it counts SB3's ``_n_updates`` across calls.
+    critic_loss : {"mse", "huber"}
+        The critics' TD loss: ``"mse"`` is SB3's update itself; ``"huber"`` runs
+        :meth:`_train_step`, the same update with
+        :math:`\tfrac12 \sum_k \mathrm{huber}(Q_k(s, a), y)` (delta 1, as DDPG's
+        ``critic_loss``, :func:`leoc.ddpg.algorithms.critic_loss_fn`): a TD error beyond 1
+        pulls with a constant gradient, so the few transitions that leave the track (one
+        reward of up to -1100 on the cart-pole) do not outweigh the rest of the batch.
     """
 
     def __init__(
@@ -414,6 +422,7 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
         actor_learning_rate: float | None = None,
         warmup: str = "uniform",
         target_update_interval: int = 1,
+        critic_loss: str = "mse",
         **kwargs: Any,
     ) -> None:
         if isinstance(target_update_interval, bool) or not (
@@ -422,22 +431,86 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
             raise ValueError(
                 f"target_update_interval: expected an int >= 1, found {target_update_interval!r}"
             )
+        critic_loss_fn(critic_loss)  # validates the name
+        self.critic_loss = critic_loss
         self._init_actor_rate_and_warmup(actor_learning_rate, warmup)
         super().__init__(*args, target_update_interval=target_update_interval, **kwargs)
         self.polyak = float(self.tau)
 
     def train(self, gradient_steps: int, batch_size: int = 64) -> None:
-        """SB3's SAC update; with ``target_update_interval > 1`` one gradient step at a time,
-        the Polyak coefficient zero on the updates between two soft target updates (SB3's own
-        check then always passes: each call's single step is its step 0)."""
+        """SB3's SAC update (:meth:`_train_step` with the Huber loss); with
+        ``target_update_interval > 1`` one gradient step at a time, the Polyak coefficient zero
+        on the updates between two soft target updates (SB3's own check then always passes:
+        each call's single step is its step 0)."""
         if self.target_update_interval == 1:
-            super().train(gradient_steps, batch_size)
+            self._train_calls(gradient_steps, batch_size)
             return
         for _ in range(gradient_steps):
             due = (self._n_updates + 1) % self.target_update_interval == 0
             self.tau = self.polyak if due else NO_TARGET_UPDATE
-            super().train(1, batch_size)
+            self._train_calls(1, batch_size)
         self.tau = self.polyak
+
+    def _train_calls(self, gradient_steps: int, batch_size: int) -> None:
+        """SB3's ``SAC.train`` with the MSE loss, else :meth:`_train_step` per step."""
+        if getattr(self, "critic_loss", "mse") == "mse":  # models saved before the option
+            super().train(gradient_steps, batch_size)
+            return
+        self.policy.set_training_mode(True)
+        optimisers = [self.actor.optimizer, self.critic.optimizer]
+        if self.ent_coef_optimizer is not None:
+            optimisers.append(self.ent_coef_optimizer)
+        self._update_learning_rate(optimisers)
+        loss_fn = critic_loss_fn(self.critic_loss)
+        for _ in range(gradient_steps):
+            self._train_step(batch_size, loss_fn)
+        self._n_updates += gradient_steps
+
+    def _train_step(self, batch_size: int, loss_fn: Any) -> None:
+        r"""One SAC gradient step (Haarnoja et al. 2018, with the automatic entropy coefficient
+        of arXiv:1812.05905), in SB3's order and with its random draws, the critics' loss
+        ``loss_fn``.
+
+        With :math:`a_\pi, \log\pi` sampled from the actor at :math:`s`: the entropy
+        coefficient's loss :math:`-\log\alpha\,(\log\pi + \bar{\mathcal H})` (when it is
+        learned; :math:`\alpha` itself enters the other losses detached, at its value before
+        this step's update); target :math:`y = r + (1 - d)\,\gamma\,(\min_k Q'_k(s', a') -
+        \alpha \log\pi(a' | s'))`, :math:`a' \sim \pi(\cdot | s')`; critics' loss
+        :math:`\tfrac12 \sum_k \mathrm{loss}(Q_k(s, a), y)`; actor's loss
+        :math:`\mathrm{mean}(\alpha \log\pi - \min_k Q_k(s, a_\pi))` with the critics just
+        updated; then the soft target update with coefficient ``tau``.
+        """
+        data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
+        discounts = data.discounts if data.discounts is not None else self.gamma
+        actions_pi, log_prob = self.actor.action_log_prob(data.observations)
+        log_prob = log_prob.reshape(-1, 1)
+        if self.ent_coef_optimizer is not None and self.log_ent_coef is not None:
+            alpha = torch.exp(self.log_ent_coef.detach())
+            alpha_loss = -(self.log_ent_coef * (log_prob + self.target_entropy).detach()).mean()
+            self.ent_coef_optimizer.zero_grad()
+            alpha_loss.backward()
+            self.ent_coef_optimizer.step()
+        else:
+            alpha = self.ent_coef_tensor
+        with torch.no_grad():
+            next_actions, next_log_prob = self.actor.action_log_prob(data.next_observations)
+            next_q = torch.cat(self.critic_target(data.next_observations, next_actions), dim=1)
+            next_q = torch.min(next_q, dim=1, keepdim=True)[0] - alpha * next_log_prob.reshape(
+                -1, 1
+            )
+            target_q = data.rewards + (1 - data.dones) * discounts * next_q
+        current_q = self.critic(data.observations, data.actions)
+        critic_loss = 0.5 * sum(loss_fn(q, target_q) for q in current_q)
+        self.critic.optimizer.zero_grad()
+        critic_loss.backward()  # type: ignore[union-attr]
+        self.critic.optimizer.step()
+        q_pi = torch.cat(self.critic(data.observations, actions_pi), dim=1)
+        actor_loss = (alpha * log_prob - torch.min(q_pi, dim=1, keepdim=True)[0]).mean()
+        self.actor.optimizer.zero_grad()
+        actor_loss.backward()
+        self.actor.optimizer.step()
+        polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+        polyak_update(self.batch_norm_stats, self.batch_norm_stats_target, 1.0)
 
 
 def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
@@ -472,6 +545,7 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
         target_entropy=config.sac_target_entropy,
         target_update_interval=config.target_update_interval,
         warmup=config.warmup,
+        critic_loss=config.critic_loss,
         policy_kwargs=policy_kwargs,
         seed=seed,
         device="cpu",

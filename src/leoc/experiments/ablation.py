@@ -177,6 +177,7 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
             "target_update_interval": 5,
         },
     ),
+    "sac_huber": ("defaults, Huber TD loss", {"critic_loss": "huber"}),
 }
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,
 #: today's defaults and SAC's settings.
