@@ -17,6 +17,8 @@ import torch
 from gymnasium import spaces
 from stable_baselines3 import SAC
 from stable_baselines3.common.torch_layers import FlattenExtractor
+from stable_baselines3.sac.policies import SACPolicy
+from torch import nn
 
 from leoc.control import design_lqr
 from leoc.ddpg import (
@@ -25,6 +27,7 @@ from leoc.ddpg import (
     HybridSACActor,
     HybridSACPolicy,
     LeocSAC,
+    LeocSACPolicy,
     hybrid_policy_kwargs,
     load_ddpg_controller,
     physical_policy,
@@ -32,7 +35,8 @@ from leoc.ddpg import (
 )
 from leoc.ddpg import sac as sac_module
 from leoc.ddpg.algorithms import critic_loss_fn
-from leoc.ddpg.sac import squashed_blend_mean
+from leoc.ddpg.policies import SplitCritic
+from leoc.ddpg.sac import SquashedMean, squashed_blend_mean
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
 
 SMALL_NET = [32, 32]
@@ -418,6 +422,78 @@ def test_huber_is_sacs_critic_loss_only_where_asked():
     )
     with pytest.raises(ValueError, match="critic_loss: expected one of"):
         LeocSAC("MlpPolicy", make_env("pendulum"), critic_loss="l1")
+
+
+def test_default_leoc_sac_policy_is_sb3_sac_policy_bit_for_bit():
+    env = make_env("mountaincar")
+    states = []
+    for policy_class in (SACPolicy, LeocSACPolicy):
+        torch.manual_seed(3)
+        policy = policy_class(env.observation_space, env.action_space, lambda _: 1e-3, SMALL_NET)
+        states.append(policy.state_dict())
+    assert states[0].keys() == states[1].keys()
+    assert all(torch.equal(states[0][key], states[1][key]) for key in states[0])
+
+
+@pytest.mark.parametrize("hybrid", [False, True])
+def test_sac_critic_layout_and_tf_agents_initialisation(hybrid):
+    """The DDPG critic options on SAC's twin critics and actor: obs -> 400 -> concat(physical
+    action) -> 300 -> 1 for each critic, TF-Agents' initialisation (hidden layers
+    U(+/- 1/sqrt(fan_in)), zero biases, output U(+/-0.003)) on the critics and on the actor's
+    hidden layers and mean head; SB3's log-std head; a hybrid keeps its identities."""
+    system = make_system("cartpole")
+    env = make_env(system)
+    limit = 0.003
+    kwargs = {
+        "net_arch": [400, 300],
+        "critic_action_layer": 1,
+        "critic_action_units": "physical",
+        "hidden_init": "tf_agents",
+        "last_layer_init": limit,
+    }
+    if hybrid:
+        kwargs = hybrid_policy_kwargs(system, **kwargs)
+    model = LeocSAC(HybridSACPolicy if hybrid else LeocSACPolicy, env, policy_kwargs=kwargs, seed=0)
+    critic = model.critic
+    assert isinstance(critic, SplitCritic) and len(critic.q_networks) == 2
+    for q_net in critic.q_networks:
+        linears = [m for m in q_net.modules() if isinstance(m, nn.Linear)]
+        shapes = [(m.in_features, m.out_features) for m in linears]
+        assert shapes == [(5, 400), (401, 300), (300, 1)]
+        _assert_tf_agents_init(linears, limit)
+    actor = model.actor
+    mean = actor.nonlinear if hybrid else SquashedMean(actor.latent_pi, actor.mu)
+    _assert_tf_agents_init([m for m in mean.modules() if isinstance(m, nn.Linear)], limit)
+    bound = 1.0 / math.sqrt(300)  # PyTorch's default on the log-std head, not TF-Agents'
+    assert float(actor.log_std.bias.detach().abs().max()) > 0.0
+    assert float(actor.log_std.weight.detach().abs().max()) <= bound
+    for key, value in critic.state_dict().items():  # the targets start as copies
+        assert torch.equal(model.critic_target.state_dict()[key], value)
+    probe = torch.randn(4, 5, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():  # the critic sees the physical action: c + h * normalised
+        features = critic.extract_features(probe, critic.features_extractor)
+        action = torch.full((4, 1), 0.5)
+        first = critic.q_networks[0]
+        joint = torch.cat([first.head(features), action * system.action_limit], dim=1)
+        torch.testing.assert_close(critic(probe, action)[0], first.tail(joint), rtol=0, atol=0)
+    if hybrid:  # pi(a) = G(a) and d pi / dx (a) = W, G from an independent LQR design
+        design = design_lqr(system)
+        policy = physical_policy(actor)
+        point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
+        value = policy(point[None, :])[0].detach().numpy()
+        np.testing.assert_allclose(value, design.W @ system.operating_obs + design.b, atol=1e-12)
+        jacobian = torch.autograd.functional.jacobian(lambda x: policy(x[None, :])[0], point)
+        np.testing.assert_allclose(jacobian.numpy(), design.W, rtol=0, atol=1e-10)
+
+
+def _assert_tf_agents_init(linears: list, limit: float) -> None:
+    for layer in linears[:-1]:
+        bound = 1.0 / math.sqrt(layer.in_features)  # VarianceScaling(1/3, fan_in, uniform)
+        weights = layer.weight.detach().abs()
+        assert 0.9 * bound < float(weights.max()) <= bound
+        assert torch.equal(layer.bias.detach(), torch.zeros_like(layer.bias))
+    assert float(linears[-1].weight.detach().abs().max()) <= limit
+    assert torch.equal(linears[-1].bias.detach(), torch.zeros_like(linears[-1].bias))
 
 
 def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):

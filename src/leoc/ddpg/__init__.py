@@ -38,7 +38,7 @@ from leoc.ddpg.policies import (
     action_box,
     hybrid_policy_kwargs,
 )
-from leoc.ddpg.sac import HybridSACActor, HybridSACPolicy, LeocSAC, SquashedMean
+from leoc.ddpg.sac import HybridSACActor, HybridSACPolicy, LeocSAC, LeocSACPolicy, SquashedMean
 from leoc.ddpg.train import (
     DDPGResult,
     build_model,
@@ -68,6 +68,7 @@ __all__ = [
     "LearningCurveCallback",
     "LeocDDPG",
     "LeocSAC",
+    "LeocSACPolicy",
     "LeocTD3",
     "LeocTD3Policy",
     "PhysicalPolicy",

@@ -104,19 +104,21 @@ SAC_DEFAULTS: dict[str, Any] = {
     "learning_starts": 200,
     "warmup": "uniform",
     "critic_loss": "mse",
+    "critic_action_layer": 0,
+    "critic_action_units": "normalised",
+    "hidden_init": "torch",
+    "last_layer_init": None,
 }
-#: Fields of the DDPG/TD3 family that SAC does not use (its exploration is its own Gaussian, its
-#: critics SB3's, its action bounded by the squash): a SAC config must leave them at their
-#: defaults. SAC does use ``critic_loss`` (:class:`~leoc.ddpg.sac.LeocSAC`).
+#: Fields of the DDPG/TD3 family that SAC does not use (its exploration is its own Gaussian,
+#: its action bounded by the squash, its twin critics always TD3's): a SAC config must leave
+#: them at their defaults. SAC does use the critics' loss, layout and initialisation
+#: (``critic_loss``, ``critic_action_layer``, ``critic_action_units``, ``hidden_init``,
+#: ``last_layer_init``; :class:`~leoc.ddpg.sac.LeocSAC`, :class:`~leoc.ddpg.sac.LeocSACPolicy`).
 TD3_FAMILY_FIELDS = (
     "ou_theta",
     "ou_sigma",
     "noise_units",
     "noise_reset",
-    "critic_action_layer",
-    "critic_action_units",
-    "hidden_init",
-    "last_layer_init",
     "td3_policy_delay",
     "td3_target_noise",
     "td3_target_noise_clip",
@@ -552,6 +554,16 @@ class DDPGConfig:
             if key in values:
                 values[key] = tuple(int(width) for width in values[key])
         return cls(system=name, algo=algo, **values)
+
+    def network_kwargs(self) -> dict[str, Any]:
+        """The critic layout and the networks' initialisation of this config, as keywords of
+        the policies (:class:`~leoc.ddpg.policies.NetworkOptionsMixin`: DDPG, TD3 and SAC)."""
+        return {
+            "critic_action_layer": self.critic_action_layer,
+            "critic_action_units": self.critic_action_units,
+            "hidden_init": self.hidden_init,
+            "last_layer_init": self.last_layer_init,
+        }
 
     def hybrid_kwargs(self) -> dict[str, Any]:
         """The hybrid's design options of this config, as keywords of

@@ -86,6 +86,7 @@ __all__ = [
     "HybridDDPGPolicy",
     "HybridTD3Policy",
     "LeocTD3Policy",
+    "NetworkOptionsMixin",
     "SplitCritic",
     "action_box",
     "check_hybrid_options",
@@ -588,16 +589,13 @@ def _check_critic_options(
         )
 
 
-class LeocTD3Policy(TD3Policy):
-    r"""SB3's TD3/DDPG policy with the critic layout and network initialisation as options.
+class NetworkOptionsMixin:
+    r"""The critic layout and the networks' initialisation as options of an SB3 policy with
+    twin critics (TD3/DDPG's and SAC's); mixed in before the SB3 policy class.
 
-    With every option at its default this *is* SB3's ``TD3Policy`` (same modules, same random
-    draws, same numbers).
+    Options (keywords of the policy; all at their defaults, the policy is SB3's own, bit for
+    bit):
 
-    Parameters
-    ----------
-    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
-        As for :class:`stable_baselines3.td3.policies.TD3Policy`.
     critic_action_layer : int
         Hidden layers of the critic before the action joins: 0 (SB3: concatenated to the
         observation) or ``j >= 1`` (:class:`SplitCritic`; TF-Agents' DDPG critic: 1).
@@ -610,17 +608,16 @@ class LeocTD3Policy(TD3Policy):
         ``hidden_init``.
     """
 
-    def __init__(
+    network_options: dict[str, Any]
+    critic_kwargs: dict[str, Any]
+    device: Any
+
+    def _set_network_options(
         self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Any,
-        *args: Any,
-        critic_action_layer: int = 0,
-        critic_action_units: str = "normalised",
-        hidden_init: str = "torch",
-        last_layer_init: float | None = None,
-        **kwargs: Any,
+        critic_action_layer: int,
+        critic_action_units: str,
+        hidden_init: str,
+        last_layer_init: float | None,
     ) -> None:
         if hidden_init not in HIDDEN_INITS:
             raise ValueError(f"hidden_init: expected one of {HIDDEN_INITS}, found {hidden_init!r}")
@@ -636,12 +633,65 @@ class LeocTD3Policy(TD3Policy):
             "hidden_init": hidden_init,
             "last_layer_init": None if last_layer_init is None else float(last_layer_init),
         }
-        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def _initialise(self, module: nn.Module) -> None:
         options = self.network_options
         if (options["hidden_init"], options["last_layer_init"]) != ("torch", None):
             initialise_mlp(module, options["hidden_init"], options["last_layer_init"])
+
+    def make_critic(self, features_extractor: nn.Module | None = None) -> nn.Module:
+        """SB3's critic, or a :class:`SplitCritic` when the action joins later or in physical
+        units (``network_options``), initialised as ``network_options`` says."""
+        layer = self.network_options["critic_action_layer"]
+        units = self.network_options["critic_action_units"]
+        _check_critic_options(layer, units, self.critic_kwargs["net_arch"])
+        if (layer, units) == (0, "normalised"):
+            critic = super().make_critic(features_extractor)  # type: ignore[misc]
+        else:
+            critic_kwargs = self._update_features_extractor(self.critic_kwargs, features_extractor)  # type: ignore[attr-defined]
+            critic = SplitCritic(**critic_kwargs, action_layer=layer, action_units=units)
+            critic = critic.to(self.device)
+        for q_net in critic.q_networks:
+            self._initialise(q_net)
+        return critic
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()  # type: ignore[misc]
+        data.update(self.network_options)
+        return data
+
+
+class LeocTD3Policy(NetworkOptionsMixin, TD3Policy):
+    r"""SB3's TD3/DDPG policy with the critic layout and network initialisation as options.
+
+    With every option at its default this *is* SB3's ``TD3Policy`` (same modules, same random
+    draws, same numbers).
+
+    Parameters
+    ----------
+    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
+        As for :class:`stable_baselines3.td3.policies.TD3Policy`.
+    critic_action_layer, critic_action_units, hidden_init, last_layer_init
+        As :class:`NetworkOptionsMixin` describes them; the actor's initialised layers are
+        its MLP (the hybrid's nonlinear part).
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Any,
+        *args: Any,
+        critic_action_layer: int = 0,
+        critic_action_units: str = "normalised",
+        hidden_init: str = "torch",
+        last_layer_init: float | None = None,
+        **kwargs: Any,
+    ) -> None:
+        self._set_network_options(
+            critic_action_layer, critic_action_units, hidden_init, last_layer_init
+        )
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def _new_actor(self, features_extractor: nn.Module | None = None) -> Actor:
         return super().make_actor(features_extractor)
@@ -652,27 +702,6 @@ class LeocTD3Policy(TD3Policy):
         actor = self._new_actor(features_extractor)
         self._initialise(actor.nonlinear if isinstance(actor, HybridActor) else actor.mu)
         return actor
-
-    def make_critic(self, features_extractor: nn.Module | None = None) -> nn.Module:
-        """SB3's critic, or a :class:`SplitCritic` when the action joins later or in physical
-        units (``network_options``), initialised as ``network_options`` says."""
-        layer = self.network_options["critic_action_layer"]
-        units = self.network_options["critic_action_units"]
-        _check_critic_options(layer, units, self.critic_kwargs["net_arch"])
-        if (layer, units) == (0, "normalised"):
-            critic = super().make_critic(features_extractor)
-        else:
-            critic_kwargs = self._update_features_extractor(self.critic_kwargs, features_extractor)
-            critic = SplitCritic(**critic_kwargs, action_layer=layer, action_units=units)
-            critic = critic.to(self.device)
-        for q_net in critic.q_networks:
-            self._initialise(q_net)
-        return critic
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(self.network_options)
-        return data
 
 
 #: The ``roa_*`` keyword arguments of the hybrid actors (:func:`roa_relevance_kwargs`).

@@ -103,6 +103,7 @@ from torch import Tensor, nn
 from leoc.ddpg.algorithms import ActorRateAndWarmupMixin, critic_loss_fn
 from leoc.ddpg.policies import (
     HybridActorMixin,
+    NetworkOptionsMixin,
     check_hybrid_options,
     hybrid_actor_kwargs,
     hybrid_policy_kwargs,
@@ -113,6 +114,7 @@ __all__ = [
     "HybridSACActor",
     "HybridSACPolicy",
     "LeocSAC",
+    "LeocSACPolicy",
     "SquashedMean",
     "build_sac_model",
     "squashed_blend_mean",
@@ -316,8 +318,55 @@ def _check_no_sde(use_sde: object) -> None:
         )
 
 
-class HybridSACPolicy(SACPolicy):
-    """SB3 SAC policy whose actor is :class:`HybridSACActor` (the critics are SB3's).
+class LeocSACPolicy(NetworkOptionsMixin, SACPolicy):
+    """SB3's SAC policy with the critic layout and the networks' initialisation as options
+    (:class:`~leoc.ddpg.policies.NetworkOptionsMixin`, as for DDPG/TD3): at their defaults
+    it is SB3's ``SACPolicy`` itself (same modules, same random draws, same numbers).
+
+    Parameters
+    ----------
+    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
+        As for :class:`stable_baselines3.sac.policies.SACPolicy`.
+    critic_action_layer, critic_action_units, hidden_init, last_layer_init
+        As :class:`~leoc.ddpg.policies.NetworkOptionsMixin` describes them. The actor's
+        initialised layers are its hidden layers and mean head (the squashed mean
+        :class:`SquashedMean`, the hybrid's nonlinear part); the log-std head keeps SB3's.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Any,
+        *args: Any,
+        critic_action_layer: int = 0,
+        critic_action_units: str = "normalised",
+        hidden_init: str = "torch",
+        last_layer_init: float | None = None,
+        **kwargs: Any,
+    ) -> None:
+        self._set_network_options(
+            critic_action_layer, critic_action_units, hidden_init, last_layer_init
+        )
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
+
+    def _new_actor(self, features_extractor: nn.Module | None = None) -> SACActor:
+        return super().make_actor(features_extractor)
+
+    def make_actor(self, features_extractor: nn.Module | None = None) -> SACActor:
+        """The actor (SB3's, or the hybrid in :class:`HybridSACPolicy`), its hidden layers and
+        mean head initialised as ``network_options`` says."""
+        actor = self._new_actor(features_extractor)
+        if isinstance(actor, HybridSACActor):
+            self._initialise(actor.nonlinear)
+        else:
+            self._initialise(SquashedMean(actor.latent_pi, actor.mu))
+        return actor
+
+
+class HybridSACPolicy(LeocSACPolicy):
+    """SB3 SAC policy whose actor is :class:`HybridSACActor` (the critics, and the network
+    options, :class:`LeocSACPolicy`'s).
 
     Use it as ``SAC(HybridSACPolicy, env, policy_kwargs=hybrid_policy_kwargs(system))``
     (:func:`leoc.ddpg.hybrid_policy_kwargs`, the same helper as for DDPG/TD3) or through
@@ -377,8 +426,8 @@ class HybridSACPolicy(SACPolicy):
         )
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
-    def make_actor(self, features_extractor: nn.Module | None = None) -> HybridSACActor:
-        """The hybrid actor (SB3 calls this once; SAC has no target actor)."""
+    def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridSACActor:
+        """The hybrid actor (SB3 calls ``make_actor`` once; SAC has no target actor)."""
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
         return HybridSACActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
 
@@ -524,8 +573,9 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
     system = env.unwrapped.system
     policy_kwargs: dict[str, Any] = {
         "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
+        **config.network_kwargs(),
     }
-    policy: Any = SACPolicy
+    policy: Any = LeocSACPolicy  # SB3's SACPolicy when the network options are its defaults
     if config.hybrid:
         policy = HybridSACPolicy
         policy_kwargs = hybrid_policy_kwargs(system, **config.hybrid_kwargs(), **policy_kwargs)

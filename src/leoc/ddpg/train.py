@@ -83,10 +83,7 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
     system = env.unwrapped.system
     policy_kwargs: dict[str, Any] = {
         "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
-        "critic_action_layer": config.critic_action_layer,
-        "critic_action_units": config.critic_action_units,
-        "hidden_init": config.hidden_init,
-        "last_layer_init": config.last_layer_init,
+        **config.network_kwargs(),
     }
     policy: Any = LeocTD3Policy  # SB3's TD3Policy when those options are at their defaults
     if config.hybrid:

@@ -178,6 +178,16 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         },
     ),
     "sac_huber": ("defaults, Huber TD loss", {"critic_loss": "huber"}),
+    "sac_critic": (
+        "defaults, DDPG's critic (Huber, action after layer 1, TF-Agents' init)",
+        {
+            "critic_loss": "huber",
+            "critic_action_layer": 1,
+            "critic_action_units": "physical",
+            "hidden_init": "tf_agents",
+            "last_layer_init": 0.003,
+        },
+    ),
 }
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,
 #: today's defaults and SAC's settings.

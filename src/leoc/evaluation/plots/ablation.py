@@ -33,7 +33,8 @@ SETTING_COLOURS = {
     "sac_alpha_0.01": "#ad494a",
     "sac_initial_collect": "#8c6d31",
     "sac_ddpg_optimiser": "#7b4173",
-    "sac_huber": "#2ca02c",
+    "sac_huber": "#98df8a",
+    "sac_critic": "#2ca02c",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
