@@ -59,7 +59,10 @@ its region (the cart-pole and the mountain car).
 SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
-also measures SAC's success rate against the budget.
+also measures SAC's success rate against the budget, and SAC's own settings
+(:data:`SAC_TUNING_SETTINGS`, not in the default grid): ``defaults`` with one SAC choice
+changed (a fixed entropy coefficient, 1000 initial steps from SAC's policy, DDPG's optimiser,
+the Huber loss, DDPG's whole critic).
 
 Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
 ``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
