@@ -28,6 +28,8 @@ from leoc.ddpg import (
     HybridSACPolicy,
     LeocSAC,
     LeocSACPolicy,
+    SeededOUNoise,
+    build_model,
     hybrid_policy_kwargs,
     load_ddpg_controller,
     physical_policy,
@@ -35,6 +37,7 @@ from leoc.ddpg import (
 )
 from leoc.ddpg import sac as sac_module
 from leoc.ddpg.algorithms import critic_loss_fn
+from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.policies import SplitCritic
 from leoc.ddpg.sac import SquashedMean, squashed_blend_mean
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
@@ -496,6 +499,38 @@ def _assert_tf_agents_init(linears: list, limit: float) -> None:
     assert torch.equal(linears[-1].bias.detach(), torch.zeros_like(linears[-1].bias))
 
 
+def test_sac_action_noise_adds_ddpgs_ou_process_to_sacs_samples():
+    """With ``sac_action_noise`` the action SAC applies (and stores) is its own sample plus
+    DDPG's OU noise (physical units: divided by the half-width in SB3's normalised action),
+    clipped to the box; without it, SAC's sample alone."""
+    nets = {"actor_hidden": (16, 16), "critic_hidden": (16, 16)}
+    config = DDPGConfig.for_system("cartpole", algo="sac", sac_action_noise=True, **nets)
+    env = make_env("cartpole")
+    noisy = build_model(config, seed=5, env=env)
+    assert isinstance(noisy.action_noise, SeededOUNoise)
+    assert (noisy.action_noise.theta, noisy.action_noise.sigma) == (0.2, 1.0)  # DDPG's
+    reference = exploration_noise(config, env.action_space, seed=5)  # the same stream
+    plain_config = DDPGConfig.for_system("cartpole", algo="sac", **nets)
+    plain = build_model(plain_config, seed=5, env=make_env("cartpole"))
+    assert plain.action_noise is None
+    plain.policy.load_state_dict(noisy.policy.state_dict())
+    obs = np.array([[0.1, 0.0, -1.0, 0.0, 0.5]], dtype=np.float32)  # hanging, spinning
+    for model in (plain, noisy):
+        model.num_timesteps = 10_000  # past the warm-up: SAC's own samples
+        model._last_obs = obs
+    steps = []
+    for _ in range(6):
+        torch.manual_seed(11)
+        _, own = plain._sample_action(0, None)
+        torch.manual_seed(11)
+        _, applied = noisy._sample_action(0, noisy.action_noise)
+        step = reference()
+        steps.append(float(step[0]))
+        np.testing.assert_allclose(applied, np.clip(own + step, -1.0, 1.0), rtol=0, atol=1e-6)
+    half = make_system("cartpole").action_limit
+    assert max(abs(value) for value in steps) * half > 0.5  # the noise is there (newtons)
+
+
 def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):
     result = train_ddpg(
         "mountaincar", algo="sac", hybrid=True, seed=2, run_dir=tmp_path, **TINY_RUN
@@ -559,7 +594,9 @@ def test_sac_config_defaults_leave_ddpg_unchanged():
     ("overrides", "message"),
     [
         ({"algo": "ppo"}, "algo: expected one of"),
-        ({"algo": "sac", "ou_sigma": 0.3}, "ou_sigma: only DDPG and TD3 use it"),
+        ({"algo": "sac", "ou_sigma": 0.3}, "ou_sigma: SAC uses the OU exploration only with"),
+        ({"algo": "sac", "sac_action_noise": 1}, "sac_action_noise: expected a bool"),
+        ({"algo": "ddpg", "sac_action_noise": True}, "sac_action_noise: only SAC uses it"),
         ({"algo": "sac", "actor_output_clip": False}, "actor_output_clip: only DDPG and TD3"),
         ({"algo": "td3", "sac_entropy_coef": 0.1}, "sac_entropy_coef: only SAC uses it"),
         ({"algo": "sac", "sac_entropy_coef": "auto_x"}, "sac_entropy_coef: expected 'auto'"),

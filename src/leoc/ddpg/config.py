@@ -113,19 +113,18 @@ SAC_DEFAULTS: dict[str, Any] = {
 #: its action bounded by the squash, its twin critics always TD3's): a SAC config must leave
 #: them at their defaults. SAC does use the critics' loss, layout and initialisation
 #: (``critic_loss``, ``critic_action_layer``, ``critic_action_units``, ``hidden_init``,
-#: ``last_layer_init``; :class:`~leoc.ddpg.sac.LeocSAC`, :class:`~leoc.ddpg.sac.LeocSACPolicy`).
+#: ``last_layer_init``; :class:`~leoc.ddpg.sac.LeocSAC`, :class:`~leoc.ddpg.sac.LeocSACPolicy`),
+#: and the OU exploration fields with ``sac_action_noise`` (:data:`OU_FIELDS`).
 TD3_FAMILY_FIELDS = (
-    "ou_theta",
-    "ou_sigma",
-    "noise_units",
-    "noise_reset",
     "td3_policy_delay",
     "td3_target_noise",
     "td3_target_noise_clip",
     "actor_output_clip",
 )
 #: Fields only SAC uses: a DDPG or TD3 config must leave them at their defaults.
-SAC_FIELDS = ("sac_entropy_coef", "sac_target_entropy")
+SAC_FIELDS = ("sac_entropy_coef", "sac_target_entropy", "sac_action_noise")
+#: The OU exploration fields: SAC uses them only with ``sac_action_noise=True``.
+OU_FIELDS = ("ou_theta", "ou_sigma", "noise_units", "noise_reset")
 AUTO = "auto"  # SB3's automatic entropy coefficient / target entropy
 
 # --------------------------------------------------------------------------- the authors' DDPG
@@ -344,6 +343,13 @@ class DDPGConfig:
     sac_target_entropy : "auto" or float
         Target entropy of the automatic tuning (``"auto"``: minus the action dimension,
         Haarnoja et al. 2018). SAC only.
+    sac_action_noise : bool
+        SAC only: add DDPG's Ornstein-Uhlenbeck exploration (``ou_theta``, ``ou_sigma``,
+        ``noise_units``, ``noise_reset``, seeded as DDPG's) to the actions SAC samples, clipped
+        to the action box (SB3 adds an algorithm's ``action_noise`` so), for temporally
+        correlated exploration on top of SAC's own Gaussian; the replayed action is the one
+        applied. False (the default): SAC's Gaussian only, and the OU fields must keep their
+        defaults.
     step_rules : dict
         Fields of the :class:`~leoc.systems.StepRules` the training and evaluation environments
         step under (empty: leoc's rules; :meth:`for_system` sets the reward of the next state
@@ -393,6 +399,7 @@ class DDPGConfig:
     model_selection: str = "best_held"
     sac_entropy_coef: str | float = AUTO
     sac_target_entropy: str | float = AUTO
+    sac_action_noise: bool = False
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -468,6 +475,15 @@ class DDPGConfig:
                     f"{name}: only {users} it, so algo={self.algo!r} needs its default "
                     f"{defaults[name]!r}; found {getattr(self, name)!r}"
                 )
+        if self.algo == "sac" and not self.sac_action_noise:
+            for name in OU_FIELDS:
+                if getattr(self, name) != defaults[name]:
+                    raise ValueError(
+                        f"{name}: SAC uses the OU exploration only with sac_action_noise=True, "
+                        f"so it needs its default {defaults[name]!r}; found {getattr(self, name)!r}"
+                    )
+        if not isinstance(self.sac_action_noise, bool):
+            raise ValueError(f"sac_action_noise: expected a bool, found {self.sac_action_noise!r}")
         _check_entropy_coef(self.sac_entropy_coef)
         target = self.sac_target_entropy
         if target != AUTO and (

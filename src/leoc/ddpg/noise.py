@@ -23,10 +23,20 @@ process runs on across episodes (TF-Agents never resets it). Unlike SB3's
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 from stable_baselines3.common.noise import ActionNoise
 
-__all__ = ["SeededOUNoise"]
+from leoc.ddpg.policies import action_box
+
+if TYPE_CHECKING:
+    from leoc.ddpg.config import DDPGConfig
+
+__all__ = ["NOISE_SEED_OFFSET", "SeededOUNoise", "exploration_noise"]
+
+#: Seed offset of the exploration noise's own stream (evaluation: :mod:`leoc.training`).
+NOISE_SEED_OFFSET = 20_000
 
 
 class SeededOUNoise(ActionNoise):
@@ -90,3 +100,20 @@ class SeededOUNoise(ActionNoise):
             f"SeededOUNoise(size={self.size}, theta={self.theta}, sigma={self.sigma}, "
             f"scale={self.scale.tolist()}, reset_each_episode={self.reset_each_episode})"
         )
+
+
+def exploration_noise(config: DDPGConfig, action_space: Any, seed: int) -> SeededOUNoise:
+    """The run's OU exploration noise (DDPG and TD3; SAC with ``sac_action_noise``):
+    ``ou_theta``, ``ou_sigma`` in ``noise_units`` (physical units divide by the action box's
+    half-width h, since SB3 adds it to the normalised action), reset at episode ends if
+    ``noise_reset``, seeded by ``seed +`` :data:`NOISE_SEED_OFFSET`."""
+    _, half = action_box(action_space)
+    scale = 1.0 / half if config.noise_units == "physical" else np.ones_like(half)
+    return SeededOUNoise(
+        half.size,
+        config.ou_theta,
+        config.ou_sigma,
+        seed + NOISE_SEED_OFFSET,
+        scale=scale,
+        reset_each_episode=config.noise_reset,
+    )

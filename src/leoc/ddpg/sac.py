@@ -101,6 +101,7 @@ from stable_baselines3.sac.policies import Actor as SACActor
 from torch import Tensor, nn
 
 from leoc.ddpg.algorithms import ActorRateAndWarmupMixin, critic_loss_fn
+from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.policies import (
     HybridActorMixin,
     NetworkOptionsMixin,
@@ -596,6 +597,9 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
         target_update_interval=config.target_update_interval,
         warmup=config.warmup,
         critic_loss=config.critic_loss,
+        action_noise=exploration_noise(config, env.action_space, seed)
+        if config.sac_action_noise
+        else None,
         policy_kwargs=policy_kwargs,
         seed=seed,
         device="cpu",

@@ -36,9 +36,9 @@ from stable_baselines3.common.logger import Logger
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback, selection_start
 from leoc.ddpg.config import DDPGConfig
-from leoc.ddpg.noise import SeededOUNoise
+from leoc.ddpg.noise import NOISE_SEED_OFFSET, exploration_noise  # noqa: F401 (re-exported)
 from leoc.ddpg.physical import physical_policy
-from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, action_box, hybrid_policy_kwargs
+from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
 from leoc.ddpg.sac import LeocSAC, build_sac_model
 from leoc.io import write_bytes_atomic, write_text_atomic
 from leoc.training import (
@@ -61,8 +61,6 @@ __all__ = [
 ]
 
 DEFAULT_RUN_ROOT = Path("runs") / "ddpg"
-# Seed offset of the exploration noise's own stream (evaluation: leoc.training).
-NOISE_SEED_OFFSET = 20_000
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
 ALGO_CLASSES = {"ddpg": LeocDDPG, "td3": LeocTD3, "sac": LeocSAC}
 DDPGResult = TrainResult  # the one trainer result (leoc.training)
@@ -124,22 +122,6 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
             **common,
         )
     return LeocDDPG(policy, env, **common)
-
-
-def exploration_noise(config: DDPGConfig, action_space: Any, seed: int) -> SeededOUNoise:
-    """The run's OU exploration noise: ``ou_theta``, ``ou_sigma`` in ``noise_units`` (physical
-    units divide by the action box's half-width h, since SB3 adds it to the normalised action),
-    reset at episode ends if ``noise_reset``, seeded by ``seed + 20000``."""
-    _, half = action_box(action_space)
-    scale = 1.0 / half if config.noise_units == "physical" else np.ones_like(half)
-    return SeededOUNoise(
-        half.size,
-        config.ou_theta,
-        config.ou_sigma,
-        seed + NOISE_SEED_OFFSET,
-        scale=scale,
-        reset_each_episode=config.noise_reset,
-    )
 
 
 def _versions() -> dict[str, str]:

@@ -62,7 +62,7 @@ are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), 
 also measures SAC's success rate against the budget, and SAC's own settings
 (:data:`SAC_TUNING_SETTINGS`, not in the default grid): ``defaults`` with one SAC choice
 changed (a fixed entropy coefficient, 1000 initial steps from SAC's policy, DDPG's optimiser,
-the Huber loss, DDPG's whole critic).
+the Huber loss, DDPG's whole critic, DDPG's OU exploration on top of SAC's).
 
 Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
 ``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
@@ -190,6 +190,10 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
             "hidden_init": "tf_agents",
             "last_layer_init": 0.003,
         },
+    ),
+    "sac_ou": (
+        "defaults, DDPG's OU noise added to SAC's samples",
+        {"sac_action_noise": True},
     ),
 }
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,

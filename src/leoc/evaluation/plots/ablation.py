@@ -35,6 +35,7 @@ SETTING_COLOURS = {
     "sac_ddpg_optimiser": "#7b4173",
     "sac_huber": "#98df8a",
     "sac_critic": "#2ca02c",
+    "sac_ou": "#1f77b4",
 }
 # "all but X" takes X's colour, dash-dotted.
 SETTING_COLOURS.update(
