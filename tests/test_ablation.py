@@ -484,7 +484,8 @@ def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> N
     for spec in sac:
         config = plan.config(spec)
         assert spec.algo == "sac" and config.algo == "sac" and config.relevance == "roa"
-        # SAC's defaults before issue 20: leoc's step rules, the final actor on 5 episodes
+        # SAC's defaults before issue 20: leoc's step rules, the final actor on 5 episodes,
+        # SB3's critics (written out: an independent reference for SB3_SAC_CRITIC)
         expected = DDPGConfig.for_system(
             spec.system,
             "sac",
@@ -495,6 +496,11 @@ def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> N
             step_rules={},
             model_selection="final",
             eval_episodes=5,
+            critic_loss="mse",
+            critic_action_layer=0,
+            critic_action_units="normalised",
+            hidden_init="torch",
+            last_layer_init=None,
         )
         assert _differences(expected, config).keys() <= {"step_rules"}
         assert bool(_differences(expected, config)) == (spec.setting == "exit_penalty")

@@ -418,11 +418,16 @@ def _seed_global(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def test_huber_is_sacs_critic_loss_only_where_asked():
-    assert DDPGConfig.for_system("cartpole", algo="sac").critic_loss == "mse"  # SB3's SAC
-    assert DDPGConfig.for_system("cartpole", algo="sac", critic_loss="huber").critic_loss == (
-        "huber"
-    )
+def test_sacs_loss_is_huber_on_sb3s_critics_by_default_and_options():
+    sac = DDPGConfig.for_system("cartpole", algo="sac")
+    assert sac.critic_loss == "huber"  # DDPG's loss (issue 20) on SB3's critics
+    assert sac.network_kwargs() == {
+        "critic_action_layer": 0,
+        "critic_action_units": "normalised",
+        "hidden_init": "torch",
+        "last_layer_init": None,
+    }
+    assert DDPGConfig.for_system("cartpole", algo="sac", critic_loss="mse").critic_loss == "mse"
     with pytest.raises(ValueError, match="critic_loss: expected one of"):
         LeocSAC("MlpPolicy", make_env("pendulum"), critic_loss="l1")
 

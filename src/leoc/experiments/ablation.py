@@ -60,9 +60,10 @@ SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out succ
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
 also measures SAC's success rate against the budget, and SAC's own settings
-(:data:`SAC_TUNING_SETTINGS`, not in the default grid): ``defaults`` with one SAC choice
-changed (a fixed entropy coefficient, 1000 initial steps from SAC's policy, DDPG's optimiser,
-the Huber loss, DDPG's whole critic, DDPG's OU exploration on top of SAC's).
+(:data:`SAC_TUNING_SETTINGS`, not in the default grid): ``defaults`` with SB3's critics, as
+SAC's defaults were when they ran, and one SAC choice changed (a fixed entropy coefficient,
+1000 initial steps from SAC's policy, DDPG's optimiser, the Huber loss, DDPG's whole critic,
+DDPG's OU exploration on top of SAC's).
 
 Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
 ``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
@@ -162,17 +163,19 @@ HORIZON_EXIT_SETTINGS = ("horizon_exit", "all_horizon_exit")
 #: override), for DDPG, TD3 and SAC alike: the setting that measures the defaults issue 20
 #: chose from this grid (module docstring).
 DEFAULTS_SETTING = "defaults"
-#: SAC's settings (issue 20: with leoc's defaults SAC did not learn the cart-pole), for the SAC
-#: controllers only: each is leoc's defaults (``defaults``) with the fields given, and a label.
+#: SAC's settings (issue 20: with SB3's critics SAC did not learn the cart-pole), for the SAC
+#: controllers only: each is leoc's defaults with SB3's critics (:data:`SB3_SAC_CRITIC`, SAC's
+#: defaults when they were measured) and the fields given, and a label. ``sac_huber`` is what
+#: SAC's defaults took: it equals ``defaults`` since.
 SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
-    "sac_alpha_0.1": ("defaults, entropy coefficient 0.1 (fixed)", {"sac_entropy_coef": 0.1}),
-    "sac_alpha_0.01": ("defaults, entropy coefficient 0.01 (fixed)", {"sac_entropy_coef": 0.01}),
+    "sac_alpha_0.1": ("SB3 critics, entropy coefficient 0.1 (fixed)", {"sac_entropy_coef": 0.1}),
+    "sac_alpha_0.01": ("SB3 critics, entropy coefficient 0.01 (fixed)", {"sac_entropy_coef": 0.01}),
     "sac_initial_collect": (
-        "defaults, 1000 initial steps from SAC's policy",
+        "SB3 critics, 1000 initial steps from SAC's policy",
         {"learning_starts": 1000, "warmup": "policy"},
     ),
     "sac_ddpg_optimiser": (
-        "defaults, DDPG's optimiser (batch 64, actor step 5e-4, targets 0.05 every 5)",
+        "SB3 critics, DDPG's optimiser (batch 64, actor step 5e-4, targets 0.05 every 5)",
         {
             "batch_size": 64,
             "actor_learning_rate": 5e-4,
@@ -180,9 +183,9 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
             "target_update_interval": 5,
         },
     ),
-    "sac_huber": ("defaults, Huber TD loss", {"critic_loss": "huber"}),
+    "sac_huber": ("SB3 critics with the Huber TD loss", {"critic_loss": "huber"}),
     "sac_critic": (
-        "defaults, DDPG's critic (Huber, action after layer 1, TF-Agents' init)",
+        "DDPG's critic (Huber, action after layer 1, TF-Agents' init)",
         {
             "critic_loss": "huber",
             "critic_action_layer": 1,
@@ -192,7 +195,7 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         },
     ),
     "sac_ou": (
-        "defaults, DDPG's OU noise added to SAC's samples",
+        "SB3 critics, DDPG's OU noise added to SAC's samples",
         {"sac_action_noise": True},
     ),
 }
@@ -253,13 +256,25 @@ LEOC_ABLATION_BASE: dict[str, Any] = {
     "gradient_steps": 1,
     "step_rules": {},
 }
+#: SAC's critics before issue 20 (SB3's: mean squared TD error, the action at the input in
+#: normalised units, PyTorch's initialisation), written out: SAC's defaults took the Huber loss
+#: from the SAC settings below, which start from these.
+SB3_SAC_CRITIC: dict[str, Any] = {
+    "critic_loss": "mse",
+    "critic_action_layer": 0,
+    "critic_action_units": "normalised",
+    "hidden_init": "torch",
+    "last_layer_init": None,
+}
 #: SAC's defaults before issue 20 of the fields that changed since, for the SAC cells of the
-#: settings other than ``defaults``: leoc's step rules and the final actor on 5 evaluation
-#: episodes (SAC's own hyperparameters, :data:`~leoc.ddpg.SAC_DEFAULTS`, did not change).
+#: settings other than ``defaults`` and :data:`SAC_TUNING_SETTINGS`: leoc's step rules, the
+#: final actor on 5 evaluation episodes and SB3's critics (SAC's other hyperparameters,
+#: :data:`~leoc.ddpg.SAC_DEFAULTS`, did not change).
 SAC_ABLATION_BASE: dict[str, Any] = {
     "step_rules": {},
     "model_selection": "final",
     "eval_episodes": 5,
+    **SB3_SAC_CRITIC,
 }
 #: The :class:`~leoc.systems.StepRules` fields of the ``exit_penalty`` setting.
 EXIT_RULE_FIELDS = ("exit_penalty", "reward_on_next_state")
@@ -354,7 +369,7 @@ def setting_overrides(
     if setting == DEFAULTS_SETTING:
         return {}
     if setting in SAC_TUNING_SETTINGS:
-        return copy.deepcopy(SAC_TUNING_SETTINGS[setting][1])
+        return {**SB3_SAC_CRITIC, **copy.deepcopy(SAC_TUNING_SETTINGS[setting][1])}
     base = LEOC_ABLATION_BASE if algo != "sac" else SAC_ABLATION_BASE
     return {**copy.deepcopy(base), **_switched(setting, system, hybrid, budget)}
 
