@@ -30,8 +30,9 @@ from leoc.ddpg import (
 from leoc.ddpg.algorithms import HUBER_DELTA, critic_loss_fn
 from leoc.ddpg.callbacks import last_third_start, selection_key, selection_start
 from leoc.ddpg.config import AUTHORS_DDPG, authors_ddpg_overrides
+from leoc.ddpg.noise import NOISE_SEED_OFFSET, exploration_noise
 from leoc.ddpg.policies import LeocTD3Policy, SplitCritic
-from leoc.ddpg.train import NOISE_SEED_OFFSET, exploration_noise, train_ddpg
+from leoc.ddpg.train import train_ddpg
 from leoc.experiments.ablation import delivered_steps
 from leoc.policies import PrecisionRelevance
 from leoc.systems import StepRules, make_env, make_system

@@ -36,7 +36,7 @@ from stable_baselines3.common.logger import Logger
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback, selection_start
 from leoc.ddpg.config import DDPGConfig
-from leoc.ddpg.noise import NOISE_SEED_OFFSET, exploration_noise  # noqa: F401 (re-exported)
+from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
 from leoc.ddpg.sac import LeocSAC, build_sac_model
