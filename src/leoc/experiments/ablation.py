@@ -61,9 +61,9 @@ its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
 also measures SAC's success rate against the budget, and SAC's own settings
 (:data:`SAC_TUNING_SETTINGS`, not in the default grid): ``defaults`` with SB3's critics, as
-SAC's defaults were when they ran, and one SAC choice changed (a fixed entropy coefficient,
-1000 initial steps from SAC's policy, DDPG's optimiser, the Huber loss, DDPG's whole critic,
-DDPG's OU exploration on top of SAC's).
+SAC's defaults were when they ran (``sac_sb3_critic``), and with one SAC choice changed (a
+fixed entropy coefficient, 1000 initial steps from SAC's policy, DDPG's optimiser, the Huber
+loss, DDPG's whole critic, DDPG's OU exploration on top of SAC's).
 
 Every cell keeps leoc's discrete LQR for the hybrids' G (the LQR design is not a DDPG choice;
 ``leoc reproduce --variant authors`` runs the authors' design as well). Controllers: the DDPG
@@ -168,6 +168,7 @@ DEFAULTS_SETTING = "defaults"
 #: defaults when they were measured) and the fields given, and a label. ``sac_huber`` is what
 #: SAC's defaults took: it equals ``defaults`` since.
 SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "sac_sb3_critic": ("SB3 critics (SAC's defaults before issue 20)", {}),
     "sac_alpha_0.1": ("SB3 critics, entropy coefficient 0.1 (fixed)", {"sac_entropy_coef": 0.1}),
     "sac_alpha_0.01": ("SB3 critics, entropy coefficient 0.01 (fixed)", {"sac_entropy_coef": 0.01}),
     "sac_initial_collect": (

@@ -29,6 +29,7 @@ SETTING_COLOURS = {
     "all_factors": "#17becf",
     "horizon_exit": "#e377c2",
     "defaults": "#bcbd22",
+    "sac_sb3_critic": "#7f7f7f",
     "sac_alpha_0.1": "#393b79",
     "sac_alpha_0.01": "#ad494a",
     "sac_initial_collect": "#8c6d31",
