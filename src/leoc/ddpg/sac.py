@@ -462,8 +462,9 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
         :meth:`_train_step`, the same update with
         :math:`\tfrac12 \sum_k \mathrm{huber}(Q_k(s, a), y)` (delta 1, as DDPG's
         ``critic_loss``, :func:`leoc.ddpg.algorithms.critic_loss_fn`): a TD error beyond 1
-        pulls with a constant gradient, so the few transitions that leave the track (one
-        reward of up to -1100 on the cart-pole) do not outweigh the rest of the batch.
+        pulls with a constant gradient instead of one proportional to the error. leoc's
+        defaults take it (:data:`~leoc.ddpg.SAC_DEFAULTS`): with the squared error SAC did not
+        learn the cart-pole swing-up (the DDPG guide, "SAC's critic loss").
     """
 
     def __init__(
