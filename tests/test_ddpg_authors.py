@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 from stable_baselines3 import DDPG
+from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import TD3Policy
 from torch import nn
 
@@ -32,6 +33,7 @@ from leoc.ddpg.callbacks import last_third_start, selection_key, selection_start
 from leoc.ddpg.config import AUTHORS_DDPG, authors_ddpg_overrides
 from leoc.ddpg.noise import NOISE_SEED_OFFSET, exploration_noise
 from leoc.ddpg.policies import LeocTD3Policy, SplitCritic
+from leoc.ddpg.sac import LeocSACPolicy
 from leoc.ddpg.train import train_ddpg
 from leoc.experiments.ablation import delivered_steps
 from leoc.policies import PrecisionRelevance
@@ -296,10 +298,13 @@ def test_split_critic_layers_and_physical_action_after_first_layer():
     torch.testing.assert_close(critic.q1_forward(obs, action), expected, rtol=1e-6, atol=1e-6)
 
 
-def test_default_leoc_policy_is_sb3_td3_policy_bit_for_bit():
+@pytest.mark.parametrize(
+    "policy_classes", [(TD3Policy, LeocTD3Policy), (SACPolicy, LeocSACPolicy)], ids=["td3", "sac"]
+)
+def test_default_leoc_policy_is_sb3s_policy_bit_for_bit(policy_classes):
     env = make_env("mountaincar")
     states = []
-    for policy_class in (TD3Policy, LeocTD3Policy):
+    for policy_class in policy_classes:
         torch.manual_seed(3)
         policy = policy_class(env.observation_space, env.action_space, lambda _: 1e-3, SMALL_NET)
         states.append(policy.state_dict())

@@ -612,12 +612,17 @@ class NetworkOptionsMixin:
     critic_kwargs: dict[str, Any]
     device: Any
 
-    def _set_network_options(
+    def __init__(
         self,
-        critic_action_layer: int,
-        critic_action_units: str,
-        hidden_init: str,
-        last_layer_init: float | None,
+        observation_space: spaces.Space,
+        action_space: spaces.Box,
+        lr_schedule: Any,
+        *args: Any,
+        critic_action_layer: int = 0,
+        critic_action_units: str = "normalised",
+        hidden_init: str = "torch",
+        last_layer_init: float | None = None,
+        **kwargs: Any,
     ) -> None:
         if hidden_init not in HIDDEN_INITS:
             raise ValueError(f"hidden_init: expected one of {HIDDEN_INITS}, found {hidden_init!r}")
@@ -633,6 +638,8 @@ class NetworkOptionsMixin:
             "hidden_init": hidden_init,
             "last_layer_init": None if last_layer_init is None else float(last_layer_init),
         }
+        # the SB3 policy after this mixin in the MRO builds the networks (make_actor/critic)
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)  # type: ignore[call-arg]
 
     def _initialise(self, module: nn.Module) -> None:
         options = self.network_options
@@ -675,23 +682,6 @@ class LeocTD3Policy(NetworkOptionsMixin, TD3Policy):
         As :class:`NetworkOptionsMixin` describes them; the actor's initialised layers are
         its MLP (the hybrid's nonlinear part).
     """
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Any,
-        *args: Any,
-        critic_action_layer: int = 0,
-        critic_action_units: str = "normalised",
-        hidden_init: str = "torch",
-        last_layer_init: float | None = None,
-        **kwargs: Any,
-    ) -> None:
-        self._set_network_options(
-            critic_action_layer, critic_action_units, hidden_init, last_layer_init
-        )
-        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def _new_actor(self, features_extractor: nn.Module | None = None) -> Actor:
         return super().make_actor(features_extractor)

@@ -334,23 +334,6 @@ class LeocSACPolicy(NetworkOptionsMixin, SACPolicy):
         :class:`SquashedMean`, the hybrid's nonlinear part); the log-std head keeps SB3's.
     """
 
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Any,
-        *args: Any,
-        critic_action_layer: int = 0,
-        critic_action_units: str = "normalised",
-        hidden_init: str = "torch",
-        last_layer_init: float | None = None,
-        **kwargs: Any,
-    ) -> None:
-        self._set_network_options(
-            critic_action_layer, critic_action_units, hidden_init, last_layer_init
-        )
-        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
-
     def _new_actor(self, features_extractor: nn.Module | None = None) -> SACActor:
         return super().make_actor(features_extractor)
 
