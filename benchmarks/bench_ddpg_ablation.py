@@ -5,7 +5,9 @@ setup, and leoc's defaults with one authors' choice switched on at a time; the D
 paper-relevance hybrid and ROA hybrid; cart-pole, mountain car and the pendulum as the control;
 5 seeds for leoc and authors, 3 per single-factor setting) through the sweep backend: local
 worker processes or a Ray cluster, resumable (a rerun skips every run whose ``result.json``
-exists; each is written atomically), with progress lines and an ETA.
+exists; each is written atomically), with progress lines and an ETA. A published folder
+(``--publish``: records, logs and the pinned plan, no models) resumes too: copy it into
+``--out`` on another machine and rerun the same command; only the missing runs train.
 
 Success at budget T: the controller the run would deliver at T (the actor at step T, or the
 best of the last third of T for the settings that select) holds the operating point in every

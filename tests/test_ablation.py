@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import shutil
 from pathlib import Path
 
 import pytest
@@ -449,6 +450,18 @@ def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> N
     assert f"Runs from leoc commit {commit} (2 runs). Recorded command: `go --on`." in markdown
     with pytest.raises(ValueError, match="budgets"):
         run_ablation(tmp_path, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
+    # a published folder (records, logs and plan; no models) is a resumable one: copied to a
+    # new machine, the same command runs only what is missing and keeps the records it found
+    published = publish_ablation(tmp_path, tmp_path.with_name(f"{tmp_path.name}-published")).parent
+    moved = tmp_path.with_name(f"{tmp_path.name}-new-machine")
+    shutil.copytree(published, moved)
+    (moved / "runs" / specs[1].key / RESULT_FILE).unlink()
+    third = run_ablation(moved, specs, plan, jobs=1, echo=quiet.append, command="go --on")
+    assert third.skipped == (specs[0].key,)
+    assert set(third.results) == {specs[1].key}
+    assert (moved / "runs" / specs[0].key / RESULT_FILE).read_bytes() == kept_bytes
+    with pytest.raises(ValueError, match="budgets"):  # the published plan is pinned too
+        run_ablation(moved, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
 
 
 def test_a_short_run_is_the_prefix_of_a_long_one_and_selection_matches_the_trainer(
