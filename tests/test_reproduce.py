@@ -79,6 +79,52 @@ def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> Non
     assert (tmp_path / "responses.png").is_file()
 
 
+def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monkeypatch) -> None:
+    """A study resumed over several sessions: each invocation is logged (interrupted ones
+    too) and the report lists them; a published folder (numbers, no models) resumes."""
+    import leoc.experiments.reproduce as reproduce_module
+    from leoc.experiments.publish import publish
+
+    first = tmp_path / "first"
+    reproduce(first, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    (only,) = json.loads((first / "meta.json").read_text())["invocations"]
+    assert (only["runs_finished"], only["interrupted"]) == (1, False)
+    assert "Resumed over" not in (first / "report.md").read_text()  # one invocation: no line
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(reproduce_module, "sweep", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            reproduce(first, controllers=["linear"], systems=["pendulum"], jobs=1)
+    # the published folder travels to a new machine and carries on there
+    moved = tmp_path / "moved"
+    publish(first, moved)
+    messages: list[str] = []
+    report = reproduce(
+        moved,
+        controllers=["linear"],
+        systems=["pendulum", "mountaincar"],
+        jobs=1,
+        echo=messages.append,
+    )
+    assert "1 already done, 1 to run" in messages[0]
+    log = json.loads((moved / "meta.json").read_text())["invocations"]
+    assert [(i["runs_finished"], i["interrupted"]) for i in log] == [
+        (1, False),
+        (0, True),
+        (1, False),
+    ]
+    total = sum(item["wall_seconds"] for item in log)
+    text = report.read_text()
+    assert f"Resumed over 3 invocations ({total:.0f} s of wall time in all): " in text
+    assert (
+        f"{log[1]['started_utc']}: {log[1]['wall_seconds']:.0f} s, 0 runs finished, interrupted"
+        in text
+    )
+
+
 def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path) -> None:
     command = [
         sys.executable,

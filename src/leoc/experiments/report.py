@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -798,6 +799,27 @@ def write_report(out_dir: str | Path) -> Path:
     return path
 
 
+def invocations_lines(invocations: Sequence[dict[str, Any]] | None) -> list[str]:
+    """The report's line on a folder resumed over several invocations (``meta.json``'s
+    ``invocations``), followed by a blank line; nothing for a folder of one invocation."""
+    if not invocations or len(invocations) < 2:
+        return []
+    parts = [
+        f"{item.get('started_utc', '?')}: {item.get('wall_seconds', 0):.0f} s, "
+        f"{item.get('runs_finished', '?')} runs finished"
+        + (", interrupted" if item.get("interrupted") else "")
+        + (f", commit {item['leoc_commit']}" if item.get("leoc_commit") else "")
+        for item in invocations
+    ]
+    total = sum(item.get("wall_seconds", 0) for item in invocations)
+    return [
+        f"Resumed over {len(invocations)} invocations ({total:.0f} s of wall time in all): "
+        + "; ".join(parts)
+        + ".",
+        "",
+    ]
+
+
 def machine_line(machine: dict[str, Any] | None) -> str:
     """The report's line on the machine of the last invocation (``meta.json``'s ``machine``)."""
     if not machine:
@@ -855,6 +877,7 @@ def render_markdown(
         if wall is not None
         else "Wall time: not finished.",
         "",
+        *invocations_lines(meta.get("invocations")),
         "Versions: " + ", ".join(f"{k} {v}" for k, v in meta.get("versions", {}).items()),
         "",
         machine_line(meta.get("machine")),

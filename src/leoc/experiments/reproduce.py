@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -408,22 +409,58 @@ def reproduce(
         command=" ".join(sys.argv),
     )
     write_json_atomic(meta_path, meta)
-    result = sweep(
-        specs,
-        ProfileRunner(profile, chosen.name),
-        out,
-        backend=backend,
-        jobs=jobs,
-        address=address,
-        run_dir=run_dir_of,
-        done_file=EVALUATION_FILE,
-        log_file=LOG_FILE,
-        echo=echo,
-        expected_seconds=profile.cost_model,
-        progress_of=trainer_progress,
-    )
+    began = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    finished_before = _finished_runs(out, specs)
+    try:
+        result = sweep(
+            specs,
+            ProfileRunner(profile, chosen.name),
+            out,
+            backend=backend,
+            jobs=jobs,
+            address=address,
+            run_dir=run_dir_of,
+            done_file=EVALUATION_FILE,
+            log_file=LOG_FILE,
+            echo=echo,
+            expected_seconds=profile.cost_model,
+            progress_of=trainer_progress,
+        )
+    except KeyboardInterrupt:
+        # an interrupted invocation is logged too: a study resumed over several sessions (or
+        # machines) then reports the wall time of each
+        _log_invocation(meta_path, meta, began, started, out, specs, finished_before, True)
+        raise
     if result.failed:
         echo(f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")
     meta["wall_seconds_last_invocation"] = time.perf_counter() - started
-    write_json_atomic(meta_path, meta)
+    _log_invocation(meta_path, meta, began, started, out, specs, finished_before, False)
     return write_report(out)
+
+
+def _finished_runs(out: Path, specs: Sequence[RunSpec]) -> int:
+    return sum((run_dir_of(out, spec) / EVALUATION_FILE).is_file() for spec in specs)
+
+
+def _log_invocation(
+    meta_path: Path,
+    meta: dict[str, Any],
+    began: str,
+    started: float,
+    out: Path,
+    specs: Sequence[RunSpec],
+    finished_before: int,
+    interrupted: bool,
+) -> None:
+    """Append this invocation to ``meta.json``'s ``invocations`` (start time in UTC, wall
+    seconds, runs it finished, whether it was interrupted, the leoc commit) and write it."""
+    meta.setdefault("invocations", []).append(
+        {
+            "started_utc": began,
+            "wall_seconds": round(time.perf_counter() - started, 1),
+            "runs_finished": _finished_runs(out, specs) - finished_before,
+            "interrupted": interrupted,
+            "leoc_commit": meta.get("versions", {}).get("leoc_commit"),
+        }
+    )
+    write_json_atomic(meta_path, meta)
