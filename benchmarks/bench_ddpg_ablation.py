@@ -29,11 +29,14 @@ The full grid (216 runs, hours)::
     nice -n 15 python benchmarks/bench_ddpg_ablation.py --out runs/ddpg-ablation --jobs 2 \\
         --publish results/ddpg-ablation
 
-SAC's success rate over 5 seeds on the three systems, with the same held-out test (SAC takes
-the settings ``leoc`` and ``exit_penalty`` only)::
+SAC's success rate over 5 seeds on the three systems at leoc's budgets, with the same
+held-out test (``results/sac-defaults``; SAC takes the settings ``defaults``, ``leoc``,
+``exit_penalty`` and its own ``SAC_TUNING_SETTINGS``)::
 
-    nice -n 15 python benchmarks/bench_ddpg_ablation.py --out runs/sac-seeds --jobs 2 \\
-        --controllers sac_baseline sac_hybrid sac_hybrid_roa --settings leoc --seeds 0 1 2 3 4
+    nice -n 15 python benchmarks/bench_ddpg_ablation.py --out runs/sac-defaults --jobs 2 \\
+        --controllers sac_hybrid_roa sac_hybrid sac_baseline --settings defaults \\
+        --seeds 0 1 2 3 4 --budget cartpole=21000 mountaincar=20000 pendulum=10000 \\
+        --publish results/sac-defaults
 """
 
 from __future__ import annotations
