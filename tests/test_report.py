@@ -117,6 +117,17 @@ def test_a_run_folder_without_its_machine_says_so():
     assert machine_line(None).startswith("Machine: not recorded")
     line = machine_line({"cpu": "AMD EPYC", "logical_cpus": 2, "platform": "Linux-6"})
     assert line == "Machine of the last invocation: AMD EPYC, 2 logical CPUs, Linux-6."
+    line = machine_line(
+        {
+            "cpu": "AMD EPYC",
+            "logical_cpus": 2,
+            "platform": "Linux-6",
+            "torch_cpu_capability": "AVX2",
+        }
+    )
+    assert line == (
+        "Machine of the last invocation: AMD EPYC, 2 logical CPUs, Linux-6, torch's AVX2 kernels."
+    )
 
 
 def test_runs_from_several_code_versions_are_said_plainly():

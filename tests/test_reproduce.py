@@ -63,6 +63,10 @@ def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> 
     machine = json.loads((tmp_path / "meta.json").read_text())["machine"]
     assert machine["logical_cpus"] == os.cpu_count()
     assert machine["memory_gib"] > 0 and machine["cpu"]
+    import torch
+
+    assert machine["torch_cpu_capability"] == torch.backends.cpu.get_cpu_capability()
+    assert f"torch's {machine['torch_cpu_capability']} kernels." in text
     assert f"Machine of the last invocation: {machine['cpu']}, {os.cpu_count()} logical" in text
 
 

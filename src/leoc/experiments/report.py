@@ -829,7 +829,13 @@ def machine_line(machine: dict[str, Any] | None) -> str:
         f"Machine of the last invocation: {machine.get('cpu', 'unknown CPU')}, "
         f"{machine.get('logical_cpus', '?')} logical CPUs"
         + (f", {memory} GiB memory" if memory is not None else "")
-        + f", {machine.get('platform', 'unknown platform')}."
+        + f", {machine.get('platform', 'unknown platform')}"
+        + (
+            f", torch's {machine['torch_cpu_capability']} kernels"
+            if machine.get("torch_cpu_capability")
+            else ""
+        )
+        + "."
     )
 
 

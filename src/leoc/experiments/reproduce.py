@@ -72,12 +72,14 @@ def versions() -> dict[str, str]:
 
 def machine() -> dict[str, Any]:
     """The machine an invocation runs on (with Ray: the driver's; the workers may differ): OS,
-    architecture, CPU model, logical CPUs and memory."""
+    architecture, CPU model, logical CPUs, memory, and the vector kernels torch runs (PILCO's
+    outcome on a seed can change with them: AVX2 against AVX-512, see the PILCO guide)."""
     found: dict[str, Any] = {
         "platform": platform.platform(),
         "architecture": platform.machine(),
         "cpu": platform.processor() or "unknown",
         "logical_cpus": os.cpu_count(),
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
     }
     with contextlib.suppress(OSError):
         for line in Path("/proc/cpuinfo").read_text().splitlines():
