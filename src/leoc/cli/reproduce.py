@@ -21,17 +21,18 @@ def add_parser(commands: Any) -> None:
     reproduce = commands.add_parser(
         "reproduce",
         help="train and evaluate every controller of the paper and write the report",
-        description="Train (or design) linear, DDPG baseline/hybrid and PILCO baseline/hybrid "
-        "controllers on the three systems over seeds, in parallel workers, then evaluate "
-        "responses, robustness and relevance and write report.md with CSV/JSON/PNG. Finished "
+        description="Train (or design) the linear references and the DDPG, SAC and PILCO "
+        "baselines and hybrids on the three systems over seeds, in parallel workers, then "
+        "evaluate responses, robustness and relevance and write report.md with CSV/JSON/PNG. "
+        "Finished "
         "runs are kept: rerunning the same command resumes.",
     )
     reproduce.add_argument(
         "--profile",
         choices=PROFILE_NAMES,
         default="quick",
-        help="quick (default: 1 seed, reduced budgets), paper (paper budgets, 3 seeds) or "
-        "smoke (a tiny pipeline check)",
+        help="quick (default: 1 seed, reduced budgets), paper (the paper's PILCO budgets, "
+        "leoc's DDPG/SAC budgets, 5 seeds) or smoke (a tiny pipeline check)",
     )
     reproduce.add_argument(
         "--out",

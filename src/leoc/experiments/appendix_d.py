@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from leoc.evaluation.metrics import MetricsSummary, ResponseMetrics, summarise_metrics
-from leoc.experiments.layout import META_FILE
+from leoc.experiments.layout import META_FILE, Evaluations, load_evaluations
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS, PaperMetrics
 
 __all__ = [
@@ -36,8 +36,6 @@ METRIC_HEADERS = (
 )
 FMT = "{:.3g}"
 
-Evaluations = dict[str, dict[str, list[dict[str, Any]]]]
-
 
 class AppendixRow(NamedTuple):
     """One row of appendix D: the paper's numbers and each variant's authors' metrics."""
@@ -57,8 +55,6 @@ def companion_evaluations(out_dir: Path, meta: dict[str, Any]) -> tuple[str, Eva
     FileNotFoundError
         The recorded companion folder does not exist (anymore).
     """
-    from leoc.experiments.report import load_evaluations
-
     relative = meta.get("compare")
     if not relative:
         return None

@@ -12,8 +12,13 @@
 
 from __future__ import annotations
 
+import json
+from collections import defaultdict
 from pathlib import Path
 from typing import Any
+
+from leoc.names import controller_framework
+from leoc.systems import system_names
 
 EVALUATION_FILE = "evaluation.json"
 LOG_FILE = "train.log"
@@ -25,3 +30,43 @@ SWING_UP_EPISODES = 5
 def run_dir_of(out_dir: Path, spec: Any) -> Path:
     """The folder of one run (a :class:`~leoc.experiments.profiles.RunSpec`)."""
     return Path(out_dir) / "runs" / spec.system / spec.controller / f"seed{spec.seed}"
+
+
+Evaluations = dict[str, dict[str, list[dict[str, Any]]]]  # system -> controller -> seeds
+
+
+def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evaluations:
+    """Finished runs under ``out_dir/runs``, grouped by system and controller.
+
+    With ``meta``, only the runs of its systems, controllers and seeds are aggregated (a folder
+    resumed with other settings never mixes runs into the report silently).
+
+    Raises
+    ------
+    ValueError
+        Naming the file, when an ``evaluation.json`` does not parse.
+    """
+    grouped: Evaluations = defaultdict(lambda: defaultdict(list))
+    for path in sorted((out_dir / "runs").glob(f"*/*/seed*/{EVALUATION_FILE}")):
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise ValueError(
+                f"{path}: damaged evaluation file ({error}); rerun the 'leoc reproduce' command "
+                "of this folder: it sets the damaged file aside and redoes that run"
+            ) from error
+        spec = data["spec"]
+        if meta is not None and not _selected(spec, meta):
+            continue
+        grouped[spec["system"]][spec["controller"]].append(data)
+    return {system: dict(grouped[system]) for system in system_names() if system in grouped}
+
+
+def _selected(spec: dict[str, Any], meta: dict[str, Any]) -> bool:
+    seeds = meta.get("seeds", [])
+    seed_ok = controller_framework(spec["controller"]) == "linear" or spec["seed"] in seeds
+    return (
+        spec["system"] in meta.get("systems", [])
+        and spec["controller"] in meta.get("controllers", [])
+        and seed_ok
+    )

@@ -31,7 +31,12 @@ from leoc.experiments.claims_report import (
     roa_estimate_lines,
     roa_method_text,
 )
-from leoc.experiments.layout import EVALUATION_FILE, META_FILE, SWING_UP_EPISODES
+from leoc.experiments.layout import (
+    META_FILE,
+    SWING_UP_EPISODES,
+    Evaluations,
+    load_evaluations,
+)
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.profiles import (
     CONTROLLER_LABELS,
@@ -58,45 +63,6 @@ FMT = "{:.3g}"
 RELATIVE_TOLERANCE = 0.01
 ZERO_FLOOR_OF_PEAK = 0.01
 COMPARED_METRICS = ("steady_state_error", "overshoot", "peak_deviation", "settling_time")
-
-Evaluations = dict[str, dict[str, list[dict[str, Any]]]]  # system -> controller -> seeds
-
-
-def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evaluations:
-    """Finished runs under ``out_dir/runs``, grouped by system and controller.
-
-    With ``meta``, only the runs of its systems, controllers and seeds are aggregated (a folder
-    resumed with other settings never mixes runs into the report silently).
-
-    Raises
-    ------
-    ValueError
-        Naming the file, when an ``evaluation.json`` does not parse.
-    """
-    grouped: Evaluations = defaultdict(lambda: defaultdict(list))
-    for path in sorted((out_dir / "runs").glob(f"*/*/seed*/{EVALUATION_FILE}")):
-        try:
-            data = json.loads(path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as error:
-            raise ValueError(
-                f"{path}: damaged evaluation file ({error}); rerun the 'leoc reproduce' command "
-                "of this folder: it sets the damaged file aside and redoes that run"
-            ) from error
-        spec = data["spec"]
-        if meta is not None and not _selected(spec, meta):
-            continue
-        grouped[spec["system"]][spec["controller"]].append(data)
-    return {system: dict(grouped[system]) for system in system_names() if system in grouped}
-
-
-def _selected(spec: dict[str, Any], meta: dict[str, Any]) -> bool:
-    seeds = meta.get("seeds", [])
-    seed_ok = spec["controller"] in LINEAR_CONTROLLERS or spec["seed"] in seeds
-    return (
-        spec["system"] in meta.get("systems", [])
-        and spec["controller"] in meta.get("controllers", [])
-        and seed_ok
-    )
 
 
 def _ordered(controllers: dict[str, Any]) -> list[str]:
