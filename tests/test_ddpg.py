@@ -552,3 +552,28 @@ def test_profiles_carry_measured_run_costs() -> None:
     assert paper.expected_seconds(other) == pytest.approx((111.0 + 210.0 + 232.0) / 3)
     assert smoke.cost_model is None and quick.cost_model is not None
     assert smoke.expected_seconds(spec) == FALLBACK_RUN_SECONDS["pilco"]
+    # SAC measured at leoc's budgets (results/sac-defaults), not derived from DDPG
+    assert paper.expected_seconds(RunSpec("mountaincar", "sac_hybrid", 0)) == 365.0
+
+
+def test_ablation_eta_scales_the_measured_cost_from_leocs_budget(monkeypatch) -> None:
+    from leoc.experiments.ablation import (
+        SAC_COST_FACTOR,
+        AblationPlan,
+        AblationSpec,
+        expected_seconds,
+    )
+    from leoc.experiments.profiles import PAPER_RUN_SECONDS
+
+    # the measured costs are at leoc's budgets (cart-pole 21k): half of it costs half, and
+    # the budget leoc measured at costs what was measured
+    half = expected_seconds(AblationPlan(budgets={"cartpole": 10_500}))
+    spec = AblationSpec("cartpole", "ddpg_hybrid", "defaults", 0)
+    assert half(spec) == pytest.approx(PAPER_RUN_SECONDS["cartpole/ddpg_hybrid"] / 2)
+    full = expected_seconds(AblationPlan(budgets={"mountaincar": 20_000}))
+    sac = AblationSpec("mountaincar", "sac_baseline", "defaults", 0)
+    assert full(sac) == pytest.approx(353.0)
+    # a SAC kind nobody measured falls back on its DDPG controller's cost
+    monkeypatch.delitem(PAPER_RUN_SECONDS, "mountaincar/sac_baseline")
+    expected = SAC_COST_FACTOR * PAPER_RUN_SECONDS["mountaincar/ddpg_baseline"]
+    assert full(sac) == pytest.approx(expected)

@@ -15,10 +15,11 @@ SAC's cart-pole case is its baseline, the controller that SAC's change of loss (
 TD error to the Huber loss, issue 20) was measured on: with the squared error it never held
 the operating point at any evaluation up to 21k steps (seeds 0 and 1; the SAC ROA hybrid, by
 contrast, held at 12k on one of two seeds with it, so it would not guard the change). SAC costs
-about 2.5 times DDPG per step, so the case runs 12k steps (about 11 minutes on 2 cores) where
-SAC's baseline holds on 3 of seeds 0-3 (4 of 4 from 18k), and asks for 2. SAC's mountain-car
+more per step than DDPG (1.3 to 1.9 times in the 5-seed validation's wall times), so the case
+runs 12k steps where
+SAC's baseline holds on 3 of seeds 0-3 (4 of 4 from 15.3k), and asks for 2. SAC's mountain-car
 case is its ROA hybrid at 4k steps, where it holds on 5 of 5 seeds (results/sac-defaults; its
-baseline first holds at 4.6k-5.2k): cheap, and it fails if SAC's hybrid stops learning the
+baseline first holds at 2.8k-5.6k): cheap, and it fails if SAC's hybrid stops learning the
 hilltop early.
 """
 
@@ -38,11 +39,11 @@ from leoc.experiments.ablation import (
 # DDPG baseline at leoc's budget (21k), the mountain-car ROA hybrid at the paper's 10k (leoc's
 # is 20k; the hybrids learn it at 10k, the baseline does not). Measured on seeds 0-4 with the same
 # settings (results/ddpg-defaults): 5 of 5 each, so 4 of 4 on seeds 0-3. About 7 and 3 min on 2
-# cores. SAC's cart-pole baseline at 12k: measured on seeds 0-3 (the 21k runs of the 5-seed
-# validation of leoc's SAC defaults, commit da65235, re-selected at 12k with best_held: seeds
-# 1, 2 and 3 hold; with the squared TD error seeds 0 and 1 never held up to 21k). SAC's
-# mountain-car ROA hybrid at 4k: results/sac-defaults (commit 75ea5b3, 20k runs re-selected at
-# 4k): seeds 0-4 hold, first at 2.2k-3.2k steps. About 3 min.
+# cores. SAC's cart-pole baseline at 12k: results/sac-defaults (commit 75ea5b3, the 21k runs
+# re-selected at 12k with best_held): seeds 1, 2 and 3 of 0-3 hold (and seed 4; seed 0 first
+# at 15.3k), as in the earlier validation at da65235; with the squared TD error seeds 0 and 1
+# never held up to 21k. SAC's mountain-car ROA hybrid at 4k: results/sac-defaults (20k runs
+# re-selected at 4k): seeds 0-4 hold, first at 2.2k-3.2k steps. About 3 min.
 CASES = [
     ("cartpole", "ddpg_baseline", 21_000, 4, 4, 3),
     ("mountaincar", "ddpg_hybrid_roa", 10_000, 4, 4, 3),

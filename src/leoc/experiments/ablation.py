@@ -127,6 +127,7 @@ from leoc.ddpg.config import (
     DEFAULT_TOTAL_STEPS,
     MODEL_SELECTIONS,
     PAPER_TOTAL_STEPS,
+    TOTAL_STEPS_BY_SYSTEM,
     DDPGConfig,
     authors_ddpg_overrides,
 )
@@ -894,20 +895,24 @@ def run_outcome(
 
 # ------------------------------------------------------------------------------------ driving
 def expected_seconds(plan: AblationPlan) -> Callable[[AblationSpec], float]:
-    """A run's expected wall time for the sweep's ETA: results/paper's measured DDPG cost of
-    its system and controller, scaled to the plan's budget (SAC: the DDPG controller's cost
-    times :data:`SAC_COST_FACTOR`)."""
+    """A run's expected wall time for the sweep's ETA: the measured cost of its system and
+    controller at leoc's budget (``leoc.experiments.profiles.PAPER_RUN_SECONDS``), scaled
+    to the plan's budget; a SAC kind that was not measured costs its DDPG controller's times
+    :data:`SAC_COST_FACTOR`."""
     from leoc.experiments.profiles import PAPER_RUN_SECONDS
 
     def cost(spec: AblationSpec) -> float:
         budget = plan.budget_for(spec.system)
-        factor = SAC_COST_FACTOR if spec.algo == "sac" else 1.0
-        controller = spec.controller.replace("sac_", "ddpg_", 1)
-        measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{controller}")
-        paper = PAPER_TOTAL_STEPS.get(spec.system)
-        if measured is None or paper is None:
+        factor = 1.0
+        measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{spec.controller}")
+        if measured is None and spec.algo == "sac":
+            factor = SAC_COST_FACTOR
+            ddpg = spec.controller.replace("sac_", "ddpg_", 1)
+            measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{ddpg}")
+        steps = TOTAL_STEPS_BY_SYSTEM.get(spec.system)
+        if measured is None or steps is None:
             return factor * FALLBACK_SECONDS_PER_KSTEP * budget / 1000.0
-        return factor * measured * budget / paper
+        return factor * measured * budget / steps
 
     return cost
 
