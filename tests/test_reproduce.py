@@ -24,6 +24,7 @@ from leoc.experiments.reproduce import (
     reproduce,
     run_dir_of,
 )
+from leoc.names import CONTROLLERS
 from leoc.policies import LinearController
 from leoc.systems import make_system
 
@@ -273,3 +274,19 @@ def test_smoke_profile_end_to_end_on_the_pendulum(tmp_path) -> None:
 @pytest.mark.slow
 def test_smoke_profile_end_to_end_on_all_systems(tmp_path) -> None:
     _smoke_end_to_end(tmp_path, ["pendulum", "cartpole", "mountaincar"])
+
+
+def test_runs_are_queued_longest_first() -> None:
+    """The queue starts with the costliest measured runs (the cart-pole's PILCO hybrids, about
+    470 s each) and ends with the linear controllers (seconds), whatever the systems' order."""
+    profile = get_profile("paper")
+    specs = run_specs(profile, ("pendulum", "cartpole", "mountaincar"), CONTROLLERS)
+    costs = [profile.expected_seconds(spec) for spec in specs]
+    assert costs == sorted(costs, reverse=True)
+    assert specs[0].key == "cartpole/pilco_hybrid_roa/seed0"
+    assert {spec.framework for spec in specs[-6:]} == {"linear"}
+    # a profile without measured costs falls back on each framework's cost: SAC, PILCO, DDPG,
+    # linear
+    smoke = run_specs(get_profile("smoke"), ("pendulum",), CONTROLLERS)
+    order = list(dict.fromkeys(spec.framework for spec in smoke))
+    assert order == ["sac", "pilco", "ddpg", "linear"]

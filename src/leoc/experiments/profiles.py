@@ -285,7 +285,8 @@ def run_specs(
     systems: tuple[str, ...] = SYSTEM_NAMES,
     controllers: tuple[str, ...] = DEFAULT_CONTROLLERS,
 ) -> list[RunSpec]:
-    """Every run of a profile, the longest first (cart-pole, PILCO) to balance the workers.
+    """Every run of a profile, the longest first (:meth:`Profile.expected_seconds`) to balance
+    the workers: a long run started last would keep one worker busy while the others idle.
 
     ``systems``: registered names (default: the paper's three)."""
     known = system_names()
@@ -301,5 +302,4 @@ def run_specs(
         for controller in controllers
         for seed in (profile.seeds if controller not in LINEAR_CONTROLLERS else (0,))
     ]
-    cost = {"pilco": 2, "sac": 2, "ddpg": 1, "linear": 0}
-    return sorted(specs, key=lambda spec: -cost[spec.framework])
+    return sorted(specs, key=lambda spec: -profile.expected_seconds(spec))
