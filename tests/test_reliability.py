@@ -169,9 +169,16 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
     assert _alive_in_group(process.pid) == []  # no worker, no resource tracker left behind
     for path in tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"):
         json.loads(path.read_text())  # whatever finished is whole
+    # the stopped invocation is logged as interrupted (SIGTERM too: its handler raises an
+    # exception, not KeyboardInterrupt)
+    (stopped,) = json.loads((tmp_path / "meta.json").read_text())["invocations"]
+    assert (stopped["ended"], stopped["interrupted"]) == ("interrupted", True)
     rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert rerun.returncode == 0, rerun.stderr
     assert _numbers(tmp_path) == uninterrupted
+    assert [
+        item["ended"] for item in json.loads((tmp_path / "meta.json").read_text())["invocations"]
+    ] == ["interrupted", "finished"]
 
 
 @pytest.fixture(scope="module")

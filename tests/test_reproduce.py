@@ -116,10 +116,10 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
     )
     assert "1 already done, 1 to run" in messages[0]
     log = json.loads((moved / "meta.json").read_text())["invocations"]
-    assert [(i["runs_finished"], i["interrupted"]) for i in log] == [
-        (1, False),
-        (0, True),
-        (1, False),
+    assert [(i["runs_finished"], i["interrupted"], i["ended"]) for i in log] == [
+        (1, False, "finished"),
+        (0, True, "interrupted"),
+        (1, False, "finished"),
     ]
     total = sum(item["wall_seconds"] for item in log)
     text = report.read_text()
@@ -147,7 +147,7 @@ def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path)
         command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
     )
     deadline = time.monotonic() + RUN_TIMEOUT_S
-    while not list(tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}")):
+    while _runs_logged(tmp_path) < 1:  # the invocation's log is written after each run
         assert time.monotonic() < deadline and process.poll() is None
         time.sleep(0.05)
     os.killpg(process.pid, signal.SIGKILL)  # the harshest interruption: no clean-up at all
@@ -156,13 +156,35 @@ def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path)
     assert 1 <= len(finished) < 3
     for content in finished.values():
         json.loads(content)  # never half-written
+    (killed,) = json.loads((tmp_path / "meta.json").read_text())["invocations"]
+    # its record survives up to its last finished run (a run may end between write and kill)
+    assert killed["ended"] == "running" and 1 <= killed["runs_finished"] <= len(finished)
     result = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert result.returncode == 0, result.stderr
     assert f"{len(finished)} already done" in result.stdout
     for path, content in finished.items():
         assert path.read_bytes() == content
     assert len(list(tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"))) == 3
-    assert (tmp_path / "report.md").is_file()
+    lost, resumed = json.loads((tmp_path / "meta.json").read_text())["invocations"]
+    assert (lost["ended"], lost["interrupted"]) == ("lost", True)
+    assert lost["wall_seconds"] == killed["wall_seconds"]
+    assert (resumed["ended"], resumed["runs_finished"]) == ("finished", 3 - len(finished))
+    text = (tmp_path / "report.md").read_text()
+    assert "a lost invocation counts up to its last finished run" in text
+    assert (
+        f"{lost['started_utc']}: {lost['wall_seconds']:.0f} s, {lost['runs_finished']} runs "
+        "finished, lost (ended without a word: killed, or its machine lost)" in text
+    )
+
+
+def _runs_logged(out: Path) -> int:
+    """Runs finished by the running invocation, as its entry in ``meta.json`` says (0 before
+    the entry exists)."""
+    try:
+        invocations = json.loads((out / "meta.json").read_text()).get("invocations", [])
+    except (OSError, ValueError):
+        return 0
+    return invocations[-1]["runs_finished"] if invocations else 0
 
 
 def test_profile_and_option_errors(tmp_path) -> None:

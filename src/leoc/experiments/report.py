@@ -767,23 +767,38 @@ def write_report(out_dir: str | Path) -> Path:
 
 def invocations_lines(invocations: Sequence[dict[str, Any]] | None) -> list[str]:
     """The report's line on a folder resumed over several invocations (``meta.json``'s
-    ``invocations``), followed by a blank line; nothing for a folder of one invocation."""
+    ``invocations``), followed by a blank line; nothing for a folder of one invocation.
+
+    An invocation that ended without a word (``ended`` ``"lost"``: killed, or its machine lost)
+    counts its wall time up to its last finished run; the line says so."""
     if not invocations or len(invocations) < 2:
         return []
     parts = [
         f"{item.get('started_utc', '?')}: {item.get('wall_seconds', 0):.0f} s, "
         f"{item.get('runs_finished', '?')} runs finished"
-        + (", interrupted" if item.get("interrupted") else "")
+        + _how_it_ended(item)
         + (f", commit {item['leoc_commit']}" if item.get("leoc_commit") else "")
         for item in invocations
     ]
     total = sum(item.get("wall_seconds", 0) for item in invocations)
+    lost = any(item.get("ended") == "lost" for item in invocations)
     return [
-        f"Resumed over {len(invocations)} invocations ({total:.0f} s of wall time in all): "
+        f"Resumed over {len(invocations)} invocations ({total:.0f} s of wall time in all"
+        + ("; a lost invocation counts up to its last finished run" if lost else "")
+        + "): "
         + "; ".join(parts)
         + ".",
         "",
     ]
+
+
+def _how_it_ended(item: dict[str, Any]) -> str:
+    ended = item.get("ended")
+    if ended == "lost":
+        return ", lost (ended without a word: killed, or its machine lost)"
+    if ended == "running":
+        return ", running"
+    return ", interrupted" if item.get("interrupted") else ""
 
 
 def machine_line(machine: dict[str, Any] | None) -> str:

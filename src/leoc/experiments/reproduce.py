@@ -385,7 +385,6 @@ def reproduce(
             f"another folder for the {chosen.name!r} variant"
         )
     specs = run_specs(profile, tuple(systems), tuple(controllers))
-    started = time.perf_counter()
     # a rerun with other seeds, systems or controllers extends the folder: earlier runs stay on
     # disk, and the report aggregates exactly the runs of this invocation (and lists them)
     meta.update(
@@ -411,8 +410,7 @@ def reproduce(
         command=" ".join(sys.argv),
     )
     write_json_atomic(meta_path, meta)
-    began = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    finished_before = _finished_runs(out, specs)
+    log = InvocationLog(meta_path, meta, out, specs)
     try:
         result = sweep(
             specs,
@@ -427,42 +425,64 @@ def reproduce(
             echo=echo,
             expected_seconds=profile.cost_model,
             progress_of=trainer_progress,
+            on_finished=lambda _key: log.write(RUNNING),
         )
-    except KeyboardInterrupt:
-        # an interrupted invocation is logged too: a study resumed over several sessions (or
-        # machines) then reports the wall time of each
-        _log_invocation(meta_path, meta, began, started, out, specs, finished_before, True)
+    except BaseException:
+        # Ctrl-C, SIGTERM (the command raises it as an exception) or an error: a study resumed
+        # over several sessions (or machines) then reports the wall time of each invocation
+        log.write(INTERRUPTED)
         raise
     if result.failed:
         echo(f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")
-    meta["wall_seconds_last_invocation"] = time.perf_counter() - started
-    _log_invocation(meta_path, meta, began, started, out, specs, finished_before, False)
+    meta["wall_seconds_last_invocation"] = time.perf_counter() - log.started
+    log.write(FINISHED)
     return write_report(out)
+
+
+# How an invocation in ``meta.json``'s ``invocations`` ended.
+RUNNING = "running"  # as written while it runs (after each finished run)
+FINISHED = "finished"
+INTERRUPTED = "interrupted"  # Ctrl-C, SIGTERM or an error
+LOST = "lost"  # still "running" when the next invocation began: killed, or its machine lost
+
+
+class InvocationLog:
+    """This invocation's entry in ``meta.json``'s ``invocations``: when it started (UTC), its
+    wall seconds, the runs it finished, how it ended and the leoc commit.
+
+    The entry is written when the invocation starts and again after each finished run, so an
+    invocation that ends without a word (SIGKILL, a machine lost between sessions) keeps its
+    record up to its last finished run; the next invocation marks it ``lost``.
+    """
+
+    def __init__(
+        self, meta_path: Path, meta: dict[str, Any], out: Path, specs: Sequence[RunSpec]
+    ) -> None:
+        self.meta_path, self.meta, self.out, self.specs = meta_path, meta, out, specs
+        self.started = time.perf_counter()
+        self.finished_before = _finished_runs(out, specs)
+        invocations = meta.setdefault("invocations", [])
+        for item in invocations:
+            if item.get("ended") == RUNNING:
+                item.update(ended=LOST, interrupted=True)
+        self.entry: dict[str, Any] = {
+            "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "leoc_commit": meta.get("versions", {}).get("leoc_commit"),
+        }
+        invocations.append(self.entry)
+        self.write(RUNNING)
+
+    def write(self, ended: str) -> None:
+        """Bring the entry up to date (``ended``: one of RUNNING, FINISHED, INTERRUPTED) and
+        write ``meta.json`` atomically."""
+        self.entry.update(
+            wall_seconds=round(time.perf_counter() - self.started, 1),
+            runs_finished=_finished_runs(self.out, self.specs) - self.finished_before,
+            ended=ended,
+            interrupted=ended != FINISHED,
+        )
+        write_json_atomic(self.meta_path, self.meta)
 
 
 def _finished_runs(out: Path, specs: Sequence[RunSpec]) -> int:
     return sum((run_dir_of(out, spec) / EVALUATION_FILE).is_file() for spec in specs)
-
-
-def _log_invocation(
-    meta_path: Path,
-    meta: dict[str, Any],
-    began: str,
-    started: float,
-    out: Path,
-    specs: Sequence[RunSpec],
-    finished_before: int,
-    interrupted: bool,
-) -> None:
-    """Append this invocation to ``meta.json``'s ``invocations`` (start time in UTC, wall
-    seconds, runs it finished, whether it was interrupted, the leoc commit) and write it."""
-    meta.setdefault("invocations", []).append(
-        {
-            "started_utc": began,
-            "wall_seconds": round(time.perf_counter() - started, 1),
-            "runs_finished": _finished_runs(out, specs) - finished_before,
-            "interrupted": interrupted,
-            "leoc_commit": meta.get("versions", {}).get("leoc_commit"),
-        }
-    )
-    write_json_atomic(meta_path, meta)

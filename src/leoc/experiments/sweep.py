@@ -499,8 +499,10 @@ class _Driver:
         echo: Callable[[str], None],
         expected_seconds: Callable[[Any], float] | None = None,
         progress_of: Callable[[str], float | None] | None = None,
+        on_finished: Callable[[str], None] | None = None,
     ) -> None:
         self.expected_seconds, self.progress_of = expected_seconds, progress_of
+        self.on_finished = on_finished
         self.finished: list[Finished] = []
         self.backend, self.out_dir, self.run_dir = backend, out_dir, run_dir
         self.done_file, self.log_file, self.max_retries, self.echo = (
@@ -546,6 +548,8 @@ class _Driver:
             if expected is not None:
                 self.finished.append(Finished(expected, wall))
             self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
+            if self.on_finished is not None:
+                self.on_finished(attempt.key)
             return None
         if outcome.kind == "died" and attempt.number <= self.max_retries:
             self.retried[attempt.key] = attempt.number
@@ -646,6 +650,7 @@ def sweep(
     echo: Callable[[str], None] = print,
     expected_seconds: Callable[[Any], float] | None = None,
     progress_of: Callable[[str], float | None] | None = None,
+    on_finished: Callable[[str], None] | None = None,
 ) -> SweepResult:
     """Run every spec not finished yet, on this machine or on a Ray cluster.
 
@@ -698,6 +703,9 @@ def sweep(
     progress_of : callable ``log line -> fraction or None``, optional
         Reads how far a running run is from its last log line
         (:func:`leoc.experiments.eta.trainer_progress`).
+    on_finished : callable ``key -> None``, optional
+        Called in the driver after each run's result is written (e.g. to keep a log of the
+        invocation current, so that a machine lost mid-sweep loses at most the runs in flight).
 
     Returns
     -------
@@ -743,6 +751,7 @@ def sweep(
         echo,
         expected_seconds,
         progress_of,
+        on_finished,
     )
     try:
         echo(
