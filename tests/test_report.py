@@ -10,8 +10,10 @@ from leoc.experiments.report import (
     code_line,
     code_versions,
     improvement_rows,
+    percent,
     response_flags,
     response_summary,
+    roa_flags,
     robustness_flags,
     seed_statistics,
     swing_up_flags,
@@ -69,6 +71,22 @@ def test_controllers_that_do_not_swing_up_are_flagged_by_name():
     rows = swing_up_summary(_evaluations(1.0))
     flags = swing_up_flags(rows)
     assert len(flags) == 1 and "DDPG baseline" in flags[0] and "67%" in flags[0]  # 4 of 6 held
+
+
+def test_a_flag_never_rounds_a_miss_to_100_percent():
+    """A hybrid that lost 1 of 2000 certified starts was flagged as holding "only 100%"."""
+    row = {"system": "pendulum", "controller": "pilco_hybrid_roa", "certified_set_held": 0.9995}
+    (flag,) = roa_flags([row, {**row, "certified_set_held": 1.0}])
+    assert "holds only 99.95% of the starts" in flag
+    assert [percent(x) for x in (1.0, 0.0, 0.98, 0.0215, 4e-5, 1 - 1e-7, 1e-9)] == [
+        "100%",
+        "0%",
+        "98%",
+        "2%",
+        "0.004%",
+        "> 99.999%",
+        "< 0.001%",
+    ]
 
 
 def test_robustness_flags_compare_stabilised_fractions():

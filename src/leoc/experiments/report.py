@@ -282,11 +282,23 @@ def roa_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
     return rows
 
 
+def percent(fraction: float) -> str:
+    """``fraction`` as a whole percentage, with as many decimals as it takes (up to 3) not to
+    print a fraction below 1 as 100% or one above 0 as 0% (a flag saying "only 100%" would
+    hide the one start in 2000 that failed); beyond that, "> 99.999%" or "< 0.001%"."""
+    for decimals in range(4):
+        text = f"{fraction:.{decimals}%}"
+        value = float(text[:-1])
+        if not (0.0 < fraction and value == 0.0) and not (fraction < 1.0 and value == 100.0):
+            return text
+    return "> 99.999%" if fraction > 0.5 else "< 0.001%"
+
+
 def roa_flags(rows: list[dict[str, Any]]) -> list[str]:
     """Hybrids whose empirical basin does not contain their LQR's certified set."""
     return [
         f"**{row['system']} {_label(row['controller'])}** holds only "
-        f"{row['certified_set_held']:.0%} of the starts in its LQR's certified region of "
+        f"{percent(row['certified_set_held'])} of the starts in its LQR's certified region of "
         "attraction."
         for row in rows
         if "_hybrid" in row["controller"]
@@ -373,7 +385,7 @@ def robustness_flags(rows: list[dict[str, Any]]) -> list[str]:
         ours, theirs = row["fraction_stabilised"], reference["fraction_stabilised"]
         if abs(ours - theirs) > RELATIVE_TOLERANCE:
             differing[(system, controller, parameter, reference_name)].append(
-                f"x{scale:g} ({ours:.0%} vs {theirs:.0%})"
+                f"x{scale:g} ({percent(ours)} vs {percent(theirs)})"
             )
     return [
         f"**{system} {_label(controller)}**, {parameter} scaled: stabilises a different "
@@ -386,7 +398,7 @@ def swing_up_flags(rows: list[dict[str, Any]]) -> list[str]:
     """Learned controllers that do not swing up and hold in every episode."""
     return [
         f"**{row['system']} {_label(row['controller'])}** does not swing up and hold: "
-        f"{row['fraction_held']:.0%} of its swing-up episodes held the operating point."
+        f"{percent(row['fraction_held'])} of its swing-up episodes held the operating point."
         for row in rows
         if row["controller"] not in LINEAR_CONTROLLERS and row["fraction_held"] < 1.0
     ]
@@ -529,7 +541,7 @@ def roa_table(rows: list[dict[str, Any]]) -> list[str]:
     ]
     for row in rows:
         extent = ", ".join(FMT.format(value) for value in row["extent"])
-        inside = "-" if row["certified_set_held"] is None else f"{row['certified_set_held']:.0%}"
+        inside = "-" if row["certified_set_held"] is None else percent(row["certified_set_held"])
         lines.append(
             f"| {row['system']} | {_label(row['controller'])} | {row['action_repeat']} "
             f"| {FMT.format(row['rho'])} | ± [{extent}] | {row['certified_box_fraction']:.0%} "
