@@ -10,7 +10,6 @@ from leoc.experiments.report import (
     code_line,
     code_versions,
     improvement_rows,
-    percent,
     response_flags,
     response_summary,
     roa_flags,
@@ -19,7 +18,7 @@ from leoc.experiments.report import (
     swing_up_flags,
     swing_up_summary,
 )
-from leoc.experiments.stats import iqm
+from leoc.experiments.stats import iqm, percent
 
 
 def _run(controller: str, seed: int, scale: float, final_return: float, held: bool) -> dict:

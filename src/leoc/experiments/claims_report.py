@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from leoc.experiments.stats import percent
+
 __all__ = ["claims_rows", "hybrid_claims_section", "roa_estimate_lines", "roa_method_text"]
 
 Evaluations = Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]]
@@ -82,7 +84,7 @@ def _mean(values: Sequence[float | None]) -> float | None:
 
 
 def _share(value: float | None) -> str:
-    return "–" if value is None else f"{value:.0%}"
+    return "–" if value is None else percent(value)
 
 
 def _basis(by_construction: Sequence[bool]) -> str:

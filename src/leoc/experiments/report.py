@@ -47,6 +47,7 @@ from leoc.experiments.profiles import (
 from leoc.experiments.stats import (
     MIN_RUNS_FOR_INTERVAL,
     curve_bands,
+    percent,
     probability_of_improvement,
     seed_summary,
 )
@@ -280,18 +281,6 @@ def roa_summary(evaluations: Evaluations) -> list[dict[str, Any]]:
                 }
             )
     return rows
-
-
-def percent(fraction: float) -> str:
-    """``fraction`` as a whole percentage, with as many decimals as it takes (up to 3) not to
-    print a fraction below 1 as 100% or one above 0 as 0% (a flag saying "only 100%" would
-    hide the one start in 2000 that failed); beyond that, "> 99.999%" or "< 0.001%"."""
-    for decimals in range(4):
-        text = f"{fraction:.{decimals}%}"
-        value = float(text[:-1])
-        if not (0.0 < fraction and value == 0.0) and not (fraction < 1.0 and value == 100.0):
-            return text
-    return "> 99.999%" if fraction > 0.5 else "< 0.001%"
 
 
 def roa_flags(rows: list[dict[str, Any]]) -> list[str]:
@@ -544,8 +533,8 @@ def roa_table(rows: list[dict[str, Any]]) -> list[str]:
         inside = "-" if row["certified_set_held"] is None else percent(row["certified_set_held"])
         lines.append(
             f"| {row['system']} | {_label(row['controller'])} | {row['action_repeat']} "
-            f"| {FMT.format(row['rho'])} | ± [{extent}] | {row['certified_box_fraction']:.0%} "
-            f"| {row['basin_box_fraction']:.0%} | {inside} |"
+            f"| {FMT.format(row['rho'])} | ± [{extent}] | {percent(row['certified_box_fraction'])} "
+            f"| {percent(row['basin_box_fraction'])} | {inside} |"
         )
     return lines
 
@@ -567,7 +556,7 @@ def robustness_table(rows: list[dict[str, Any]]) -> list[str]:
             if (r["system"], r["controller"], r["parameter"]) == (system, controller, parameter)
         }
         cells = [
-            f"{selected[s]['fraction_stabilised']:.0%}" if s in selected else "" for s in scales
+            percent(selected[s]["fraction_stabilised"]) if s in selected else "" for s in scales
         ]
         mean_return = np.mean([r["return_mean"] for r in selected.values()])
         lines.append(
@@ -589,7 +578,7 @@ def swing_up_table(rows: list[dict[str, Any]]) -> list[str]:
         hold = "-" if math.isnan(row["mean_hold_step"]) else FMT.format(row["mean_hold_step"])
         lines.append(
             f"| {row['system']} | {_label(row['controller'])} "
-            f"| {_pm(row['return_mean'], row['return_std'])} | {row['fraction_held']:.0%} "
+            f"| {_pm(row['return_mean'], row['return_std'])} | {percent(row['fraction_held'])} "
             f"| {row['runs_all_held']}/{row['n_runs']} | {hold} |"
         )
     return lines

@@ -488,3 +488,15 @@ def wilson_interval(successes: int, trials: int, confidence: float = CONFIDENCE)
     centre = (rate + z * z / (2.0 * n)) / shrink
     half = z / shrink * math.sqrt(rate * (1.0 - rate) / n + z * z / (4.0 * n * n))
     return Interval(max(0.0, centre - half), min(1.0, centre + half))
+
+
+def percent(fraction: float) -> str:
+    """``fraction`` as a whole percentage, with as many decimals as it takes (up to 3) not to
+    print a fraction below 1 as 100% or one above 0 as 0% (a flag saying "only 100%" would
+    hide the one start in 2000 that failed); beyond that, "> 99.999%" or "< 0.001%"."""
+    for decimals in range(4):
+        text = f"{fraction:.{decimals}%}"
+        value = float(text[:-1])
+        if not (0.0 < fraction and value == 0.0) and not (fraction < 1.0 and value == 100.0):
+            return text
+    return "> 99.999%" if fraction > 0.5 else "< 0.001%"
