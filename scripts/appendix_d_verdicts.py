@@ -10,14 +10,9 @@ from their stored impulse traces (``responses.impulse.deviation``, leoc's wrappe
 mapped to the authors' arcsin(sin e) in degrees), over the length of the stored record; the
 table says so ("from traces", and the record length when it is not the authors' one).
 
-Verdict per metric, with n seeds on each side: the tolerance is 2 standard errors of the
-difference of the means, 2 sqrt((std^2 + paper std^2) / n), plus 2% of the scale (the paper's
-overshoot for the steady-state error, the response's size against which errors of order 1e-13
-are round-off; the paper's value otherwise). *yes* when |mean - paper| is within it; *no*
-otherwise; *spread* when the tolerance exceeds the scale itself, i.e. the seeds disagree so much
-that three of them cannot tell (counted as not reproduced). A settling time reproduces only when
-every run reached a steady state (the paper's rows are means over settled runs of all seeds).
-A row reproduces when its three metrics do; a metric the paper does not print agrees.
+Verdict per metric: :func:`leoc.experiments.appendix_d.metric_verdict` (the rule the report's
+appendix-D section applies; *yes* when the metric agrees, else why not). A row reproduces when
+its three metrics do.
 
 Run: ``python scripts/appendix_d_verdicts.py results/paper-authors results/paper``
 """
@@ -36,7 +31,13 @@ from leoc.evaluation.metrics import (
     authors_response_metrics,
     summarise_metrics,
 )
-from leoc.experiments.appendix_d import APPENDIX_CONTROLLERS, VARIANT_HEADERS, VARIANT_ORDER
+from leoc.experiments.appendix_d import (
+    AGREES,
+    APPENDIX_CONTROLLERS,
+    VARIANT_HEADERS,
+    VARIANT_ORDER,
+    metric_verdict,
+)
 from leoc.experiments.layout import META_FILE
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.experiments.report import load_evaluations
@@ -80,18 +81,6 @@ def mean_std(summary: MetricsSummary, metric: str) -> tuple[float, float] | None
     return getattr(summary, f"{metric}_mean"), getattr(summary, f"{metric}_std")
 
 
-def verdict(paper, measured, scale: float, n: int) -> str:
-    if paper is None:
-        return "yes"
-    if measured is None:
-        return "no"
-    (p, ps), (m, ms) = paper, measured
-    spread = 2 * np.sqrt((ps**2 + ms**2) / max(n, 1))
-    if spread > abs(scale):
-        return "spread"
-    return "yes" if abs(m - p) <= spread + 0.02 * abs(scale) else "no"
-
-
 def cell(value) -> str:
     if value is None:
         return "-"
@@ -130,11 +119,6 @@ def main() -> None:
             metric_cells = []
             for metric in METRICS:
                 p = getattr(paper, metric)
-                scale = (
-                    (paper.overshoot or paper.steady_state_error)[0]
-                    if metric == "steady_state_error"
-                    else (p[0] if p else 0.0)
-                )
                 cells = [system, controller, metric, cell(p)]
                 for v in variants:
                     entry = by_variant[v].get((system, controller))
@@ -146,10 +130,9 @@ def main() -> None:
                     if source != "recorded":
                         notes.add(f"{VARIANT_HEADERS[v]}: {system} {source}")
                     m = mean_std(summary, metric)
-                    word = verdict(p, m, scale, summary.n_runs)
-                    if metric == "settling_time" and summary.n_settled < summary.n_runs:
-                        word = "no"
-                    good = word == "yes"
+                    word = metric_verdict(paper, metric, summary)
+                    good = word == AGREES
+                    word = "yes" if good else word
                     if ok[v] is not None:
                         ok[v] = ok[v] and good
                     shown = cell(m) if m else f"not settled (0/{summary.n_runs})"

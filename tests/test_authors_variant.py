@@ -275,6 +275,11 @@ def test_reproduce_variants_side_by_side_in_appendix_d(tmp_path) -> None:
     # settling time [steps]: paper | authors' variant | leoc default (leoc's LQR is half the
     # gain: 42 steps, see benchmarks/bench_authors_linear.py)
     assert cells[-3:] == ["26 ± 0", "26.0 ± 0", "42.0 ± 0"]
+    # the row-by-row verdicts: the authors' variant reproduces the row, leoc's LQR does not
+    verdicts = [line for line in text.splitlines() if line.startswith("| pendulum | linear |")]
+    assert verdicts[1] == (
+        "| pendulum | linear | **reproduces** | no: overshoot differs; settling time differs |"
+    )
     assert json.loads((authors / "meta.json").read_text())["compare"] == "../leoc"
     with pytest.raises(ValueError, match="other variant"):
         from leoc.experiments.report import record_companion

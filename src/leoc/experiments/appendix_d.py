@@ -10,6 +10,7 @@ can be compared like with like. A reproduce folder holds runs of one variant; it
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -21,7 +22,10 @@ __all__ = [
     "AppendixRow",
     "appendix_d_rows",
     "appendix_d_table",
+    "appendix_d_verdict_lines",
     "companion_evaluations",
+    "metric_verdict",
+    "row_verdict",
 ]
 
 # The controllers of appendix D, in its order; "linear" is the paper's single linear row (the
@@ -44,6 +48,13 @@ class AppendixRow(NamedTuple):
     controller: str
     paper: PaperMetrics
     measured: dict[str, MetricsSummary | None]  # variant name -> summary over seeds
+    # variant name -> whether it ran the controller (its runs may predate the authors' metrics)
+    ran: dict[str, bool] | None = None
+
+    def missing(self, variant: str) -> str:
+        """Why a variant has no summary: "not run", or "not measured" for runs evaluated
+        before leoc measured the authors' metrics."""
+        return "not measured" if (self.ran or {}).get(variant) else "not run"
 
 
 def companion_evaluations(out_dir: Path, meta: dict[str, Any]) -> tuple[str, Evaluations] | None:
@@ -84,11 +95,13 @@ def appendix_d_rows(by_variant: dict[str, Evaluations]) -> list[AppendixRow]:
     rows = []
     for system, papers in PAPER_IMPULSE_METRICS.items():
         for controller in APPENDIX_CONTROLLERS:
-            measured = {
-                name: _authors_summary(evaluations.get(system, {}).get(controller))
+            runs = {
+                name: evaluations.get(system, {}).get(controller)
                 for name, evaluations in by_variant.items()
             }
-            rows.append(AppendixRow(system, controller, papers[controller], measured))
+            measured = {name: _authors_summary(found) for name, found in runs.items()}
+            ran = {name: bool(found) for name, found in runs.items()}
+            rows.append(AppendixRow(system, controller, papers[controller], measured, ran))
     return rows
 
 
@@ -99,9 +112,9 @@ def _paper_cell(value: tuple[float, float] | None) -> str:
     return f"{FMT.format(mean)} ± {FMT.format(abs(std))}"
 
 
-def _measured_cell(summary: MetricsSummary | None, metric: str) -> str:
+def _measured_cell(summary: MetricsSummary | None, metric: str, missing: str) -> str:
     if summary is None:
-        return "not run"
+        return missing
     if metric == "settling_time":
         if summary.n_settled == 0:
             return f"not settled (0/{summary.n_runs})"
@@ -124,8 +137,111 @@ def appendix_d_table(rows: list[AppendixRow]) -> list[str]:
         cells = [row.system, row.controller]
         for metric, _ in METRIC_HEADERS:
             cells.append(_paper_cell(getattr(row.paper, metric)))
-            cells += [_measured_cell(row.measured[v], metric) for v in variants]
+            cells += [_measured_cell(row.measured[v], metric, row.missing(v)) for v in variants]
         lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+# ------------------------------------------------------------------------------------ verdicts
+SCALE_SHARE = 0.02
+"""Share of a metric's scale added to the verdict's tolerance (round-off, printed digits)."""
+
+#: How a metric compares with the paper's number (:func:`metric_verdict`).
+AGREES, DIFFERS, SPREAD, UNSETTLED, NOT_RUN = (
+    "agrees",
+    "differs",
+    "seeds disagree",
+    "not settled in every run",
+    "not run",
+)
+
+
+def metric_scale(paper: PaperMetrics, metric: str) -> float:
+    """The size against which a metric's difference is judged: the paper's overshoot for the
+    steady-state error (errors of order 1e-13 are round-off against a response of size 0.45),
+    the paper's own value otherwise (0 when the paper prints none)."""
+    if metric == "steady_state_error":
+        return abs((paper.overshoot or paper.steady_state_error)[0])
+    value = getattr(paper, metric)
+    return abs(value[0]) if value else 0.0
+
+
+def metric_verdict(paper: PaperMetrics, metric: str, summary: MetricsSummary | None) -> str:
+    """Whether a variant's mean over its n runs reproduces the paper's number for ``metric``.
+
+    The tolerance is two standard errors of the difference of the means,
+    2 sqrt((std^2 + paper std^2) / n), plus :data:`SCALE_SHARE` of :func:`metric_scale`:
+    DIFFERS beyond it; within it, SPREAD when the two standard errors alone exceed the scale
+    (the seeds disagree so much that n of them cannot tell; not a reproduction), else AGREES. A
+    settling time reproduces only when every run settled (the paper's means are over settled
+    runs of all its seeds): UNSETTLED otherwise. A metric the paper does not print agrees.
+    """
+    printed = getattr(paper, metric)
+    if printed is None:
+        return AGREES
+    if summary is None:
+        return NOT_RUN
+    if metric == "settling_time" and summary.n_settled < summary.n_runs:
+        return UNSETTLED
+    mean = getattr(summary, f"{metric}_mean")
+    std = getattr(summary, f"{metric}_std")
+    paper_mean, paper_std = printed
+    scale = metric_scale(paper, metric)
+    errors = 2.0 * math.sqrt((paper_std**2 + std**2) / max(summary.n_runs, 1))
+    if abs(mean - paper_mean) > errors + SCALE_SHARE * scale:
+        return DIFFERS
+    return SPREAD if errors > scale else AGREES
+
+
+def row_verdict(row: AppendixRow, variant: str) -> dict[str, str] | None:
+    """The metrics of ``row`` that ``variant`` does not reproduce, each with its verdict ({}:
+    the row reproduces), or None when the variant has no summary (:meth:`AppendixRow.missing`
+    says why)."""
+    summary = row.measured.get(variant)
+    if summary is None:
+        return None
+    verdicts = {metric: metric_verdict(row.paper, metric, summary) for metric, _ in METRIC_HEADERS}
+    return {metric: word for metric, word in verdicts.items() if word != AGREES}
+
+
+def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
+    """Markdown: per row of appendix D and variant, whether it reproduces the paper's row (its
+    three metrics within :func:`metric_verdict`'s tolerance), then the count per variant."""
+    variants = [name for name in VARIANT_ORDER if rows and name in rows[0].measured]
+    labels = {"steady_state_error": "steady-state error", "overshoot": "overshoot"}
+    labels["settling_time"] = "settling time"
+    lines = [
+        "| system | controller | " + " | ".join(VARIANT_HEADERS[v] for v in variants) + " |",
+        "|" + "---|" * (2 + len(variants)),
+    ]
+    for row in rows:
+        cells = []
+        for variant in variants:
+            missed = row_verdict(row, variant)
+            if missed is None:
+                cells.append(row.missing(variant))
+            elif not missed:
+                cells.append("**reproduces**")
+            else:
+                cells.append(
+                    "no: " + "; ".join(f"{labels[m]} {word}" for m, word in missed.items())
+                )
+        lines.append(f"| {row.system} | {row.controller} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for variant in variants:
+        verdicts = [(row, row_verdict(row, variant)) for row in rows]
+        ran = [(row, missed) for row, missed in verdicts if missed is not None]
+        good = [f"{row.system} {row.controller}" for row, missed in ran if not missed]
+        lines.append(
+            f"- {VARIANT_HEADERS[variant]}: {len(good)} of {len(ran)} rows measured reproduce"
+            + (f" ({', '.join(good)})" if good else "")
+            + "".join(
+                f"; {count} {word}"
+                for word in ("not run", "not measured")
+                if (count := sum(row.missing(variant) == word for row, m in verdicts if m is None))
+            )
+            + "."
+        )
     return lines
 
 
@@ -151,4 +267,18 @@ def appendix_d_section(out_dir: Path, meta: dict[str, Any], evaluations: Evaluat
         f"{source}.",
         "",
     ]
-    return lines + appendix_d_table(appendix_d_rows(by_variant)) + [""]
+    rows = appendix_d_rows(by_variant)
+    verdict = [
+        "",
+        "**Row by row.** A row reproduces when each of its three metrics is within two standard "
+        "errors of the difference of the means, 2 sqrt((std^2 + paper std^2) / n) over the n "
+        f"seeds of the run, plus {SCALE_SHARE:.0%} of the metric's scale (the paper's overshoot "
+        "for the steady-state error, the paper's value otherwise). *Seeds disagree*: the two "
+        "standard errors alone exceed the scale, so n seeds cannot tell (not a reproduction); a "
+        "settling time must be reached in every run; a metric the paper does not print agrees; "
+        "a difference beyond the tolerance *differs* however much the seeds disagree. *Not "
+        "measured*: runs evaluated before leoc recorded the authors' metrics "
+        "(`scripts/appendix_d_verdicts.py` measures them from the stored traces).",
+        "",
+    ]
+    return lines + appendix_d_table(rows) + verdict + appendix_d_verdict_lines(rows) + [""]
