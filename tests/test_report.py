@@ -10,6 +10,7 @@ from leoc.experiments.report import (
     code_line,
     code_versions,
     improvement_rows,
+    improvement_table,
     response_flags,
     response_summary,
     roa_flags,
@@ -124,8 +125,27 @@ def test_seed_statistics_with_three_seeds_have_intervals_and_with_one_do_not():
 
 
 def test_probability_that_the_hybrid_beats_its_baseline():
-    (row,) = improvement_rows(_evaluations(1.0, seeds=3))
-    assert row["framework"] == "ddpg" and row["probability"] == 1.0  # every hybrid run is better
+    evaluations = _evaluations(1.0, seeds=3)
+    final, sooner = improvement_rows(evaluations)
+    assert (final["hybrid"], final["quantity"]) == ("ddpg_hybrid", "final return")
+    assert final["probability"] == 1.0  # every hybrid run is better
+    # first hold: every hybrid run at 10 s; the baseline's seed 0 never holds (a win for each
+    # hybrid run), seeds 1 and 2 at 10 s (ties, half each): (3 + 3) / 9
+    assert sooner["quantity"] == "interaction time to first hold"
+    assert sooner["probability"] == pytest.approx(6 / 9)
+    # the ROA hybrid is compared with the same baseline; a hybrid that never holds loses
+    evaluations["pendulum"]["ddpg_hybrid_roa"] = [
+        _run("ddpg_hybrid_roa", s, 1.0, -400.0, False) for s in range(3)
+    ]
+    rows = improvement_rows(evaluations)
+    roa = {r["quantity"]: r["probability"] for r in rows if r["hybrid"] == "ddpg_hybrid_roa"}
+    # never against never (seed 0) ties: 3 * 0.5 / 9
+    assert roa == {"final return": 0.0, "interaction time to first hold": pytest.approx(1.5 / 9)}
+    table = improvement_table(rows)
+    # the interval's ends: a baseline resample of seed 0 only (P = 1), of seeds 1 and 2 only (the
+    # hybrid ties every run: P = 0.5)
+    row = "| pendulum | DDPG hybrid | DDPG baseline | 1.00 | [1, 1] | 0.67 | [0.5, 1] |"
+    assert table[2] == row
 
 
 def test_a_run_folder_without_its_machine_says_so():
