@@ -18,6 +18,7 @@ from leoc.experiments.report import (
     seed_statistics,
     swing_up_flags,
     swing_up_summary,
+    swing_up_table,
 )
 from leoc.experiments.stats import iqm, percent
 
@@ -71,6 +72,11 @@ def test_controllers_that_do_not_swing_up_are_flagged_by_name():
     rows = swing_up_summary(_evaluations(1.0))
     flags = swing_up_flags(rows)
     assert len(flags) == 1 and "DDPG baseline" in flags[0] and "67%" in flags[0]  # 4 of 6 held
+    # 2 of 3 runs hold in every episode: Clopper-Pearson [B(0.025; 2, 2), B(0.975; 3, 1)]
+    # = [0.0943, 0.975^(1/3)]
+    table = swing_up_table(rows)
+    baseline = next(line for line in table if "DDPG baseline" in line)
+    assert "| 2/3 | [9%, 99%] |" in baseline
 
 
 def test_a_flag_never_rounds_a_miss_to_100_percent():

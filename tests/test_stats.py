@@ -194,3 +194,24 @@ def test_curve_bands_without_enough_seeds_say_so() -> None:
     np.testing.assert_allclose(bands.iqm, [1.0, 2.0, 3.0])
     assert bands.ci_low is None and bands.ci_high is None and bands.n == 2
     assert bands.note == f"n = 2 < {MIN_RUNS_FOR_INTERVAL}: no interval"
+
+
+# ------------------------------------------------------------------------ success-rate interval
+def test_success_interval_closed_forms_and_scipy() -> None:
+    from scipy.stats import binomtest
+
+    from leoc.experiments.stats import success_interval
+
+    # all or none succeed: the interval is [(alpha / 2)^(1/n), 1] or [0, 1 - (alpha / 2)^(1/n)]
+    assert success_interval(5, 5) == (pytest.approx(0.025 ** (1 / 5)), 1.0)
+    assert success_interval(0, 5) == (0.0, pytest.approx(1 - 0.025 ** (1 / 5)))
+    for k, n in [(1, 3), (3, 5), (7, 20)]:
+        reference = binomtest(k, n).proportion_ci(confidence_level=0.95, method="exact")
+        assert success_interval(k, n) == (
+            pytest.approx(reference.low, rel=1e-9),
+            pytest.approx(reference.high, rel=1e-9),
+        )
+    with pytest.raises(ValueError, match="successes: expected an integer in \\[0, 3\\], found 4"):
+        success_interval(4, 3)
+    with pytest.raises(ValueError, match="trials: expected a positive integer, found 0"):
+        success_interval(0, 0)
