@@ -214,10 +214,11 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
         "| system | controller | " + " | ".join(VARIANT_HEADERS[v] for v in variants) + " |",
         "|" + "---|" * (2 + len(variants)),
     ]
-    for row in rows:
+    verdicts = {v: [(row, row_verdict(row, v)) for row in rows] for v in variants}
+    for index, row in enumerate(rows):
         cells = []
         for variant in variants:
-            missed = row_verdict(row, variant)
+            missed = verdicts[variant][index][1]
             if missed is None:
                 cells.append(row.missing(variant))
             elif not missed:
@@ -229,8 +230,7 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
         lines.append(f"| {row.system} | {row.controller} | " + " | ".join(cells) + " |")
     lines.append("")
     for variant in variants:
-        verdicts = [(row, row_verdict(row, variant)) for row in rows]
-        ran = [(row, missed) for row, missed in verdicts if missed is not None]
+        ran = [(row, missed) for row, missed in verdicts[variant] if missed is not None]
         good = [f"{row.system} {row.controller}" for row, missed in ran if not missed]
         lines.append(
             f"- {VARIANT_HEADERS[variant]}: {len(good)} of {len(ran)} rows measured reproduce"
@@ -238,7 +238,11 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
             + "".join(
                 f"; {count} {word}"
                 for word in ("not run", "not measured")
-                if (count := sum(row.missing(variant) == word for row, m in verdicts if m is None))
+                if (
+                    count := sum(
+                        row.missing(variant) == word for row, m in verdicts[variant] if m is None
+                    )
+                )
             )
             + "."
         )
