@@ -214,11 +214,11 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
         "| system | controller | " + " | ".join(VARIANT_HEADERS[v] for v in variants) + " |",
         "|" + "---|" * (2 + len(variants)),
     ]
-    verdicts = {v: [(row, row_verdict(row, v)) for row in rows] for v in variants}
+    verdicts = {v: [row_verdict(row, v) for row in rows] for v in variants}
     for index, row in enumerate(rows):
         cells = []
         for variant in variants:
-            missed = verdicts[variant][index][1]
+            missed = verdicts[variant][index]
             if missed is None:
                 cells.append(row.missing(variant))
             elif not missed:
@@ -230,7 +230,8 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
         lines.append(f"| {row.system} | {row.controller} | " + " | ".join(cells) + " |")
     lines.append("")
     for variant in variants:
-        ran = [(row, missed) for row, missed in verdicts[variant] if missed is not None]
+        judged = list(zip(rows, verdicts[variant], strict=True))
+        ran = [(row, missed) for row, missed in judged if missed is not None]
         good = [f"{row.system} {row.controller}" for row, missed in ran if not missed]
         lines.append(
             f"- {VARIANT_HEADERS[variant]}: {len(good)} of {len(ran)} rows measured reproduce"
@@ -238,11 +239,7 @@ def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
             + "".join(
                 f"; {count} {word}"
                 for word in ("not run", "not measured")
-                if (
-                    count := sum(
-                        row.missing(variant) == word for row, m in verdicts[variant] if m is None
-                    )
-                )
+                if (count := sum(row.missing(variant) == word for row, m in judged if m is None))
             )
             + "."
         )
