@@ -25,6 +25,90 @@ def test_lqr_json_matches_the_library(capsys) -> None:
     assert printed["spectral_radius"] < 1
 
 
+FD_STEP = 1e-6
+
+
+def held_jacobians(system, period: int) -> tuple[np.ndarray, np.ndarray]:
+    """A_N, B_N of the N-step map with the action held (zero-order hold), by iterating
+    ``system.step`` and central differences: independent of leoc's autodiff linearisation."""
+
+    def held(state, action):
+        for _ in range(period):
+            state = system.step(state, action)[0].numpy()
+        return state
+
+    state, action = system.operating_state, system.u_eq
+    columns_a = [
+        (held(state + e, action) - held(state - e, action)) / (2 * FD_STEP)
+        for e in FD_STEP * np.eye(system.state_dim)
+    ]
+    columns_b = [
+        (held(state, action + e) - held(state, action - e)) / (2 * FD_STEP)
+        for e in FD_STEP * np.eye(system.action_dim)
+    ]
+    return np.stack(columns_a, axis=1), np.stack(columns_b, axis=1)
+
+
+def independent_gain(system, period: int, q, r) -> tuple[np.ndarray, np.ndarray]:
+    """(K, closed-loop poles) from scipy's DARE on the finite-difference held map."""
+    import scipy.linalg
+
+    a_held, b_held = held_jacobians(system, period)
+    q_matrix, r_matrix = np.diag(q), np.diag(r)
+    p = scipy.linalg.solve_discrete_are(a_held, b_held, q_matrix, r_matrix)
+    gain = np.linalg.solve(r_matrix + b_held.T @ p @ b_held, b_held.T @ p @ a_held)
+    return gain, np.linalg.eigvals(a_held - b_held @ gain)
+
+
+# Central differences (h = 1e-6) are good to ~1e-9; the gain inherits about that relative error.
+CLI_GAIN_RTOL = 1e-5
+
+
+@pytest.mark.parametrize(
+    "name, period, weights",
+    [
+        ("cartpole", 1, []),
+        ("cartpole", 3, []),
+        ("pendulum", 2, ["--q", "3", "0.5", "--r", "0.2"]),
+        ("mountaincar", 3, []),
+    ],
+)
+def test_lqr_json_matches_scipy_on_an_independent_held_map(capsys, name, period, weights):
+    """``leoc lqr --action-repeat N --json``: the gain is the DARE solution of the N-step held
+    map, computed here by finite differences and scipy (not by ``design_lqr``)."""
+    assert main(["lqr", name, "--json", "--action-repeat", str(period), *weights]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    system = make_system(name)
+    q = [float(v) for v in weights[1:3]] if weights else list(system.default_q)
+    r = [float(weights[4])] if weights else list(system.default_r)
+    np.testing.assert_allclose(printed["Q"], np.diag(q))
+    np.testing.assert_allclose(printed["R"], np.diag(r))
+    gain, poles = independent_gain(system, period, q, r)
+    scale = np.max(np.abs(gain))
+    np.testing.assert_allclose(printed["K"], gain, rtol=0, atol=CLI_GAIN_RTOL * scale)
+    a_held, b_held = held_jacobians(system, period)
+    np.testing.assert_allclose(printed["A_d"], a_held, atol=1e-6)
+    np.testing.assert_allclose(printed["B_d"], b_held, atol=1e-6)
+    assert printed["action_repeat"] == period
+    assert printed["dt"] == system.dt
+    assert printed["control_period"] == pytest.approx(period * system.dt)
+    assert printed["spectral_radius"] == pytest.approx(np.max(np.abs(poles)), abs=1e-5)
+    if period > 1:  # the period matters: the one-step gain is far from this one
+        one_step, _ = independent_gain(system, 1, q, r)
+        assert np.max(np.abs(one_step - gain)) > 100 * CLI_GAIN_RTOL * scale
+
+
+def test_lqr_text_states_the_control_period(capsys) -> None:
+    assert main(["lqr", "pendulum", "--action-repeat", "3"]) == 0
+    text = capsys.readouterr().out
+    assert "dt = 0.05 s, control period 3 step(s) = 0.15 s" in text
+    with pytest.raises(SystemExit) as stop:
+        main(["lqr", "pendulum", "--action-repeat", "0"])
+    assert stop.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--action-repeat" in line and "expected a positive integer, found 0" in line
+
+
 def test_lqr_with_custom_weights_and_bad_weights(capsys) -> None:
     assert main(["lqr", "pendulum", "--q", "1", "1", "--r", "2"]) == 0
     assert "spectral radius" in capsys.readouterr().out

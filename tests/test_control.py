@@ -209,3 +209,127 @@ def test_non_stabilisable_pair_is_rejected() -> None:
 
     with pytest.raises(ValueError, match="not stabilisable"):
         design_lqr(Uncontrollable())
+
+
+# --- The design at a control period (action_repeat), against an independent discretisation ---
+
+HELD_PERIODS = (1, 2, 3, 5)
+
+
+class LinearPlant(Scalar):
+    """x' = A x + B u with a 2-by-2 unstable A that does not commute with B B^T: the held map
+    is A_N = A^N, B_N = sum_{k<N} A^k B, and a period off by one changes both."""
+
+    name = "linear_plant"
+    state_names = ("x", "x_dot")
+    obs_layout = (ObsComponent("state", 0), ObsComponent("state", 1))
+    swing_up_centre = (1.0, 0.0)
+    start_spread = (0.0, 0.0)
+    default_q = (1.0, 0.5)
+    default_r = (2.0,)
+    A: ClassVar[np.ndarray] = np.array([[1.05, 0.1], [0.3, 0.98]])
+    B: ClassVar[np.ndarray] = np.array([[0.0], [0.1]])
+
+    def step_fn(self, state, action):
+        return state @ torch.as_tensor(self.A).T + action @ torch.as_tensor(self.B).T
+
+    def continuous_model(self):
+        return (self.A - np.eye(2)) / self.dt, self.B / self.dt
+
+
+def dare_gain(a_matrix, b_matrix, q_matrix, r_matrix):
+    """K = (R + B^T P B)^-1 B^T P A with P from scipy's discrete Riccati solver."""
+    p = scipy.linalg.solve_discrete_are(a_matrix, b_matrix, q_matrix, r_matrix)
+    return np.linalg.solve(r_matrix + b_matrix.T @ p @ b_matrix, b_matrix.T @ p @ a_matrix), p
+
+
+@pytest.mark.parametrize("period", HELD_PERIODS)
+def test_linear_plant_design_at_a_period_is_the_lqr_of_a_power_n_and_the_held_sum(period):
+    a, b = LinearPlant.A, LinearPlant.B
+    # Closed form of the zero-order hold over N steps, written out by hand (no library call).
+    a_held = np.linalg.matrix_power(a, period)
+    b_held = sum(np.linalg.matrix_power(a, k) @ b for k in range(period))
+    q, r = np.diag(LinearPlant.default_q), np.diag(LinearPlant.default_r)
+    gain, p = dare_gain(a_held, b_held, q, r)
+    design = design_lqr(LinearPlant(), action_repeat=period)
+    assert design.action_repeat == period
+    np.testing.assert_allclose(design.A_d, a_held, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(design.B_d, b_held, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(design.K, gain, rtol=1e-8)
+    np.testing.assert_allclose(design.P, p, rtol=1e-8)
+    expected_poles = np.sort_complex(np.linalg.eigvals(a_held - b_held @ gain))
+    np.testing.assert_allclose(np.sort_complex(design.closed_loop_eigenvalues), expected_poles)
+
+
+def test_the_period_changes_the_gain_enough_for_the_tests_to_tell() -> None:
+    """The checks above could not catch an ignored or off-by-one period if neighbouring
+    periods gave nearly the same gain: they differ by far more than the 1e-8 tolerance."""
+    gains = [design_lqr(LinearPlant(), action_repeat=n).K for n in range(1, 7)]
+    for one, next_one in zip(gains[:-1], gains[1:], strict=True):
+        assert np.max(np.abs(one - next_one)) > 1e-2 * np.max(np.abs(one))
+
+
+def held_map_by_central_differences(system: System, period: int):
+    """Jacobians of the N-step map with the action held, by iterating ``system.step`` (numpy
+    in, numpy out) and central differences: independent of ``linearise`` and ``step_held``."""
+
+    def held(x, u):
+        state = np.asarray(x, dtype=float)
+        for _ in range(period):
+            state = system.step(state, u)[0].numpy()
+        return state
+
+    state, action = system.operating_state, system.u_eq
+    a_matrix = np.zeros((system.state_dim, system.state_dim))
+    b_matrix = np.zeros((system.state_dim, system.action_dim))
+    for j in range(system.state_dim):
+        e = np.zeros(system.state_dim)
+        e[j] = FD_STEP
+        a_matrix[:, j] = (held(state + e, action) - held(state - e, action)) / (2 * FD_STEP)
+    for j in range(system.action_dim):
+        e = np.zeros(system.action_dim)
+        e[j] = FD_STEP
+        b_matrix[:, j] = (held(state, action + e) - held(state, action - e)) / (2 * FD_STEP)
+    return a_matrix, b_matrix
+
+
+# Central differences at h = 1e-6 on these smooth maps are good to ~1e-9 absolute; the gain of
+# the Riccati equation moves by about the same relative amount (the DARE is well conditioned
+# here), so 1e-5 is a safe bound that still sits far below the gap between periods (> 1e-2).
+HELD_GAIN_RTOL = 1e-5
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+@pytest.mark.parametrize("period", [2, 3])
+def test_design_at_a_period_matches_scipy_on_the_finite_difference_held_map(name, period):
+    system = make_system(name)
+    a_held, b_held = held_map_by_central_differences(system, period)
+    design = design_lqr(system, action_repeat=period)
+    np.testing.assert_allclose(design.A_d, a_held, atol=1e-6)
+    np.testing.assert_allclose(design.B_d, b_held, atol=1e-6)
+    gain, _ = dare_gain(a_held, b_held, design.Q, design.R)
+    scale = np.max(np.abs(gain))
+    np.testing.assert_allclose(design.K, gain, rtol=0, atol=HELD_GAIN_RTOL * scale)
+    assert design.action_repeat == period
+    # Poles and margins are those of the held loop (sample time N dt), not the one-step loop.
+    poles = np.sort_complex(np.linalg.eigvals(a_held - b_held @ gain))
+    np.testing.assert_allclose(np.sort_complex(design.closed_loop_eigenvalues), poles, atol=1e-5)
+    # The one-step gain is not a solution at this period (so ignoring the period would fail).
+    one_step = design_lqr(system).K
+    assert np.max(np.abs(one_step - gain)) > 100 * HELD_GAIN_RTOL * scale
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+def test_authors_design_at_a_period_is_evaluated_on_the_held_map(name) -> None:
+    """The authors' gain does not depend on the period; its poles and Lyapunov matrix do."""
+    system = make_system(name)
+    period = 3
+    a_held, b_held = held_map_by_central_differences(system, period)
+    design = design_lqr(system, method="authors", action_repeat=period)
+    closed = a_held - b_held @ design.K
+    poles = np.sort_complex(np.linalg.eigvals(closed))
+    np.testing.assert_allclose(np.sort_complex(design.closed_loop_eigenvalues), poles, atol=1e-5)
+    stage = design.Q + design.K.T @ design.R @ design.K
+    # P solves closed^T P closed - P + stage = 0 (checked as a residual, not by the same solver)
+    residual = closed.T @ design.P @ closed - design.P + stage
+    assert np.max(np.abs(residual)) < 1e-4 * np.max(np.abs(design.P))

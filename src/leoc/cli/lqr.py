@@ -6,7 +6,7 @@ import argparse
 import json
 from typing import Any
 
-from leoc.cli._args import SYSTEM_HELP, system_name
+from leoc.cli._args import SYSTEM_HELP, positive_int, system_name
 from leoc.names import LQR_METHODS as METHODS
 
 
@@ -29,6 +29,14 @@ def add_parser(commands: Any) -> None:
     )
     lqr.add_argument("--q", type=float, nargs="+", help="diagonal of Q (default per system)")
     lqr.add_argument("--r", type=float, nargs="+", help="diagonal of R (default 1)")
+    lqr.add_argument(
+        "--action-repeat",
+        type=positive_int,
+        default=1,
+        help="control period in simulator steps: design for the map that holds each action "
+        "this many steps (PILCO's LQR: 3 on the pendulum and cart-pole); A_d, B_d, the "
+        "eigenvalues and the margins are those of that map, sample time N dt (default 1)",
+    )
     lqr.add_argument("--json", action="store_true", help="print the design as JSON")
     lqr.set_defaults(run=run)
 
@@ -47,11 +55,19 @@ def run(args: argparse.Namespace) -> int:
     from leoc.systems import make_system
 
     system = make_system(args.system)
-    design = design_lqr(system, Q=args.q, R=args.r, method=args.method)
+    design = design_lqr(
+        system, Q=args.q, R=args.r, method=args.method, action_repeat=args.action_repeat
+    )
+    period = design.action_repeat * system.dt
     if args.json:
-        print(json.dumps(design_summary(design), indent=1))
+        summary = design_summary(design)
+        summary.update(action_repeat=design.action_repeat, dt=system.dt, control_period=period)
+        print(json.dumps(summary, indent=1))
         return 0
-    print(f"LQR design for {args.system} ({args.method}), dt = {system.dt} s")
+    print(
+        f"LQR design for {args.system} ({args.method}), dt = {system.dt} s, control period "
+        f"{design.action_repeat} step(s) = {period:g} s (action held)"
+    )
     print(f"state: {', '.join(system.state_names)}")
     observed = system.observation.labels(system.state_names)
     print(f"observation: {', '.join(observed)}")
