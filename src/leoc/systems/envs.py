@@ -11,7 +11,11 @@ with
   offset (for response and robustness tests);
 * ``{"state": [...]}``: an explicit initial state.
 
-Rendering is not part of the physics and is not provided.
+Rendering, as gymnasium's classic control: ``render_mode`` ``None``, ``"rgb_array"``
+(``render()`` returns the ``(H, W, 3)`` uint8 frame of the current state) or ``"human"`` (a
+matplotlib window, redrawn by ``reset`` and ``step`` at ``metadata["render_fps"]`` = 1 / dt).
+The drawing lives apart from the physics, in :mod:`leoc.systems.rendering` (the hook for a
+user's system is there too).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from leoc.systems.cartpole import CartPole
 from leoc.systems.mountaincar import MountainCar
 from leoc.systems.pendulum import Pendulum
 from leoc.systems.registry import env_id, make_system
+from leoc.systems.rendering import RENDER_MODES, Renderer
 
 RESET_OPTION_KEYS = ("start", "offset", "state")
 
@@ -44,9 +49,14 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         The system (a registered name is resolved through the registry; this is how
         ``gymnasium.make`` builds the env of a user's system). Default: ``system_type(params)``
         of the subclass.
+    render_mode : {None, "rgb_array", "human"}
+        gymnasium's render mode (see the module docstring). A system that cannot be drawn
+        accepts every mode and raises a one-line ``ValueError`` on the first frame.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    # render_fps is set per instance from the system's dt (gymnasium reads the class's
+    # render_modes before building the env, and the instance's render_fps after).
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES)}
     system_type: ClassVar[type[System]]
 
     def __init__(
@@ -54,9 +64,14 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         params: PhysicalParams | None = None,
         start: str = "swing_up",
         system: System | str | None = None,
+        render_mode: str | None = None,
     ) -> None:
         if start not in START_KINDS:
             raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(
+                f"render_mode: expected None or one of {RENDER_MODES}, found {render_mode!r}"
+            )
         if isinstance(system, str):
             system = make_system(system, params)
         elif system is None:
@@ -74,6 +89,9 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_space = gym.spaces.Box(-high, high, dtype=np.float64)
         self.state: np.ndarray | None = None
         self._steps = 0  # steps taken in this episode
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.system.dt}
+        self._renderer: Renderer | None = None  # built on the first frame
 
     def _obs(self) -> np.ndarray:
         assert self.state is not None
@@ -107,6 +125,8 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         else:
             kind = options.get("start", self.default_start)
             self.state = self.system.sample_start(self.np_random, kind, options.get("offset"))
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), {"state": self.state.copy()}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -130,7 +150,39 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
             )
             terminated = bool(leaving[0])
         self.state = next_state[0].numpy()
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), reward, terminated, False, {"state": self.state.copy()}
+
+    def render(self) -> np.ndarray | None:
+        """The frame of the current state: ``(H, W, 3)`` uint8 in ``rgb_array`` mode; drawn in
+        the window (returning None) in ``human`` mode; None without a render mode (gymnasium
+        warns then).
+
+        Raises
+        ------
+        RuntimeError
+            Before ``reset()``.
+        ValueError
+            If the system cannot be drawn (:func:`~leoc.systems.rendering.drawer_for`).
+        """
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or "
+                "'human' when making the env"
+            )
+            return None
+        if self.state is None:
+            raise RuntimeError("render() called before reset()")
+        if self._renderer is None:
+            self._renderer = Renderer(self.system, self.render_mode)
+        return self._renderer.frame(self.state)
+
+    def close(self) -> None:
+        """Close the render window (if any)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
 
 class PendulumSwingUpEnv(LeocEnv):
