@@ -315,10 +315,19 @@ def test_a_run_folder_is_simulated_on_the_plant_it_was_trained_on(tmp_path, caps
     assert on_leoc_plant["deviation"] != default["deviation"]
 
 
-def test_roa_refuses_a_controller_trained_on_another_plant(tmp_path, capsys) -> None:
-    authors = tmp_path / "authors"
+def test_roa_certifies_a_run_on_its_own_plant_and_refuses_mixed_plants(tmp_path, capsys) -> None:
+    """``leoc roa --controller RUN`` (no system: read from the run) certifies the LQR on the
+    plant the run was trained on (gym 0.17's integrator for an authors' pendulum run, leoc's for
+    a leoc run); runs on two plants are refused in one line."""
+    authors, leoc_run = tmp_path / "authors", tmp_path / "leoc"
     _pilco_run_folder(authors, {"legacy_integrator": True})
-    args = ["roa", "pendulum", "--controller", str(authors), "--samples", "500", "--starts", "4"]
-    assert main(args) == 2
+    _pilco_run_folder(leoc_run, {})
+    common = ["--samples", "500", "--starts", "4", "--json"]
+    assert main(["roa", "--controller", str(authors), *common]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["system"] == "pendulum" and report["plant"]["legacy_integrator"] is True
+    assert main(["roa", "pendulum", "--controller", str(leoc_run), *common]) == 0
+    assert json.loads(capsys.readouterr().out)["plant"]["legacy_integrator"] is False
+    assert main(["roa", "--controller", str(authors), str(leoc_run), *common]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert "--controller:" in line and "legacy_integrator': True" in line
+    assert "--controller:" in line and "one plant" in line and "legacy_integrator': True" in line

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -29,9 +30,18 @@ def add_parser(commands: Any) -> None:
         "Najafi et al. 2016, printed beside it, is its target), and simulate seeded starts in a "
         "box for the LQR and each --controller.",
     )
-    roa.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     roa.add_argument(
-        "--controller", nargs="+", help="run folders written by 'leoc train' (basins of each)"
+        "system",
+        nargs="?",
+        type=system_name,
+        metavar="SYSTEM",
+        help=f"{SYSTEM_HELP}; optional with --controller (read from the run folders)",
+    )
+    roa.add_argument(
+        "--controller",
+        nargs="+",
+        help="run folders written by 'leoc train' or printed by 'leoc reproduce' (basins of "
+        "each); the LQR is certified on their plant (the integrator they were trained with)",
     )
     roa.add_argument(
         "--action-repeat",
@@ -68,28 +78,63 @@ def add_parser(commands: Any) -> None:
 
 ROA_SLICES = {"pendulum": (0, 1), "cartpole": (2, 3), "mountaincar": (0, 1)}
 """2-D slice of each system's basin plot: theta vs theta_dot, or x vs x_dot."""
+LEGACY_PLANT_NOTE = "; on gym 0.17's integrator, the plant the runs were trained on"
 ROA_PLOT_MARGIN = 1.25
 """The plot's slice box reaches at least this factor times the certified set's extent."""
 
 
-def _roa_controllers(args: argparse.Namespace, system, design) -> dict:
-    """The LQR (at the design's period) and every ``--controller`` run folder, by label."""
-    import dataclasses
+def roa_plant(args: argparse.Namespace):
+    """The system ``leoc roa`` certifies and samples: ``SYSTEM`` on leoc's plant, or the plant
+    the ``--controller`` runs were trained on (:meth:`~leoc.systems.StepRules.plant`: reward-only
+    training choices dropped), which every run must share; fills ``args.system`` from the runs
+    when it was left out.
 
-    from leoc.control import lqr_closed_loop
-    from leoc.experiments.controllers import trained_step_rules
+    Raises
+    ------
+    ValueError
+        Neither a system nor a run given, a run trained for another system, or runs trained on
+        different plants (one certificate is of one plant).
+    """
+    from leoc.experiments.controllers import trained_step_rules, trained_system
+    from leoc.systems import make_system
     from leoc.systems.base import DEFAULT_RULES
+
+    runs = list(args.controller or [])
+    if args.system is None:
+        if not runs:
+            raise ValueError(
+                "system: expected a system name or --controller RUN_DIR (e.g. 'leoc roa "
+                "pendulum' or 'leoc roa --controller runs/pendulum_ddpg_hybrid_seed0'), found "
+                "neither"
+            )
+        args.system = trained_system(runs[0])
+    plants = {}
+    for spec in runs:
+        trained_for = trained_system(spec)
+        if trained_for != args.system:
+            raise ValueError(
+                f"--controller: {spec!r} was trained for {trained_for!r}, not for {args.system!r}"
+            )
+        plants.setdefault(trained_step_rules(spec).plant(), []).append(spec)
+    if len(plants) > 1:
+        described = "; ".join(
+            f"{', '.join(map(repr, specs))} on {dataclasses.asdict(plant)}"
+            for plant, specs in plants.items()
+        )
+        raise ValueError(
+            f"--controller: expected runs trained on one plant (a certificate is of one plant), "
+            f"found {described}; certify them in separate 'leoc roa' calls"
+        )
+    plant = next(iter(plants), DEFAULT_RULES)
+    return make_system(args.system).with_rules(plant)
+
+
+def _roa_controllers(args: argparse.Namespace, design) -> dict:
+    """The LQR (at the design's period) and every ``--controller`` run folder, by label."""
+    from leoc.control import lqr_closed_loop
 
     controllers = {f"LQR (period {design.action_repeat})": lqr_closed_loop(design)}
     for spec in args.controller or []:
-        rules = trained_step_rules(spec)
-        if rules != DEFAULT_RULES:
-            raise ValueError(
-                f"--controller: {spec!r} was trained under the step rules "
-                f"{dataclasses.asdict(rules)}; 'leoc roa' certifies and samples leoc's plant "
-                f"({dataclasses.asdict(DEFAULT_RULES)}), on which it was not trained; use 'leoc "
-                "simulate' (it runs a controller on its own plant)"
-            )
         controllers[Path(spec).name] = load_controller(spec, args.system)
     return controllers
 
@@ -111,18 +156,17 @@ def run(args: argparse.Namespace) -> int:
         plot_basins,
         slice_grid,
     )
-    from leoc.systems import make_system
 
     torch.set_num_threads(1)
     started = time.perf_counter()
-    system = make_system(args.system)
+    system = roa_plant(args)
     design = design_lqr(system, action_repeat=args.action_repeat)
     certificate = certify_lqr(system, design, samples=args.samples, seed=args.seed)
     box = default_basin_box(system) if args.box is None else np.asarray(args.box, dtype=float)
     fraction, error = box_fraction(certificate, box, seed=args.seed)
     starts = basin_starts(system, box, args.starts, seed=args.seed)
     basins = {}
-    for label, controller in _roa_controllers(args, system, design).items():
+    for label, controller in _roa_controllers(args, design).items():
         basin = empirical_basin(system, controller, starts, box=box)
         inside = certified_set_check(system, controller, certificate, args.starts, args.seed)
         basins[label] = {
@@ -132,6 +176,7 @@ def run(args: argparse.Namespace) -> int:
         }
     report = {
         "system": args.system,
+        "plant": dataclasses.asdict(system.rules.plant()),
         "action_repeat": design.action_repeat,
         "certificate": certificate.summary(),
         "box": box.tolist(),
@@ -167,7 +212,9 @@ def _print_roa(system, certificate, report: dict) -> None:
     names = ", ".join(system.state_names)
     print(
         f"Region of attraction of the LQR on {report['system']} (control period "
-        f"{report['action_repeat']} step(s), dt = {system.dt} s); state: {names}"
+        f"{report['action_repeat']} step(s), dt = {system.dt} s"
+        f"{LEGACY_PLANT_NOTE if report['plant']['legacy_integrator'] else ''}"
+        f"); state: {names}"
     )
     print("V(x) = z^T P z, z = x - a (angles wrapped); certified: V(F(x)) < V(x) on 0 < V <= rho")
     print_matrix("P", certificate.P)

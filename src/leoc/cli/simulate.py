@@ -165,37 +165,58 @@ def controller_label(spec: str, period: int) -> str:
 
 
 def simulated_variant(target: Target, requested: str | None) -> str:
-    """The variant whose plant ``target`` is simulated on: ``requested`` (default leoc) for the
-    LQR; for a run folder, the variant whose step rules for its system are the ones it was
-    trained under (a trained controller is measured on the plant it was trained on).
+    """The variant whose settings (episode length, the name reported) ``target`` is simulated
+    with: ``requested`` (default leoc) for the LQR; for a run folder, a variant with the run's
+    plant (:meth:`~leoc.systems.StepRules.plant`: its dynamics; which state a reward was taken
+    on or what an exit paid are training choices and never block evaluation), by default the
+    one whose rules equal the run's, else leoc's if it has the run's plant. The run itself is
+    always stepped under its own recorded rules (:func:`simulated_system`).
 
     Raises
     ------
     ValueError
-        ``requested`` names a variant with other step rules than the run's, or no variant has
-        the run's rules.
+        ``requested`` names a variant on another plant than the run's, or no variant has the
+        run's plant.
     """
-    import dataclasses
-
     from leoc.experiments.controllers import trained_step_rules
     from leoc.experiments.variants import VARIANTS
 
     if target.controller == LINEAR:
         return requested or "leoc"
     rules = trained_step_rules(target.controller)
-    matching = [name for name, v in VARIANTS.items() if v.rules_for(target.system) == rules]
-    if requested is None and matching:
-        return matching[0]
-    if requested in matching:
+    same_plant = [
+        name for name, v in VARIANTS.items() if v.rules_for(target.system).plant() == rules.plant()
+    ]
+    if requested is None:
+        exact = [name for name in same_plant if VARIANTS[name].rules_for(target.system) == rules]
+        if exact or same_plant:
+            return (exact or same_plant)[0]
+    elif requested in same_plant:
         return requested
-    trained = dataclasses.asdict(rules)
-    found = f"the {requested} variant's" if requested else "no variant has them; leoc's"
+    found = f"the {requested} variant's plant" if requested else "no variant's plant"
     raise ValueError(
-        f"--variant: the controller in {target.controller!r} was trained under the step rules "
-        f"{trained} on {target.system}; {found} differ, and simulating it there would measure "
-        f"another plant than the one it was trained on"
-        + (f" (leave --variant out, or use {' or '.join(matching)})" if matching else "")
+        f"--variant: the controller in {target.controller!r} was trained on {target.system} "
+        f"under {_describe_plant(rules)}; {found} differs, and simulating it there would "
+        "measure another plant than the one it was trained on"
+        + (f" (leave --variant out, or use {' or '.join(same_plant)})" if same_plant else "")
     )
+
+
+def _describe_plant(rules) -> str:
+    """The plant fields of ``rules`` in words, for an error message."""
+    plant = rules.plant()
+    return "gym 0.17's integrator" if plant.legacy_integrator else "leoc's integrator"
+
+
+def simulated_system(target: Target, variant):
+    """The system ``target`` is simulated on: a run folder's own plant under its own recorded
+    step rules (:func:`~leoc.experiments.controllers.trained_plant`); the variant's system for
+    the LQR."""
+    if target.controller == LINEAR:
+        return variant.system(target.system)
+    from leoc.experiments.controllers import trained_plant
+
+    return trained_plant(target.controller)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -207,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
     target = resolve_target(args.target, args.controller)
     args.variant = simulated_variant(target, args.variant)
     variant = get_variant(args.variant)
-    system = variant.system(target.system)
+    system = simulated_system(target, variant)
     controller = load_controller(
         target.controller, target.system, args.method, args.action_repeat, args.variant
     )

@@ -15,7 +15,7 @@ import torch
 from leoc.training import read_config
 
 if TYPE_CHECKING:
-    from leoc.systems.base import StepRules
+    from leoc.systems.base import StepRules, System
 
 PILCO_MARKER = "controller.pt"
 DDPG_MARKER = "model.zip"
@@ -66,6 +66,21 @@ def trained_step_rules(run_dir: str | Path) -> StepRules:
             f"run folder: {folder / 'config.json'} records step_rules {rules!r}, which are not "
             f"StepRules fields ({error})"
         ) from error
+
+
+def trained_plant(run_dir: str | Path) -> System:
+    """The system the controller in ``run_dir`` was trained on, stepping under the rules it was
+    trained under: the plant to evaluate it on (its reward too, so a return is the one it was
+    trained for).
+
+    Raises
+    ------
+    ValueError
+        The config names no registered system or records unknown rules (naming the file).
+    """
+    from leoc.systems import make_system
+
+    return make_system(trained_system(run_dir)).with_rules(trained_step_rules(run_dir))
 
 
 def load_trained_controller(run_dir: str | Path, system: str | None = None) -> torch.nn.Module:

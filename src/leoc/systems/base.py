@@ -117,6 +117,15 @@ def _check_positive(label: str, attribute: str, value: Any) -> None:
         )
 
 
+def _returned_tensor(label: str, method: str, value: Any, expected: str) -> Tensor:
+    """``value`` if ``method`` of system ``label`` returned a torch tensor, else raise naming the
+    method, ``expected`` and what it returned (a body left as ``...`` or ``pass`` returns None)."""
+    if not isinstance(value, Tensor):
+        hint = " (a body left as '...' or 'pass' returns None)" if value is None else ""
+        raise ValueError(f"{label}: {method}: expected {expected}, found {value!r}{hint}")
+    return value
+
+
 def check_repeat(repeat: Any) -> int:
     """A control period in simulator steps: a positive integer (raises naming ``action_repeat``)."""
     if isinstance(repeat, bool) or not isinstance(repeat, (int, np.integer)) or repeat < 1:
@@ -198,8 +207,22 @@ class StepRules:
                 f"exit for a whole episode), found True with exit_penalty={penalty!r}"
             )
 
+    def plant(self) -> StepRules:
+        """These rules with every reward-only field at leoc's default: what decides the plant
+        a controller runs on (its dynamics and where an episode ends), without what a learner
+        was paid. Two runs whose rules have the same ``plant()`` ran on the same plant; a
+        controller is evaluated and certified on its own plant whatever reward it was trained
+        with."""
+        return dataclasses.replace(
+            self, **{name: getattr(DEFAULT_RULES, name) for name in REWARD_ONLY_RULES}
+        )
+
 
 DEFAULT_RULES = StepRules()
+#: :class:`StepRules` fields that change only the reward a transition earns, not the plant's
+#: dynamics nor where an episode ends (termination is the system's allowed region under every
+#: rule): training choices, which never block evaluating a controller on its plant.
+REWARD_ONLY_RULES = ("exit_penalty", "reward_on_next_state", "horizon_exit")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -567,8 +590,9 @@ class System:
         ValueError
             Naming the system and the attribute, with what was expected and what was found:
             a missing attribute, wrong shapes, a non-positive ``dt`` or action limit, an
-            inconsistent observation layout, a ``step_fn``/``reward_fn`` that returns the wrong
-            shape or non-finite values, or an operating point that is not an equilibrium:
+            inconsistent observation layout, a ``step_fn``/``reward_fn``/``out_of_bounds`` that
+            returns no tensor (a body left as ``...``), the wrong shape or non-finite values, or
+            an operating point that is not an equilibrium:
             ``max |f(a, u_eq) - a| > EQUILIBRIUM_TOL`` (angles wrapped).
         """
         label = f"system {getattr(self, 'name', type(self).__name__)!r}"
@@ -627,9 +651,15 @@ class System:
         states = operating.expand(VALIDATION_BATCH, size).clone()
         actions = torch.as_tensor(self.u_eq, dtype=DTYPE).expand(VALIDATION_BATCH, -1).clone()
         with torch.no_grad():
-            following = self.step_fn(states, actions)
-            reward = self.reward_fn(states, actions)
-            left = self.out_of_bounds(states)
+            following = _returned_tensor(
+                label, "step_fn", self.step_fn(states, actions), f"a (B, {size}) tensor"
+            )
+            reward = _returned_tensor(
+                label, "reward_fn", self.reward_fn(states, actions), "a (B,) tensor of rewards"
+            )
+            left = _returned_tensor(
+                label, "out_of_bounds", self.out_of_bounds(states), "a (B,) bool tensor"
+            )
         if tuple(following.shape) != (VALIDATION_BATCH, size) or following.dtype != DTYPE:
             raise ValueError(
                 f"{label}: step_fn: expected a float64 tensor of shape (B, {size}) for B = "
