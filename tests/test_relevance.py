@@ -18,6 +18,7 @@ from leoc.policies import (
     MLPActor,
     ObservationDeviation,
     PaperRelevance,
+    PrecisionRelevance,
     RBFNetwork,
     ROARelevance,
     roa_hybrid,
@@ -250,3 +251,100 @@ def test_bad_arguments_raise_naming_them(setups):
             system.operating_obs,
             relevance=PaperRelevance(system.operating_obs + 0.1),
         )
+
+
+# ---- known answers, written out by hand (independent of paper_relevance and the modules) ----
+
+# a, lambda and four observations whose d(x) = sum_i (x_i - a_i)^2 / lambda_i is worked out
+# by hand: d = 0.5^2/0.25 + 2^2/4 + 0.5^2/1 = 2.25, 0, 1 and 4; r = 1/(1 + d)^2.
+KNOWN_A = [0.5, -1.0, 2.0]
+KNOWN_LAMBDA = [0.25, 4.0, 1.0]
+KNOWN_X = [[1.0, 1.0, 2.5], [0.5, -1.0, 2.0], [0.5, -1.0, 3.0], [0.5, 3.0, 2.0]]
+KNOWN_D = [2.25, 0.0, 1.0, 4.0]
+KNOWN_R = [16.0 / 169.0, 1.0, 0.25, 1.0 / 25.0]
+
+
+def test_paper_relevance_matches_its_closed_form_with_numbers():
+    """r(x) = 1/(1 + sum (x - a)^2 / lambda)^2 (paper eq. 5) for the module, the hybrid's
+    default and the precision parametrisation with S = 1/lambda; a lambda that multiplies
+    instead of dividing gives d = 16.3125 at the first point, r = 0.0033, not 16/169."""
+    x = torch.tensor(KNOWN_X, dtype=DTYPE)
+    expected_r = torch.tensor(KNOWN_R, dtype=DTYPE).unsqueeze(-1)
+    module = PaperRelevance(KNOWN_A, KNOWN_LAMBDA)
+    torch.testing.assert_close(module(x), expected_r, rtol=1e-14, atol=0)
+    precision = PrecisionRelevance(KNOWN_A, [1.0 / value for value in KNOWN_LAMBDA])
+    torch.testing.assert_close(precision(x), expected_r, rtol=1e-14, atol=0)
+    policy = HybridPolicy(
+        LinearController(np.ones((1, 3))), _mlp(make_system("pendulum")), KNOWN_A, KNOWN_LAMBDA
+    )
+    torch.testing.assert_close(policy.relevance(x), expected_r, rtol=1e-14, atol=0)
+    expected_d = torch.tensor(KNOWN_D, dtype=DTYPE).unsqueeze(-1)
+    torch.testing.assert_close(policy.distance(x), expected_d, rtol=1e-14, atol=0)
+
+
+def test_paper_relevance_gradients_match_their_closed_forms():
+    """dr/dx_i = -4 (x_i - a_i) / (lambda_i (1 + d)^3) and, with lambda = exp(l),
+    dr/dl_i = 2 (x_i - a_i)^2 / (lambda_i (1 + d)^3), at x = (1, 1, 2.5): 1 + d = 3.25."""
+    module = PaperRelevance(KNOWN_A, KNOWN_LAMBDA, learn_lambda=True)
+    x = torch.tensor(KNOWN_X[0], dtype=DTYPE, requires_grad=True)
+    module(x).sum().backward()
+    cube = 3.25**3
+    # (x - a) / lambda = (0.5 / 0.25, 2 / 4, 0.5 / 1); (x - a)^2 / lambda = (1, 1, 0.25)
+    expected_x = [-4.0 * 2.0 / cube, -4.0 * 0.5 / cube, -4.0 * 0.5 / cube]
+    expected_log_lambda = [2.0 * 1.0 / cube, 2.0 * 1.0 / cube, 2.0 * 0.25 / cube]
+    np.testing.assert_allclose(x.grad.numpy(), expected_x, rtol=1e-13)
+    np.testing.assert_allclose(module.log_lambda.grad.numpy(), expected_log_lambda, rtol=1e-13)
+
+
+class _Constant(nn.Module):
+    """H(x) = value everywhere."""
+
+    def __init__(self, value: float) -> None:
+        super().__init__()
+        self.value = value
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.full((*x.shape[:-1], 1), self.value, dtype=x.dtype)
+
+
+def test_paper_hybrid_blends_with_the_closed_form_weights():
+    """pi = r G + (1 - r) H: G(x) = x_0 - 0.5, H = 2, at the known points (limit 10, inactive);
+    at (1, 1, 2.5): 16/169 * 0.5 + 153/169 * 2 = 314/169."""
+    policy = HybridPolicy(
+        LinearController(np.array([[1.0, 0.0, 0.0]]), np.array([-0.5])),
+        _Constant(2.0),
+        KNOWN_A,
+        KNOWN_LAMBDA,
+        action_limit=10.0,
+    )
+    x = torch.tensor(KNOWN_X, dtype=DTYPE)
+    linear = np.array(KNOWN_X)[:, 0] - 0.5
+    r = np.array(KNOWN_R)
+    expected = r * linear + (1.0 - r) * 2.0
+    with torch.no_grad():
+        np.testing.assert_allclose(policy(x).numpy()[:, 0], expected, rtol=1e-14)
+    assert expected[0] == pytest.approx(314.0 / 169.0, rel=1e-15)
+
+
+def test_roa_relevance_matches_its_closed_form_with_numbers():
+    """r = 1 - (10 t^3 - 15 t^4 + 6 t^5), t = clamp((z^T P z / rho_in - 1) / w, 0, 1), worked
+    out by hand for a plain 2-state layout and for an angle seen through (cos, sin)."""
+    plain = make_system("mountaincar").obs_layout
+    module = ROARelevance(
+        plain, [0.0, 0.0], [[2.0, 0.5], [0.5, 1.0]], 1.0, width_init=1.0, learn_width=False
+    )
+    # z = (0.5, 0): V = 0.5, flat top. z = (1, 0): V = 2, t = 1, r = 0.
+    # z = (0.6, 0.6): V = 2 (0.36) + 2 (0.5)(0.36) + 0.36 = 1.44, t = 0.44,
+    # 10 (0.085184) - 15 (0.03748096) + 6 (0.0164916224) = 0.3885753344.
+    obs = torch.tensor([[0.5, 0.0], [1.0, 0.0], [0.6, 0.6]], dtype=DTYPE)
+    expected = [1.0, 0.0, 1.0 - 0.3885753344]
+    np.testing.assert_allclose(module(obs).detach().numpy()[:, 0], expected, rtol=1e-12)
+    angle = make_system("pendulum").obs_layout
+    module = ROARelevance(angle, [0.0, 0.0], [[2.0, 0.0], [0.0, 1.0]], 0.4, width_init=1.0)
+    # theta = 0.5 + 2 pi (wrapped to 0.5), theta_dot = 0.2: V = 2 (0.25) + 0.04 = 0.54,
+    # V / rho_in = 1.35, t = 0.35: 10 (0.042875) - 15 (0.01500625) + 6 (0.0052521875)
+    # = 0.235169375.
+    theta = 0.5 + 2.0 * math.pi
+    obs = torch.tensor([[math.cos(theta), math.sin(theta), 0.2]], dtype=DTYPE)
+    assert float(module.width.detach()) == pytest.approx(1.0, rel=1e-12)
+    np.testing.assert_allclose(float(module(obs).detach()), 1.0 - 0.235169375, rtol=1e-12)
