@@ -7,10 +7,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from leoc.systems import make_system, system_names, unregister_system
+from leoc.systems import make_system, register_system, system_names, unregister_system
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "docs" / "examples" / "damped_cart.py"
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+EXAMPLE = DOCS / "examples" / "damped_cart.py"
+GUIDE = DOCS / "user_guide" / "custom_system.md"
 TINY_STEPS = 200
 
 
@@ -35,3 +38,34 @@ def test_the_how_to_example_runs_end_to_end(tmp_path) -> None:
     finally:
         if "damped_cart" in system_names():
             unregister_system("damped_cart")
+
+
+def test_the_guide_prints_the_complete_file() -> None:
+    """GitHub shows no Sphinx include: the page's last block is the example file, verbatim."""
+    page = GUIDE.read_text(encoding="utf-8")
+    section = page.split("\n## The complete file\n", 1)[1]
+    block = section.split("```python\n", 1)[1].rsplit("```", 1)[0]
+    assert block == EXAMPLE.read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("method", ["step_fn", "reward_fn", "out_of_bounds"])
+def test_a_stub_method_is_refused_in_one_line_naming_it(method) -> None:
+    """A method left as ``...`` (the guide's elided ``reward_fn``) returns None: registration
+    refuses it with one line naming the system, the method, the expectation and ``None``."""
+    example = _load_example()
+    stub = type("StubCart", (example.DampedCart,), {method: lambda self, *args: None})
+    with pytest.raises(ValueError) as error:
+        register_system("damped_cart", stub)
+    message = str(error.value)
+    assert "\n" not in message
+    assert message.startswith(f"system 'damped_cart': {method}: expected a (B")
+    assert "found None" in message
+    assert "damped_cart" not in system_names()
+
+
+def test_the_guide_quotes_the_stub_error_as_raised() -> None:
+    example = _load_example()
+    stub = type("StubCart", (example.DampedCart,), {"reward_fn": lambda self, *args: None})
+    with pytest.raises(ValueError) as error:
+        register_system("damped_cart", stub)
+    assert f"    ValueError: {error.value}\n" in GUIDE.read_text(encoding="utf-8")
