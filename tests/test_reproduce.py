@@ -312,3 +312,76 @@ def test_runs_are_queued_longest_first() -> None:
     smoke = run_specs(get_profile("smoke"), ("pendulum",), CONTROLLERS)
     order = list(dict.fromkeys(spec.framework for spec in smoke))
     assert order == ["sac", "pilco", "ddpg", "linear"]
+
+
+def _mountain_car_responses(system) -> dict[str, np.ndarray]:
+    """Impulse and step responses of the hilltop LQR, simulated here in numpy from the
+    equations of motion (semi-implicit Euler, acceleration F/m + g A sin x) with the gain from
+    scipy's DARE on their closed-form Jacobian: independent of leoc's design, rollout and
+    response code. e(t) = x(t) in metres, 201 samples from t = 0."""
+    import scipy.linalg
+
+    p = system.params
+    slope = p.gravity * p.hill_amplitude  # d(acceleration)/dx at the hilltop x = 0
+    a_matrix = np.array([[1.0 + p.dt**2 * slope, p.dt], [p.dt * slope, 1.0]])
+    b_matrix = np.array([[p.dt**2 / p.mass], [p.dt / p.mass]])
+    q_matrix, r_matrix = np.diag(system.default_q), np.diag(system.default_r)
+    riccati = scipy.linalg.solve_discrete_are(a_matrix, b_matrix, q_matrix, r_matrix)
+    gain = np.linalg.solve(
+        r_matrix + b_matrix.T @ riccati @ b_matrix, b_matrix.T @ riccati @ a_matrix
+    )[0]
+    records = {}
+    for test, offsets in (("impulse", [-1.0] + [0.0] * 199), ("step", [-0.2] * 200)):
+        position, speed = 0.0, 0.0
+        record = [position]
+        for offset in offsets:
+            force = np.clip(-gain @ [position, speed] + offset, -p.max_force, p.max_force)
+            speed = speed + p.dt * (force / p.mass + slope * np.sin(position))
+            position = position + p.dt * speed
+            record.append(position)
+        records[test] = np.array(record)
+    return records
+
+
+def _metrics_by_definition(e: np.ndarray) -> dict[str, float]:
+    """The report's metrics written out from their definitions (DESIGN.md): final value = mean
+    of the last 20 samples; peak = max |e|; overshoot = largest excursion past the final value
+    opposite to the first clear deviation; settling = first step after which
+    |e - e_f| <= 2 % of max |e - e_f| for the rest of the record."""
+    final = float(np.mean(e[-20:]))
+    spread = np.abs(e - final)
+    first = int(np.argmax(spread > 0.01 * spread.max()))
+    side = np.sign(e[first] - final)
+    band = 0.02 * spread.max()
+    outside = [t for t in range(len(e)) if spread[t] > band]
+    return {
+        "steady_state_error_mean": final,
+        "peak_deviation_mean": float(np.max(np.abs(e))),
+        "overshoot_mean": max(0.0, float(np.max(-side * (e - final)))),
+        "settling_time_mean": float(outside[-1] + 1 if outside else 0),
+    }
+
+
+def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path) -> None:
+    """The report's impulse and step rows of the mountain car's LQR against a simulation and
+    metrics written in this test (not leoc's response_test), so a wrong impulse, step length,
+    window or band in the pipeline fails here."""
+    reproduce(
+        tmp_path, controllers=["linear"], systems=["mountaincar"], jobs=1, echo=lambda _: None
+    )
+    results = json.loads((tmp_path / "results.json").read_text())
+    records = _mountain_car_responses(make_system("mountaincar"))
+    for test, record in records.items():
+        (row,) = [
+            r
+            for r in results["responses"]
+            if (r["system"], r["test"], r["controller"]) == ("mountaincar", test, "linear")
+        ]
+        expected = _metrics_by_definition(record)
+        assert row["n_runs"] == row["n_settled"] == 1 and row["n_terminated"] == 0
+        for key, value in expected.items():
+            # numpy here, torch there, and a gain from another Riccati solver: agreement to
+            # ~1e-9 relative; the impulse's overshoot and final value are ~1e-6 m, hence atol.
+            assert row[key] == pytest.approx(value, rel=1e-6, abs=1e-10), (test, key)
+    # the step's final value is the equilibrium of the biased loop, far from 0: informative
+    assert abs(row["steady_state_error_mean"]) > 0.05
