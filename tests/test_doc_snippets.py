@@ -194,3 +194,33 @@ def test_the_runner_runs_in_the_working_folder_and_forgets_registrations(tmp_pat
     assert run_page(page, workdir) == 1
     assert (workdir / "written.txt").is_file()
     assert "copy_of_pendulum" not in system_names()
+
+
+ROOT = DOCS.parent
+#: A repository path named in leoc's source: help strings, docstrings, comments, messages.
+REPOSITORY_PATH = re.compile(r"(?<![\w/.-])(?:docs|benchmarks|scripts|tests)/[\w./-]*\w")
+
+
+def repository_paths() -> dict[str, list[str]]:
+    """Each repository path named in ``src/leoc``, with the ``file:line`` places naming it."""
+    named: dict[str, list[str]] = {}
+    for source in sorted((ROOT / "src" / "leoc").rglob("*.py")):
+        for number, line in enumerate(source.read_text(encoding="utf-8").splitlines(), 1):
+            for path in REPOSITORY_PATH.findall(line):
+                named.setdefault(path, []).append(f"{source.relative_to(ROOT)}:{number}")
+    return named
+
+
+def test_every_path_leoc_names_exists() -> None:
+    """No help text or docstring sends a reader to a missing file (the CLI's help once named
+    docs/custom_system.md, which never existed)."""
+    named = repository_paths()
+    assert "docs/user_guide/custom_system.md" in named  # the scan finds what it is about
+    missing = {path: places for path, places in named.items() if not (ROOT / path).exists()}
+    assert missing == {}
+
+
+def test_the_cli_help_names_the_custom_system_guide() -> None:
+    from leoc.cli._args import SYSTEM_HELP
+
+    assert "docs/user_guide/custom_system.md" in SYSTEM_HELP

@@ -9,7 +9,7 @@ from leoc.names import BUILTIN_SYSTEM_NAMES
 
 SYSTEM_HELP = (
     f"system name: {', '.join(BUILTIN_SYSTEM_NAMES)}, or a system registered by a module "
-    "imported first (docs/custom_system.md)"
+    "imported first (docs/user_guide/custom_system.md)"
 )
 
 
