@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -78,6 +79,14 @@ def add_parser(commands: Any) -> None:
         "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
     )
     simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    simulate.add_argument(
+        "--video",
+        type=Path,
+        metavar="FILE",
+        help="write an animation here (.gif, or .mp4 where ffmpeg is installed): the swing-up "
+        "from the system's swing-up start, then the impulse response, with r(x) shown for a "
+        "hybrid controller",
+    )
     simulate.add_argument(
         "--json", action="store_true", help="print the metrics and e(t) as JSON instead"
     )
@@ -238,6 +247,12 @@ def run(args: argparse.Namespace) -> int:
         system, controller, args.test, steps=args.steps, band=args.band, metric_set=args.metrics
     )
     period = control_period(controller)
+    if args.video:
+        from leoc.evaluation.video import write_video
+
+        label = f"{controller_label(target.controller, period)} on {target.system}"
+        video = write_video(system, controller, args.video, args.steps, label)
+        print(f"animation written to {video}", file=sys.stderr if args.json else sys.stdout)
     if args.json:
         print(
             json.dumps(

@@ -85,9 +85,11 @@ CART_HEIGHT = 0.15
 # Mountain car: the car's half-length in metres and points along the hill it is drawn with.
 CAR_HALF_LENGTH = 0.15
 HILL_SAMPLES = 200
-# Text and the relevance gauge, in axes coordinates (0..1).
-CAPTION_POSITION = (0.02, 0.97)
-GAUGE_BOX = (0.55, 0.04, 0.4, 0.05)  # left, bottom, width, height
+# Layout, in figure coordinates (0..1): the drawing between a caption band at the top and a
+# gauge band at the bottom, so that neither covers the system.
+DRAWING_BOX = (0.0, 0.1, 1.0, 0.76)  # left, bottom, width, height
+CAPTION_POSITION = (0.02, 0.98)
+GAUGE_BOX = (0.55, 0.025, 0.4, 0.05)
 FONT_SIZE = 10
 
 #: ``drawer(system, ax, state)``: draws ``state`` on ``ax`` and sets the axes' limits.
@@ -308,24 +310,27 @@ class Renderer:
 
             self.figure = Figure(figsize=figsize, dpi=DPI)
             FigureCanvasAgg(self.figure)
-        self.axes = self.figure.add_axes((0.0, 0.0, 1.0, 1.0))
+        # captions and the gauge on a figure-wide axes beneath the drawing's
+        self.overlay = self.figure.add_axes((0.0, 0.0, 1.0, 1.0))
+        self.axes = self.figure.add_axes(DRAWING_BOX)
 
     def frame(
         self, state: Any, caption: str | None = None, gauge: Gauge | None = None
     ) -> np.ndarray | None:
-        """Draw ``state`` ``(S,)`` (with an optional caption, top left, and gauge, bottom right).
+        """Draw ``state`` ``(S,)``, with an optional caption (top left) and gauge (bottom right)
+        in bands of their own.
 
         Returns the ``(H, W, 3)`` uint8 frame in ``rgb_array`` mode, None in ``human`` mode.
         """
-        ax = self.axes
-        ax.clear()
-        ax.set_axis_off()
-        self.draw(ax, np.asarray(state, dtype=float))
+        for ax in (self.overlay, self.axes):
+            ax.clear()
+            ax.set_axis_off()
+        self.draw(self.axes, np.asarray(state, dtype=float))
         if caption:
-            ax.text(
+            self.overlay.text(
                 *CAPTION_POSITION,
                 caption,
-                transform=ax.transAxes,
+                transform=self.overlay.transAxes,
                 va="top",
                 fontsize=FONT_SIZE,
                 family="monospace",
@@ -342,7 +347,7 @@ class Renderer:
     def _gauge(self, gauge: Gauge) -> None:
         from matplotlib.patches import Rectangle
 
-        ax = self.axes
+        ax = self.overlay
         left, bottom, width, height = GAUGE_BOX
         value = float(np.clip(gauge.value, 0.0, 1.0))
         for fill, colour in ((1.0, GAUGE_BACKGROUND), (value, GAUGE_COLOUR)):
