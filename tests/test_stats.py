@@ -57,6 +57,17 @@ def test_iqm_equals_rliable(shape: tuple[int, ...]) -> None:
     assert iqm(scores) == pytest.approx(metrics.aggregate_iqm(scores), rel=1e-12, abs=1e-12)
 
 
+@pytest.mark.parametrize("size", [4, 5, 7, 8, 9, 10, 31])
+def test_iqm_equals_scipy_trim_mean(size: int) -> None:
+    """scipy.stats.trim_mean(x, 0.25) cuts floor(n / 4) values from each end (no rliable
+    needed), per column with axis=0 too."""
+    from scipy.stats import trim_mean
+
+    scores = np.random.default_rng(size).standard_cauchy((size, 3))
+    np.testing.assert_allclose(iqm(scores[:, 0]), trim_mean(scores[:, 0], 0.25), rtol=1e-12)
+    np.testing.assert_allclose(iqm(scores, axis=0), trim_mean(scores, 0.25, axis=0), rtol=1e-12)
+
+
 # ------------------------------------------------------------------------- bootstrap interval
 def test_stratified_interval_equals_rliable(rliable_global_seed: None) -> None:
     library = pytest.importorskip("rliable.library")
@@ -215,3 +226,47 @@ def test_success_interval_closed_forms_and_scipy() -> None:
         success_interval(4, 3)
     with pytest.raises(ValueError, match="trials: expected a positive integer, found 0"):
         success_interval(0, 0)
+
+
+# ------------------------------------------------------------- the report's seed statistics
+def _seed_run(final_return: float, first_hold: float | None, settling: int | None) -> dict:
+    """A run result with only what the report's seed statistics read."""
+    seconds = [0.0, 5.0] + ([first_hold] if first_hold is not None else [])
+    held = [0.0, 0.0] + ([1.0] if first_hold is not None else [])
+    returns = [-1500.0] * (len(seconds) - 1) + [final_return]
+    metrics = {"steady_state_error": 0.0, "peak_deviation": 1.0, "settling_time": settling}
+    return {
+        "curve": {"seconds": seconds, "returns": returns, "held_fraction": held},
+        "responses": {"impulse": {"metrics": metrics}},
+    }
+
+
+def test_report_seed_statistics_match_scipy_trim_mean_and_a_hand_iqm() -> None:
+    """The report's IQM over seeds, not against leoc's own ``iqm`` but against
+    scipy.stats.trim_mean(x, 0.25) (what rliable's IQM is) and the value worked out by hand."""
+    from scipy.stats import trim_mean
+
+    from leoc.experiments.report import seed_statistics
+
+    finals = [-100.0, -150.0, -900.0, -210.0, -205.0, -5000.0, -190.0, -180.0]
+    holds = [10.0, 20.0, 30.0, None, 40.0, 50.0, 60.0, 1000.0]
+    settlings = [30, 31, None, 33, 34, 35, 36, 400]
+    runs = [_seed_run(*values) for values in zip(finals, holds, settlings, strict=True)]
+    rows = seed_statistics({"pendulum": {"ddpg_hybrid": runs}})
+    by_quantity = {row["quantity"]: row for row in rows}
+    # sorted finals: -5000, -900 | -210, -205, -190, -180 | -150, -100: IQM = -785 / 4
+    final = by_quantity["final return"]
+    assert final["iqm"] == pytest.approx(-196.25, rel=1e-12)
+    assert final["iqm"] == pytest.approx(trim_mean(finals, 0.25), rel=1e-12)
+    assert final["n"] == 8 and final["n_missing"] == 0
+    assert final["ci_low"] <= final["iqm"] <= final["ci_high"]
+    # 7 values held: 10 | 20, 30, 40, 50, 60 | 1000 (one cut from each end): IQM = 40
+    hold = by_quantity["interaction time to first hold [s]"]
+    present = [value for value in holds if value is not None]
+    assert hold["iqm"] == pytest.approx(40.0, rel=1e-12)
+    assert hold["iqm"] == pytest.approx(trim_mean(present, 0.25), rel=1e-12)
+    assert (hold["n"], hold["n_missing"]) == (7, 1)
+    settling = by_quantity["impulse settling time [steps]"]
+    # 30 | 31, 33, 34, 35, 36 | 400: IQM = 169 / 5
+    assert settling["iqm"] == pytest.approx(169.0 / 5.0, rel=1e-12)
+    assert (settling["n"], settling["n_missing"]) == (7, 1)
