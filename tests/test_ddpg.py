@@ -421,6 +421,39 @@ def test_baseline_physical_policy_matches_sb3_predict():
     assert not physical_policy(model.actor).is_hybrid
 
 
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+@pytest.mark.parametrize("hybrid", [False, True])
+def test_physical_policy_accepts_the_sb3_policy(algo, hybrid):
+    """``physical_policy(model.policy)`` is ``physical_policy(model.actor)``, and both act as the
+    SB3 actor's deterministic action (``model.predict``) to float32 precision."""
+    from stable_baselines3 import SAC
+
+    from leoc.ddpg import HybridSACPolicy
+
+    env = make_env("cartpole")
+    if hybrid:
+        policy_class = HybridSACPolicy if algo == "sac" else HybridTD3Policy
+        kwargs = hybrid_policy_kwargs("cartpole", net_arch=SMALL_NET)
+    else:
+        policy_class, kwargs = "MlpPolicy", {"net_arch": SMALL_NET}
+    algorithm = {"ddpg": DDPG, "td3": TD3, "sac": SAC}[algo]
+    model = algorithm(policy_class, env, policy_kwargs=kwargs, seed=0, device="cpu")
+    # away from the operating point, where the MLP part acts
+    obs = np.random.default_rng(1).normal(size=(16, env.observation_space.shape[0]))
+    sb3_actions, _ = model.predict(obs, deterministic=True)
+    from_policy = physical_policy(model.policy)
+    actions = from_policy(torch.as_tensor(obs)).numpy()
+    np.testing.assert_array_equal(actions, physical_policy(model.actor)(torch.as_tensor(obs)))
+    np.testing.assert_allclose(actions, sb3_actions, rtol=F32_RTOL, atol=F32_ATOL)
+    assert from_policy.is_hybrid == hybrid
+
+
+def test_physical_policy_names_the_call_for_a_model():
+    model = LeocTD3("MlpPolicy", make_env("pendulum"), policy_kwargs={"net_arch": SMALL_NET})
+    with pytest.raises(TypeError, match=r"physical_policy\(model\.policy\).*found LeocTD3$"):
+        physical_policy(model)
+
+
 @pytest.mark.slow
 def test_hybrid_ddpg_learns_to_hold_pendulum_on_most_seeds(tmp_path):
     """The paper's budget (10k steps) on three seeds: at least two reach and hold the operating

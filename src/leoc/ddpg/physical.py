@@ -26,7 +26,8 @@ import math
 import numpy as np
 import torch
 from stable_baselines3.sac.policies import Actor as SACActor
-from stable_baselines3.td3.policies import Actor
+from stable_baselines3.sac.policies import SACPolicy
+from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
 from leoc.ddpg.policies import HybridActorMixin, action_box, roa_relevance
@@ -106,23 +107,36 @@ class PhysicalPolicy(nn.Module):
         return self.hybrid.relevance(x)
 
 
-def physical_policy(actor: Actor | SACActor) -> PhysicalPolicy:
+def physical_policy(actor: Actor | SACActor | TD3Policy | SACPolicy) -> PhysicalPolicy:
     """float64 physical-units copy of an SB3 DDPG/TD3 or SAC actor, baseline or hybrid
     (:class:`~leoc.ddpg.HybridActor`, :class:`~leoc.ddpg.HybridSACActor`): its deterministic
     action.
 
-    The copy shares nothing with ``actor`` (later training does not change it) and has no
-    trainable parameters (all ``requires_grad`` off; gradients with respect to the *input* still
-    flow, so autograd Jacobians work).
+    Parameters
+    ----------
+    actor : SB3 actor or policy
+        ``model.actor`` of an SB3 ``DDPG``/``TD3``/``SAC`` model, or ``model.policy`` (the
+        policy's ``actor`` is taken; both give the same copy).
+
+    Returns
+    -------
+    PhysicalPolicy
+        The copy: it shares nothing with ``actor`` (later training does not change it) and has
+        no trainable parameters (all ``requires_grad`` off; gradients with respect to the
+        *input* still flow, so autograd Jacobians work).
 
     Raises
     ------
     TypeError
-        If ``actor`` is not an SB3 DDPG/TD3 or SAC actor.
+        If ``actor`` is neither an SB3 DDPG/TD3 or SAC actor nor a policy holding one (for a
+        model, pass ``model.policy``).
     """
+    if isinstance(actor, (TD3Policy, SACPolicy)):
+        actor = actor.actor
     if not isinstance(actor, (Actor, SACActor)):
         raise TypeError(
-            f"actor: expected an SB3 DDPG/TD3 or SAC Actor, found {type(actor).__name__}"
+            "actor: expected an SB3 DDPG/TD3 or SAC actor or policy (physical_policy(model.policy)"
+            f" or physical_policy(model.actor)), found {type(actor).__name__}"
         )
     centre, half = action_box(actor.action_space)
     low = np.asarray(actor.action_space.low, dtype=np.float64).reshape(-1)
