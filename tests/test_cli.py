@@ -237,6 +237,44 @@ def test_the_authors_metrics_refuse_a_band_in_one_line(capsys) -> None:
     assert "--band: the authors' metrics fix the band" in line
 
 
+def _check_mountain_car_certificate(certificate: dict, system) -> None:
+    """The ROA JSON against references computed here: P is scipy's DARE solution on the
+    closed-form Jacobian of the semi-implicit Euler step at the hilltop; the extent of
+    {z^T P z <= rho} is sqrt(rho (P^-1)_ii); the set stays on the track (x <= 2.2 - pi/2), which
+    is what limits it, so rho is just below TRACK_HIGH^2 / (P^-1)_00; and V decreases on
+    samples of the set under the saturated LQR, simulated in numpy."""
+    import scipy.linalg
+
+    from leoc.systems.mountaincar import TRACK_HIGH
+
+    p = system.params
+    slope = p.gravity * p.hill_amplitude
+    a_matrix = np.array([[1.0 + p.dt**2 * slope, p.dt], [p.dt * slope, 1.0]])
+    b_matrix = np.array([[p.dt**2 / p.mass], [p.dt / p.mass]])
+    q_matrix, r_matrix = np.diag(system.default_q), np.diag(system.default_r)
+    riccati = scipy.linalg.solve_discrete_are(a_matrix, b_matrix, q_matrix, r_matrix)
+    np.testing.assert_allclose(certificate["P"], riccati, rtol=1e-8)
+    gain = np.linalg.solve(
+        r_matrix + b_matrix.T @ riccati @ b_matrix, b_matrix.T @ riccati @ a_matrix
+    )
+    rho, inverse = certificate["rho"], np.linalg.inv(riccati)
+    np.testing.assert_allclose(certificate["extent"], np.sqrt(rho * np.diag(inverse)), rtol=1e-8)
+    on_track = TRACK_HIGH**2 / inverse[0, 0]
+    assert 0.999 * on_track <= rho <= on_track
+    # uniform samples of the ellipse z = sqrt(rho) L^-T (radius * direction)
+    rng = np.random.default_rng(0)
+    direction = rng.standard_normal((20_000, 2))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    radius = np.sqrt(rng.uniform(1e-6, 1.0, (20_000, 1)))
+    z = np.sqrt(rho) * (radius * direction) @ np.linalg.inv(np.linalg.cholesky(riccati))
+    force = np.clip(-(z @ gain.T)[:, 0], -p.max_force, p.max_force)
+    speed = z[:, 1] + p.dt * (force / p.mass + slope * np.sin(z[:, 0]))
+    following = np.stack([z[:, 0] + p.dt * speed, speed], 1)
+    value = np.einsum("bi,ij,bj->b", z, riccati, z)
+    assert np.max(value) <= rho * (1 + 1e-9)
+    assert np.all(np.einsum("bi,ij,bj->b", following, riccati, following) < value)
+
+
 def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:
     from leoc.control import certify_lqr
 
@@ -248,6 +286,7 @@ def test_roa_json_matches_the_library_and_plots(tmp_path, capsys) -> None:
     expected = certify_lqr(system, design_lqr(system), samples=5000, seed=0)
     assert report["certificate"]["rho"] == expected.rho
     assert report["certificate"]["samples"] == 5000
+    _check_mountain_car_certificate(report["certificate"], system)
     assert report["basins"]["LQR (period 1)"]["certified_set_held"] == 1.0
     assert plot.is_file()
     assert (
