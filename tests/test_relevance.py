@@ -331,13 +331,15 @@ def test_roa_relevance_matches_its_closed_form_with_numbers():
     out by hand for a plain 2-state layout and for an angle seen through (cos, sin)."""
     plain = make_system("mountaincar").obs_layout
     module = ROARelevance(
-        plain, [0.0, 0.0], [[2.0, 0.5], [0.5, 1.0]], 1.0, width_init=1.0, learn_width=False
+        plain, [0.0, 0.0], [[2.0, 0.5], [0.5, 1.0]], 1.0, width_init=0.5, learn_width=False
     )
-    # z = (0.5, 0): V = 0.5, flat top. z = (1, 0): V = 2, t = 1, r = 0.
-    # z = (0.6, 0.6): V = 2 (0.36) + 2 (0.5)(0.36) + 0.36 = 1.44, t = 0.44,
-    # 10 (0.085184) - 15 (0.03748096) + 6 (0.0164916224) = 0.3885753344.
-    obs = torch.tensor([[0.5, 0.0], [1.0, 0.0], [0.6, 0.6]], dtype=DTYPE)
-    expected = [1.0, 0.0, 1.0 - 0.3885753344]
+    # w = 0.5. z = (0.5, 0): V = 0.5, flat top. z = (1, 0): V = 2, t = 2 -> 1, r = 0.
+    # z = (0.6, 0.6): V = 2 (0.36) + 2 (0.5)(0.36) + 0.36 = 1.44, t = 0.88,
+    # 10 (0.681472) - 15 (0.59969536) + 6 (0.5277319168) = 0.9856811008.
+    # z = (0.8, 0): V = 1.28, t = 0.56, 10 (0.175616) - 15 (0.09834496) + 6 (0.0550731776)
+    # = 0.6114246656.
+    obs = torch.tensor([[0.5, 0.0], [1.0, 0.0], [0.6, 0.6], [0.8, 0.0]], dtype=DTYPE)
+    expected = [1.0, 0.0, 1.0 - 0.9856811008, 1.0 - 0.6114246656]
     np.testing.assert_allclose(module(obs).detach().numpy()[:, 0], expected, rtol=1e-12)
     angle = make_system("pendulum").obs_layout
     module = ROARelevance(angle, [0.0, 0.0], [[2.0, 0.0], [0.0, 1.0]], 0.4, width_init=1.0)
