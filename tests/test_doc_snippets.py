@@ -10,6 +10,8 @@ page, and :data:`SKIPPED` lists those pages, so a new skip is a visible choice.
 
 from __future__ import annotations
 
+import importlib.util
+import json
 import re
 import sys
 import types
@@ -224,3 +226,68 @@ def test_the_cli_help_names_the_custom_system_guide() -> None:
     from leoc.cli._args import SYSTEM_HELP
 
     assert "docs/user_guide/custom_system.md" in SYSTEM_HELP
+
+
+# --- the getting-started page's numbers come from the published studies and the tests -------
+GETTING_STARTED = DOCS / "getting_started.md"
+STUDIES = ("results/paper", "results/paper-authors")
+VARIANT_LABELS = {"leoc": "leoc's defaults", "authors": "the authors' variant"}
+SYSTEM_LABELS = {"pendulum": "pendulum", "cartpole": "cart-pole", "mountaincar": "mountain-car"}
+KIND_LABELS = {"baseline": "baseline", "hybrid": "hybrid", "hybrid_roa": "ROA hybrid"}
+SECONDS_PER_MINUTE = 60
+
+
+def _page_text(page: Path) -> str:
+    """The page with every run of white space one blank (sentences wrap anywhere)."""
+    return " ".join(page.read_text(encoding="utf-8").split())
+
+
+def study_summary(folder: Path) -> str:
+    """The page's description of a published study, from its ``meta.json`` and run folders."""
+    meta = json.loads((folder / "meta.json").read_text(encoding="utf-8"))
+    runs = sorted(folder.glob("runs/*/*/seed*/evaluation.json"))
+    seconds = sum(json.loads(run.read_text(encoding="utf-8"))["wall_seconds"] for run in runs)
+    seeds = meta["seeds"]
+    assert seeds == list(range(seeds[0], seeds[-1] + 1)), seeds  # written as a range
+    controllers = meta["controllers"]
+    sac = "SAC included" if any(name.startswith("sac_") for name in controllers) else "no SAC"
+    jobs, cores = meta["jobs"], meta["machine"]["logical_cpus"]
+    minutes = seconds / jobs / SECONDS_PER_MINUTE
+    return (
+        f"`{folder.relative_to(ROOT).as_posix()}` ({VARIANT_LABELS[meta['variant']]}): "
+        f"{len(controllers)} controllers, {sac}, seeds {seeds[0]}-{seeds[-1]}, {len(runs)} runs, "
+        f"{seconds:.0f} s of worker time ({minutes:.0f} min on {cores} cores, {jobs} runs at a "
+        "time)"
+    )
+
+
+def learning_case_summary(
+    system: str, controller: str, budget: int, seeds: int, at_least: int
+) -> str:
+    """The page's description of one case of ``tests/test_learning.py``."""
+    framework, _, kind = controller.partition("_")
+    assert budget % 1000 == 0, budget
+    return (
+        f"{framework.upper()}'s {SYSTEM_LABELS[system]} {KIND_LABELS[kind]} at {budget // 1000}k "
+        f"steps on at least {at_least} of seeds 0-{seeds - 1}"
+    )
+
+
+def _learning_cases() -> list[tuple]:
+    spec = importlib.util.spec_from_file_location("learning_cases", ROOT / "tests/test_learning.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.CASES
+
+
+@pytest.mark.parametrize("study", STUDIES)
+def test_getting_started_describes_the_published_study(study: str) -> None:
+    expected = study_summary(ROOT / study)
+    assert expected in _page_text(GETTING_STARTED), f"the page should say: {expected}"
+
+
+def test_getting_started_states_the_learning_tests_thresholds() -> None:
+    page = _page_text(GETTING_STARTED)
+    for system, controller, budget, seeds, _measured, at_least in _learning_cases():
+        expected = learning_case_summary(system, controller, budget, seeds, at_least)
+        assert expected in page, f"the page should say: {expected}"
