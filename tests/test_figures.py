@@ -9,9 +9,17 @@ import pytest
 
 from leoc.evaluation.plots.basins import draw_basins
 from leoc.evaluation.plots.common import layout_problems, pyplot
-from leoc.evaluation.plots.learning import draw_learning_curves
+from leoc.evaluation.plots.learning import draw_learning_curves, learning_caption
 from leoc.evaluation.plots.relevance import break_at_wraps, draw_relevance
-from leoc.evaluation.plots.responses import draw_responses, visible_part
+from leoc.evaluation.plots.responses import (
+    Response,
+    draw_responses,
+    exit_mark,
+    exit_text,
+    falls_or_diverges,
+    panel_layout,
+    visible_part,
+)
 from leoc.evaluation.plots.robustness import draw_robustness
 from leoc.experiments.profiles import CONTROLLER_LABELS, CONTROLLERS
 from leoc.systems import make_system
@@ -80,7 +88,7 @@ def test_responses_figure_reads_cleanly():
         *(CONTROLLER_LABELS[c] for c in ("linear", "ddpg_hybrid", "ddpg_baseline")),
         CONTROLLER_LABELS["pilco_hybrid"],
         CONTROLLER_LABELS["pilco_baseline"],
-        "left the plotted range",
+        "falls or diverges (leaves the range)",
         "episode ended early",
     }
     pendulum = figure.axes[0]
@@ -251,3 +259,169 @@ def test_the_checks_catch_data_beyond_the_axes_and_a_legend_over_a_panel():
     figure.legend(loc="center")  # over both panels
     assert any("legend over" in p for p in layout_problems(figure))
     plt.close(figure)
+
+
+# ------------------------------------------------------------ decisions, against known answers
+PENDULUM_HOLD = 5.0  # deg, the pendulum's hold band
+MOUNTAINCAR_HOLD = 0.05  # m
+READABLE_POINTS = 8.0
+"""Smallest font a bar label may have: 13 px at the saved 120 dpi."""
+
+
+def _step_to(final: float, steps: int = 120, rise: int = 10) -> np.ndarray:
+    """0, a linear rise to ``final`` over ``rise`` steps, then ``final`` held: its extremes are
+    exactly 0 and ``final``."""
+    return np.concatenate([np.linspace(0.0, final, rise), np.full(steps - rise, final)])
+
+
+def _dip(depth: float, steps: int = 120) -> np.ndarray:
+    """0, down to ``-depth`` and back to 0, then 0 held: extremes exactly ``-depth`` and 0."""
+    return np.concatenate(
+        [np.linspace(0.0, -depth, 6), np.linspace(-depth, 0.0, 6)[1:], np.zeros(steps - 11)]
+    )
+
+
+@pytest.mark.parametrize(
+    ("record", "falls"),
+    [
+        (Response(_step_to(3.35)), False),  # settles off zero: not a fall
+        (Response(_step_to(180.0)), False),  # settles, wherever (the record says so)
+        (Response(_step_to(1.0), terminated=True), True),  # the episode ended early
+        (Response(_step_to(4.9), settled=False), False),  # still moving, within the band
+        (Response(_step_to(5.1), settled=False), True),  # still moving, beyond the band
+        # a wrapped record that turns once and ends at +2 deg: unwrapped it ends at 362 deg
+        (Response(_wrap_degrees(_step_to(362.0)), settled=False), True),
+    ],
+    ids=["settles_off_zero", "settles_far", "terminated", "moving_in", "moving_out", "turned"],
+)
+def test_a_run_falls_or_diverges_from_its_record_alone(record, falls):
+    assert falls_or_diverges(record, PENDULUM_HOLD, unwrap=True) is falls
+
+
+def test_a_run_that_settles_off_zero_is_inside_the_range_and_not_marked():
+    """The issue's pendulum: a DDPG baseline settling at +3.35 deg among traces near 0."""
+    by_key = {
+        "linear": [Response(_dip(1.0))],
+        "ddpg_hybrid": [Response(_dip(0.8)), Response(_dip(0.9))],
+        "ddpg_baseline": [Response(_step_to(3.35))],
+    }
+    limits, traces = panel_layout(by_key, unwrap=True, hold_band=PENDULUM_HOLD)
+    span = 3.35 + 1.0
+    assert limits == pytest.approx((-1.0 - 0.15 * span, 3.35 + 0.15 * span))
+    assert {key: exit_mark(trace, limits) for key, trace in traces.items()} == dict.fromkeys(by_key)
+    figure = draw_responses({"pendulum": {"step": by_key}}, CONTROLLER_LABELS)
+    labels = {text.get_text() for text in figure.legends[0].get_texts()}
+    assert not any("falls" in label or "range" in label for label in labels)
+    assert "triangle" not in figure.legends[0].get_title().get_text()
+    assert layout_problems(figure) == []
+    pyplot().close(figure)
+
+
+@pytest.mark.parametrize(
+    ("settled", "terminated", "falls"),
+    [(True, False, False), (False, False, True), (False, True, True)],
+    ids=["settles_there", "diverges", "terminated"],
+)
+def test_a_run_far_off_is_left_out_of_the_range_and_marked(settled, terminated, falls):
+    """The issue's mountain car: one run ends at -4.15 m among runs within 0.1 m. The range is
+    the others' (whether the far run settled there or not); the far run is marked at the
+    edge with its extreme, and as a fall only when its record says it falls."""
+    by_key = {
+        "linear": [Response(_step_to(-0.1))],
+        "pilco_baseline": [Response(_step_to(-0.06)) for _ in range(3)],
+        "pilco_hybrid": [
+            Response(_step_to(-0.08)),
+            Response(_step_to(-4.15), terminated=terminated, settled=settled),
+        ],
+        "ddpg_hybrid": [Response(_step_to(-4.15), terminated=terminated, settled=settled)],
+    }
+    limits, traces = panel_layout(by_key, unwrap=False, hold_band=MOUNTAINCAR_HOLD)
+    assert limits == pytest.approx((-0.1 - 0.15 * 0.1, 0.15 * 0.1))
+    marks = {key: exit_mark(trace, limits) for key, trace in traces.items()}
+    assert [key for key, mark in marks.items() if mark is not None] == ["ddpg_hybrid"]
+    mark = marks["ddpg_hybrid"]
+    assert (mark.edge, mark.extreme, mark.falls) == (limits[0], -4.15, falls)
+    assert exit_text(mark, "m", angle=False) == "min -4.15 m"
+    figure = draw_responses({"mountaincar": {"step": by_key}}, CONTROLLER_LABELS)
+    texts = [text.get_text() for text in figure.axes[0].texts]
+    assert texts == ["min -4.15 m"]
+    assert layout_problems(figure) == []
+    pyplot().close(figure)
+
+
+def test_an_angle_past_half_a_turn_is_written_as_such():
+    by_key = {"linear": [Response(_dip(1.0))], "pilco_baseline": [Response(_step_to(-900.0))]}
+    limits, traces = panel_layout(by_key, unwrap=True, hold_band=PENDULUM_HOLD)
+    mark = exit_mark(traces["pilco_baseline"], limits)
+    assert exit_text(mark, "deg", angle=True) == "min < -180 deg"
+
+
+def _curve(seeds: int) -> dict:
+    seconds = np.linspace(0, 100, 30).tolist()
+    rising = (-1000 + 8 * np.array(seconds)).tolist()
+    curve = {"seconds": seconds, "mean": rising, "std": [0.0 if seeds == 1 else 50.0] * 30}
+    curve["n_seeds"] = seeds
+    if seeds >= 3:
+        curve.update(iqm=rising, ci_low=[r - 80 for r in rising], ci_high=[r + 80 for r in rising])
+    return curve
+
+
+@pytest.mark.parametrize("seeds", [1, 2, 5])
+def test_learning_curves_describe_the_bands_they_draw(seeds):
+    curves = {"pendulum": {"ddpg_baseline": _curve(seeds), "ddpg_hybrid": _curve(seeds)}}
+    figure = draw_learning_curves(curves, CONTROLLER_LABELS)
+    caption = figure.legends[0].get_title().get_text().replace("\n", " ")
+    bands = sum(len(axis.collections) for axis in figure.axes)
+    assert bands == (0 if seeds == 1 else 2)
+    assert ("shaded" in caption) is (seeds > 1)
+    if seeds == 1:
+        assert "one seed (no band)" in caption
+    else:
+        assert f"over the {seeds} seeds" in caption
+    pyplot().close(figure)
+
+
+def test_the_learning_caption_names_each_kind_with_its_seeds():
+    assert "shaded" not in learning_caption({"single": {1}})
+    mixed = learning_caption({"iqm": {5}, "single": {1}})
+    assert "interquartile mean over the 5 seeds; shaded" in mixed
+    assert "A controller with one seed: its run's evaluation return, no band." in mixed
+
+
+def _many_roa_rows(value: float) -> list[dict]:
+    """Eleven controllers, as the paper's figure, all with 3-digit labels."""
+    return [
+        {
+            "system": system,
+            "controller": controller,
+            "basin_box_fraction": value,
+            "certified_set_held": value,
+            "certified_box_fraction": value,
+        }
+        for system in ("pendulum", "cartpole", "mountaincar")
+        for controller in CONTROLLERS
+    ]
+
+
+def test_bar_labels_are_readable_and_apart():
+    """Every bar label is at least READABLE_POINTS, inside its panel, clear of the other
+    labels and of the certified ticks, at the saved size (eleven controllers of 100%)."""
+    figure = draw_basins(_many_roa_rows(1.0), CONTROLLER_LABELS)
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()
+    for axis in figure.axes:
+        labels = axis.texts
+        assert len(labels) == 2 * len(CONTROLLERS)
+        assert min(text.get_fontsize() for text in labels) >= READABLE_POINTS
+        ticks = [t.get_fontsize() for t in axis.get_xticklabels()]
+        assert min(ticks) >= READABLE_POINTS
+        boxes = [text.get_window_extent(renderer) for text in labels]
+        panel = axis.get_window_extent(renderer)
+        assert all(panel.contains(b.x0, b.y0) and panel.contains(b.x1, b.y1) for b in boxes)
+        for index, box in enumerate(boxes):
+            assert not any(box.overlaps(other) for other in boxes[index + 1 :]), index
+        (certified,) = axis.collections  # the ticks at the certified share, here 100%
+        tick_top = axis.transData.transform((0, 100.0))[1]
+        assert all(box.y0 > tick_top for box in boxes)
+        assert certified is not None
+    pyplot().close(figure)

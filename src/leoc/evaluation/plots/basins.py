@@ -1,7 +1,8 @@
 """Empirical basins beside the certified region of attraction: per system, each controller's
-share of the basin box held and of its LQR's certified set held (bars, labelled with their
-value, 0 included), and the certified set's own share of the box (a tick over each
-controller's bars: each controller's LQR is the one designed for its control period)."""
+share of the basin box held and of its LQR's certified set held (bars, their values written
+upward in a row above 100%, 0 included), and the certified set's own share of the box (a tick
+over each controller's bars: each controller's LQR is the one designed for its control
+period)."""
 
 from __future__ import annotations
 
@@ -18,15 +19,21 @@ BOX_COLOUR = "#1f77b4"
 SET_COLOUR = "#2ca02c"
 CERTIFIED_COLOUR = "#222222"
 PERCENT = 100.0
-Y_TOP = 118.0
-"""Room above 100% for the bar labels."""
-LABEL_FONT_SIZE = 6
-TICK_FONT_SIZE = 7
+Y_TOP = 125.0
+"""Room above 100% for the bar labels (written upward, so a 3-digit value needs ~20%)."""
+MIN_FONT_SIZE = 8.0
+"""Smallest font (points) of any text in the figure: 13 pixels at the saved 120 dpi."""
+LABEL_FONT_SIZE = MIN_FONT_SIZE
+TICK_FONT_SIZE = MIN_FONT_SIZE
+LABEL_ROW = 102.0
+"""Height (percent) of the row of bar labels: above every bar and every certified tick (both
+at most 100%), so no label is crossed by a tick or sits on a neighbouring bar."""
 CAPTION = (
     "Blue: share of seeded starts in the basin box from which the controller converges to "
     "the operating point and holds it; green: the same for starts uniform in the certified "
     "region of attraction of the LQR designed for the controller's control period (100% when "
-    "the basin contains the certified set); black tick: the certified set's share of the box."
+    "the basin contains the certified set); black tick: the certified set's share of the box. "
+    "Numbers above the bars: each bar's value in % (n/a: not measured)."
 )
 
 
@@ -49,10 +56,11 @@ def draw_basins(rows: Sequence[Mapping[str, Any]], labels: Mapping[str, str] | N
                 text = "n/a" if np.isnan(value) else f"{value:.0f}"
                 axis.text(
                     xi,
-                    (0 if np.isnan(value) else value) + 1.5,
+                    LABEL_ROW,
                     text,
                     ha="center",
                     va="bottom",
+                    rotation=90,  # upright labels of neighbouring bars would run into each other
                     fontsize=LABEL_FONT_SIZE,
                 )
         certified = PERCENT * np.array([row["certified_box_fraction"] for row in selected])

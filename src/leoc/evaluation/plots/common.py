@@ -61,6 +61,9 @@ OTHER_COLOUR = "#7f7f7f"
 FIGURE_DPI = 120
 PANEL_SIZE = (4.2, 3.0)
 LEGEND_COLUMNS = 4
+LEGEND_COLUMN_INCHES = 3.0
+"""Figure width per legend column: a one-panel figure gets one column, so its legend (its
+longest entries are ~2.5 in in the small font) stays within the figure."""
 CAPTION_WIDTH_PER_INCH = 16
 """Caption characters per inch of figure width (small font) before it wraps."""
 EDGE_TOLERANCE = 1e-9
@@ -119,21 +122,27 @@ def axes_handles(axes: Any) -> dict[str, Any]:
 
 
 def legend_below(figure: Any, handles: Mapping[str, Any], caption: str | None = None) -> None:
-    """One legend for the whole figure below the panels, outside them (the constrained layout
-    makes room), with the caption as its heading, wrapped to the figure's width."""
+    """One legend for the whole figure below the panels, outside them, with the caption as its
+    heading, wrapped to the figure's width. The figure grows by the legend's height, so the
+    panels keep their size however long the caption (the constrained layout places it)."""
     if not handles and not caption:
         return
-    width = int(figure.get_figwidth() * CAPTION_WIDTH_PER_INCH)
-    figure.legend(
+    width_inches = figure.get_figwidth()
+    width = int(width_inches * CAPTION_WIDTH_PER_INCH)
+    columns = min(LEGEND_COLUMNS, len(handles), int(width_inches // LEGEND_COLUMN_INCHES))
+    legend = figure.legend(
         list(handles.values()),
         list(handles),
         loc="outside lower center",
-        ncol=max(1, min(LEGEND_COLUMNS, len(handles))),
+        ncol=max(1, columns),
         fontsize="small",
         frameon=False,
         title=textwrap.fill(caption, width) if caption else None,
         title_fontsize="small",
     )
+    renderer = figure.canvas.get_renderer()
+    height = legend.get_window_extent(renderer).height / figure.dpi
+    figure.set_figheight(figure.get_figheight() + height)
 
 
 # ------------------------------------------------------------------------------------ checks

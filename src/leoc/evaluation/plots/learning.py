@@ -25,6 +25,8 @@ KINDS = ("baseline", "hybrid")
 BAND_ALPHA = 0.2
 MARKER_BELOW_POINTS = 20
 """Curves with fewer grid points than this get a dot per evaluation."""
+MIN_SEEDS_FOR_BAND = 2
+"""Fewest seeds with a spread to shade; one seed is drawn as its line alone."""
 
 
 def _centre_and_band(curve: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
@@ -36,23 +38,41 @@ def _centre_and_band(curve: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, 
     return centre, centre - std, centre + std, "mean"
 
 
-def learning_caption(kinds: set[str], counts: set[int]) -> str:
-    """What the lines and bands are, for the seeds the figure holds."""
-    seeds = "/".join(str(n) for n in sorted(counts))
+def band_kind(curve: Mapping[str, Any]) -> str:
+    """What a curve's line is and whether it has a band: ``"iqm"`` (IQM and its bootstrap
+    interval), ``"mean"`` (mean +/- one std, two seeds) or ``"single"`` (one seed: its own
+    curve, no band, as there is no spread to show)."""
+    if int(curve["n_seeds"]) < MIN_SEEDS_FOR_BAND:
+        return "single"
+    return _centre_and_band(curve)[3]
+
+
+def learning_caption(seeds_by_kind: Mapping[str, set[int]]) -> str:
+    """What the lines and bands are, from the :func:`band_kind` of each curve drawn mapped to
+    the seed counts of those curves. A band is described only when one is drawn."""
+
+    def seeds(kind: str) -> str:
+        return "/".join(str(n) for n in sorted(seeds_by_kind[kind]))
+
     parts = [
         "Return of the evaluation episodes (sum of rewards per 200-step episode, higher is "
         "better) against the interaction time the learner had used (simulated seconds)."
     ]
-    if "iqm" in kinds:
+    if "iqm" in seeds_by_kind:
         parts.append(
-            f"Line: interquartile mean over the seeds ({seeds}); shaded: its 95% "
+            f"Line: interquartile mean over the {seeds('iqm')} seeds; shaded: its 95% "
             "stratified-bootstrap confidence interval."
         )
-    if "mean" in kinds:
+    if "mean" in seeds_by_kind:
         parts.append(
-            "Line: mean over the seeds; shaded: +/- one standard deviation (too few seeds for "
-            "an interval)."
+            f"Line: mean over the {seeds('mean')} seeds; shaded: +/- one standard deviation "
+            "(too few seeds for an interval)."
         )
+    if "single" in seeds_by_kind:
+        if len(seeds_by_kind) > 1:
+            parts.append("A controller with one seed: its run's evaluation return, no band.")
+        else:
+            parts.append("Line: the evaluation return of the one seed (no band).")
     return " ".join(parts)
 
 
@@ -65,8 +85,7 @@ def draw_learning_curves(
     drawn = {key.split("_")[0] for by_controller in curves.values() for key in by_controller}
     frameworks = [name for name in FRAMEWORKS if name in PAPER_FRAMEWORKS or name in drawn]
     figure, axes = new_figure(len(frameworks), max(1, len(systems)), (4.2, 3.0))
-    kinds_used: set[str] = set()
-    counts: set[int] = set()
+    seeds_by_kind: dict[str, set[int]] = {}
     for column, system in enumerate(systems):
         for row, framework in enumerate(frameworks):
             axis = axes[row][column]
@@ -76,9 +95,9 @@ def draw_learning_curves(
                 if curve is None:
                     continue
                 seconds = np.array(curve["seconds"])
-                centre, low, high, what = _centre_and_band(curve)
-                kinds_used.add(what)
-                counts.add(int(curve["n_seeds"]))
+                centre, low, high, _ = _centre_and_band(curve)
+                kind = band_kind(curve)
+                seeds_by_kind.setdefault(kind, set()).add(int(curve["n_seeds"]))
                 colour = controller_colour(key)
                 axis.plot(
                     seconds,
@@ -88,11 +107,12 @@ def draw_learning_curves(
                     marker="." if len(seconds) < MARKER_BELOW_POINTS else None,
                     label=labels.get(key, key),
                 )
-                axis.fill_between(seconds, low, high, color=colour, alpha=BAND_ALPHA, lw=0)
+                if kind != "single":
+                    axis.fill_between(seconds, low, high, color=colour, alpha=BAND_ALPHA, lw=0)
             axis.set_title(f"{system}: {framework.upper()}")
             axis.set_xlabel("interaction time [s]")
             axis.set_ylabel("evaluation return")
-    legend_below(figure, axes_handles(axes), learning_caption(kinds_used, counts))
+    legend_below(figure, axes_handles(axes), learning_caption(seeds_by_kind))
     return figure
 
 

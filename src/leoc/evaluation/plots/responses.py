@@ -3,10 +3,21 @@
 Each panel draws, per controller, the median over seeds of e(t) (the deviation of the main
 coordinate from the operating point) with the seeds' range shaded. Angles are unwrapped over
 time before the median, so a pendulum that falls over is one trace moving away and not a comb
-of wrap lines. The y-range comes from the references (the LQRs and the hybrids that settle); a
-trace that leaves it stops at the edge with a triangle, a trace that comes back and settles is
-drawn again from where it re-enters, and an episode that ends early (the cart left its track)
-ends in a cross.
+of wrap lines.
+
+Two decisions are made from the records, not from the drawing (:func:`panel_layout`):
+
+- the y-range (:func:`panel_range`) covers the runs that settle (not terminated), less the
+  outliers among them (a peak over :data:`OUTLIER_FACTOR` times their median peak), so one
+  run that settles far away does not flatten the others;
+- a trace *falls or diverges* (:func:`falls_or_diverges`) when its episode ended early, or
+  when it did not settle and its final window reaches beyond the system's hold band.
+
+A trace that leaves the y-range stops at the edge with a triangle, filled when it falls or
+diverges and open when it does not (it settles or stays near the operating point out of the
+range), and the edge is annotated with how far it went ("min -4.15 m"); a trace that comes back
+and settles is drawn again from where it re-enters, and an episode that ends early (the cart
+left its track) ends in a cross.
 """
 
 from __future__ import annotations
@@ -29,12 +40,20 @@ from leoc.evaluation.plots.common import (
 from leoc.systems import make_system
 
 Y_MARGIN = 0.15
-"""Headroom around the references' range, as a fraction of that range."""
+"""Headroom around the settled runs' range, as a fraction of that range."""
+OUTLIER_FACTOR = 10.0
+"""A settled run whose peak |e| exceeds this many times the median peak of the runs that set
+the range is left out of the range (it is drawn to the edge and annotated)."""
 DEGREES_PER_TURN = 360.0
 BAND_ALPHA = 0.15
 EXIT_MARKER_SIZE = 7
 END_MARKER_SIZE = 8
 LINE_WIDTH = 1.4
+ANNOTATION_FONT_SIZE = 7.5
+ANNOTATION_STEP_POINTS = 9.0
+"""Vertical offset between annotations that would otherwise sit on one another (points)."""
+ANNOTATION_CLOSE = 0.18
+"""Annotations at one edge closer than this fraction of the panel's width are staggered."""
 
 
 class Response(NamedTuple):
@@ -50,7 +69,8 @@ class Trace(NamedTuple):
 
     ``centre`` is the median run's own e(t) (cut short when its episode ended early:
     ``ended_early``); ``low`` and ``high`` the range over the seeds at each step while their
-    episodes run (NaN where none does).
+    episodes run (NaN where none does); ``falls`` whether the median run falls or diverges
+    (:func:`falls_or_diverges`).
     """
 
     centre: np.ndarray
@@ -58,6 +78,25 @@ class Trace(NamedTuple):
     high: np.ndarray
     count: int
     ended_early: bool
+    falls: bool = False
+
+
+class Exit(NamedTuple):
+    """Where a drawn trace leaves the y-range: the first sample outside (``index``), the edge it
+    crosses (``edge``), the furthest value beyond that edge (``extreme``), and whether the run
+    falls or diverges (``falls``; else it is only out of the range chosen for the others)."""
+
+    index: int
+    edge: float
+    extreme: float
+    falls: bool
+
+
+class Panel(NamedTuple):
+    """A panel's decisions: its y-range and one trace per controller."""
+
+    limits: tuple[float, float]
+    traces: dict[str, Trace]
 
 
 class Visible(NamedTuple):
@@ -82,30 +121,80 @@ def as_response(entry: Any) -> Response:
     return Response(np.asarray(entry, dtype=float))
 
 
-def is_reference(key: str) -> bool:
-    """LQRs and hybrids set the axis range (their responses are the ones the paper compares)."""
-    return key.startswith("linear") or "hybrid" in key
+def final_excursion(response: Response, unwrap: bool, window: int = DEFAULT_FINAL_WINDOW) -> float:
+    """Largest :math:`|e|` over the record's last ``window`` samples (angles unwrapped over
+    time, so a pendulum that keeps turning ends many degrees away, not within half a turn);
+    infinite for a record without a finite sample there."""
+    tail = np.abs(_unwrapped(response.deviation, unwrap)[-window:])
+    tail = tail[np.isfinite(tail)]
+    return float(tail.max()) if tail.size else np.inf
 
 
-def panel_range(by_key: Mapping[str, Sequence[Response]], unwrap: bool) -> tuple[float, float]:
-    """y-range of a panel, with a margin, always including 0: the span of the settled, not
-    terminated responses of the references; of every controller's when no reference settles;
-    of every response (angles within half a turn) when none settles."""
-    records = [(key, r) for key, rs in by_key.items() for r in rs]
+def falls_or_diverges(
+    response: Response, hold_band: float, unwrap: bool, window: int = DEFAULT_FINAL_WINDOW
+) -> bool:
+    """Whether a run falls or diverges, from its record alone (never from a plot's range).
+
+    .. math::
+
+        \\text{falls} = \\text{terminated} \\lor \\big(\\lnot\\,\\text{settled} \\land
+            \\max_{t \\ge T - W} |e[t]| > b_{hold}\\big)
+
+    with :math:`W` = ``window`` and :math:`b_{hold}` the system's hold band (the band of its
+    "reached and held the operating point" test, e.g. 5 deg, 0.05 m). A run that settles,
+    wherever it settles, does not fall; neither does one that keeps moving within the hold band.
+    """
+    if response.terminated:
+        return True
+    return not response.settled and final_excursion(response, unwrap, window) > hold_band
+
+
+def range_records(
+    by_key: Mapping[str, Sequence[Response]], hold_band: float, unwrap: bool
+) -> list[Response]:
+    """The records a panel's y-range covers.
+
+    The first non-empty group of: the runs that settled (not terminated); the runs that do not
+    fall or diverge; every run. From that group, outliers are left out: a run whose peak
+    :math:`|e|` (angles within half a turn) exceeds :data:`OUTLIER_FACTOR` times the group's
+    median peak (kept all when that median is 0).
+    """
+    records = [r for rs in by_key.values() for r in rs]
     candidates = (
-        [r for key, r in records if is_reference(key) and r.settled and not r.terminated],
-        [r for _, r in records if r.settled and not r.terminated],
-        [r for _, r in records],
+        [r for r in records if r.settled and not r.terminated],
+        [r for r in records if not falls_or_diverges(r, hold_band, unwrap)],
+        records,
     )
     chosen = next((group for group in candidates if group), [])
-    half_turn = DEGREES_PER_TURN / 2
-    values = [
-        np.clip(_unwrapped(r.deviation, unwrap), -half_turn, half_turn) if unwrap else r.deviation
-        for r in chosen
-    ]
-    finite = [v[np.isfinite(v)] for v in values if np.isfinite(v).any()]
-    low = min([0.0, *(float(v.min()) for v in finite)])
-    high = max([0.0, *(float(v.max()) for v in finite)])
+    peaks = np.array([_peak(r, unwrap) for r in chosen])
+    typical = float(np.median(peaks)) if peaks.size else 0.0
+    if typical == 0.0:
+        return chosen
+    return [r for r, peak in zip(chosen, peaks, strict=True) if peak <= OUTLIER_FACTOR * typical]
+
+
+def _clipped(response: Response, unwrap: bool) -> np.ndarray:
+    """The finite values of a record as the range sees them (angles within half a turn)."""
+    values = _unwrapped(response.deviation, unwrap)
+    if unwrap:
+        half_turn = DEGREES_PER_TURN / 2
+        values = np.clip(values, -half_turn, half_turn)
+    return values[np.isfinite(values)]
+
+
+def _peak(response: Response, unwrap: bool) -> float:
+    values = _clipped(response, unwrap)
+    return float(np.abs(values).max()) if values.size else 0.0
+
+
+def panel_range(
+    by_key: Mapping[str, Sequence[Response]], unwrap: bool, hold_band: float
+) -> tuple[float, float]:
+    """y-range of a panel: the span of :func:`range_records` and 0, with a margin of
+    :data:`Y_MARGIN` of that span on each side."""
+    values = [_clipped(r, unwrap) for r in range_records(by_key, hold_band, unwrap)]
+    low = min([0.0, *(float(v.min()) for v in values if v.size)])
+    high = max([0.0, *(float(v.max()) for v in values if v.size)])
     span = max(high - low, 1e-9)
     return low - Y_MARGIN * span, high + Y_MARGIN * span
 
@@ -127,8 +216,14 @@ def median_run(series: Sequence[np.ndarray], limits: tuple[float, float]) -> int
     return int(np.argmin(distances))
 
 
-def central_trace(records: Sequence[Response], unwrap: bool, limits: tuple[float, float]) -> Trace:
-    """The median run (:func:`median_run`) and the range over the seeds, per time step."""
+def central_trace(
+    records: Sequence[Response],
+    unwrap: bool,
+    limits: tuple[float, float],
+    hold_band: float = np.inf,
+) -> Trace:
+    """The median run (:func:`median_run`) and the range over the seeds, per time step;
+    whether the median run falls or diverges is judged with ``hold_band``."""
     series = [_unwrapped(r.deviation, unwrap) for r in records]
     length = max(len(s) for s in series)
     matrix = np.full((len(series), length), np.nan)
@@ -145,7 +240,42 @@ def central_trace(records: Sequence[Response], unwrap: bool, limits: tuple[float
         high=high,
         count=len(series),
         ended_early=bool(records[chosen].terminated),
+        falls=falls_or_diverges(records[chosen], hold_band, unwrap),
     )
+
+
+def panel_layout(by_key: Mapping[str, Sequence[Response]], unwrap: bool, hold_band: float) -> Panel:
+    """A panel's y-range (:func:`panel_range`) and each controller's trace in it."""
+    limits = panel_range(by_key, unwrap, hold_band)
+    traces = {
+        key: central_trace(records, unwrap, limits, hold_band)
+        for key, records in by_key.items()
+        if records
+    }
+    return Panel(limits, traces)
+
+
+def exit_mark(trace: Trace, limits: tuple[float, float]) -> Exit | None:
+    """Where ``trace`` leaves ``limits`` and how far it goes beyond the edge (None: it stays
+    inside)."""
+    visible = visible_part(trace.centre, limits)
+    if visible.exit is None:
+        return None
+    index, edge = visible.exit
+    finite = trace.centre[np.isfinite(trace.centre)]
+    extreme = float(finite.max() if edge == limits[1] else finite.min())
+    return Exit(index, edge, extreme, trace.falls)
+
+
+def exit_text(mark: Exit, unit: str, angle: bool) -> str:
+    """The annotation at an exit: the trace's extreme beyond the edge ("min -4.15 m"); an angle
+    past half a turn is written as such ("min < -180 deg": it went over)."""
+    side = "max" if mark.extreme > mark.edge else "min"
+    half_turn = DEGREES_PER_TURN / 2
+    if angle and abs(mark.extreme) > half_turn:
+        bound = "> +" if mark.extreme > 0 else "< -"
+        return f"{side} {bound}{half_turn:.0f} {unit}"
+    return f"{side} {mark.extreme:+.3g} {unit}"
 
 
 def visible_part(
@@ -177,7 +307,7 @@ def _band_centre(trace: Trace) -> np.ndarray:
 
 
 def _draw_trace(axis, time, trace: Trace, limits, key: str, bands: bool) -> set[str]:
-    """Draw one controller's trace (and band); returns the markers used."""
+    """Draw one controller's trace (and band, and exit triangle); returns the markers used."""
     colour, style = controller_colour(key), controller_style(key)
     centre = trace.centre
     visible = visible_part(centre, limits)
@@ -199,11 +329,18 @@ def _draw_trace(axis, time, trace: Trace, limits, key: str, bands: bool) -> set[
                 linewidth=0,
             )
             used.add("band")
-    if visible.exit is not None:
-        index, edge = visible.exit
-        marker = "^" if edge == limits[1] else "v"
-        axis.plot(time[index], edge, marker=marker, color=colour, markersize=EXIT_MARKER_SIZE)
-        used.add("exit")
+    mark = exit_mark(trace, limits)
+    if mark is not None:
+        axis.plot(
+            time[mark.index],
+            mark.edge,
+            marker="^" if mark.edge == limits[1] else "v",
+            color=colour,
+            markerfacecolor=colour if mark.falls else "white",
+            markersize=EXIT_MARKER_SIZE,
+            clip_on=False,  # whole, not halved by the axes' edge it sits on
+        )
+        used.add("falls" if mark.falls else "clipped")
     if trace.ended_early and np.isfinite(visible.values[-1]):
         axis.plot(
             time[len(centre) - 1],
@@ -217,11 +354,41 @@ def _draw_trace(axis, time, trace: Trace, limits, key: str, bands: bool) -> set[
     return used
 
 
+def _annotate_exits(axis, time, marks: Sequence[tuple[str, Exit]], unit: str, angle: bool):
+    """Write each exit's extreme beside its triangle, inside the panel; annotations at one edge
+    closer than :data:`ANNOTATION_CLOSE` of the panel's width are stacked inward."""
+    width = max(float(time[-1]), 1e-12)
+    placed: dict[float, list[float]] = {}
+    for key, mark in sorted(marks, key=lambda item: item[1].index):
+        x = float(time[mark.index])
+        at_edge = placed.setdefault(mark.edge, [])
+        near = [other for other in at_edge if abs(other - x) < ANNOTATION_CLOSE * width]
+        at_edge.append(x)
+        top = mark.extreme > mark.edge
+        step = (len(near) + 1) * ANNOTATION_STEP_POINTS
+        left = x > width / 2  # write toward the panel's middle
+        axis.annotate(
+            exit_text(mark, unit, angle),
+            (x, mark.edge),
+            xytext=(-5 if left else 5, -step if top else step),
+            textcoords="offset points",
+            ha="right" if left else "left",
+            va="center",
+            fontsize=ANNOTATION_FONT_SIZE,
+            color=controller_colour(key),
+        )
+
+
 def response_caption(
-    counts: set[int], markers: set[str], angles: bool = True, controllers: int = 2
+    counts: set[int],
+    markers: set[str],
+    angles: bool = True,
+    controllers: int = 2,
+    hold_bands: str = "",
 ) -> str:
     """The figure's caption: what the line, the band and the markers are (``angles``: some
-    panel shows an angle; ``controllers``: how many controllers the figure draws)."""
+    panel shows an angle; ``controllers``: how many controllers the figure draws;
+    ``hold_bands``: the systems' hold bands, as in "pendulum 5 deg, mountaincar 0.05 m")."""
     several = sorted(n for n in counts if n > 1)
     if not several:
         what = "Line: e(t), the deviation of the main coordinate from the operating point"
@@ -234,14 +401,37 @@ def response_caption(
         )
     parts = [what + (" (angles unwrapped over time, so a fall is one trace)." if angles else ".")]
     if controllers > 1:
-        parts.append("The y-range covers the LQRs and the hybrids that settle.")
+        parts.append(
+            "The y-range covers the runs that settle, less any whose peak is over "
+            f"{OUTLIER_FACTOR:.0f} times their median peak."
+        )
     if "band" in markers:
         parts.append("Shaded: the range over the seeds, where all of them are in the plot.")
-    if "exit" in markers:
-        parts.append("A triangle: the trace leaves the range there (it falls or diverges).")
+    bands = f" ({hold_bands})" if hold_bands else ""
+    if "falls" in markers:
+        parts.append(
+            "Filled triangle: the trace leaves the range there and falls or diverges: its "
+            f"episode ended early, or it did not settle and its last {DEFAULT_FINAL_WINDOW} "
+            f"samples reach beyond the system's hold band{bands}."
+        )
+    if "clipped" in markers:
+        parts.append(
+            "Open triangle: the trace leaves the range there but does not fall (it settles, or "
+            "stays within the hold band, out of the range)."
+        )
+    if markers & {"falls", "clipped"}:
+        parts.append("Beside each triangle: how far the trace goes beyond the edge.")
     if "terminated" in markers:
         parts.append("A cross: the episode ended early (the cart left its track).")
     return " ".join(parts)
+
+
+def _unit(system: Any) -> str:
+    """The main coordinate's unit, from its label ("x [m]" -> "m")."""
+    label = str(system.main_label)
+    if "[" in label and label.endswith("]"):
+        return label[label.rindex("[") + 1 : -1]
+    return "deg" if system.main_in_degrees else ""
 
 
 def draw_responses(
@@ -267,21 +457,23 @@ def draw_responses(
                 key: [as_response(entry) for entry in entries]
                 for key, entries in responses[system_name].get(test, {}).items()
             }
-            limits = panel_range(by_key, unwrap)
+            limits, traces = panel_layout(by_key, unwrap, system.hold_band)
             length = max((len(r.deviation) for rs in by_key.values() for r in rs), default=1)
             time = np.arange(length) * system.dt
-            for key, records in by_key.items():
-                if not records:
-                    continue
-                trace = central_trace(records, unwrap, limits)
+            exits = []
+            for key, trace in traces.items():
                 counts.add(trace.count)
                 markers |= _draw_trace(axis, time, trace, limits, key, bands)
+                mark = exit_mark(trace, limits)
+                if mark is not None:
+                    exits.append((key, mark))
                 handles.setdefault(
                     labels.get(key, key),
                     plt.Line2D(
                         [], [], color=controller_colour(key), linestyle=controller_style(key)
                     ),
                 )
+            _annotate_exits(axis, time, exits, _unit(system), unwrap)
             axis.set_ylim(*limits)
             axis.set_xlim(0.0, time[-1])
             axis.axhline(0.0, color="#bbbbbb", linewidth=0.8, zorder=0)
@@ -295,15 +487,22 @@ def draw_responses(
             key=lambda item: order.index(item[0]) if item[0] in order else len(order),
         )
     )
-    if "exit" in markers:
-        handles["left the plotted range"] = plt.Line2D(
+    if "falls" in markers:
+        handles["falls or diverges (leaves the range)"] = plt.Line2D(
             [], [], color="k", marker="^", linestyle="none"
+        )
+    if "clipped" in markers:
+        handles["out of the range, does not fall"] = plt.Line2D(
+            [], [], color="k", marker="^", markerfacecolor="white", linestyle="none"
         )
     if "terminated" in markers:
         handles["episode ended early"] = plt.Line2D([], [], color="k", marker="X", linestyle="none")
-    angles = any(make_system(name).main_in_degrees for name in systems)
+    made = {name: make_system(name) for name in systems}
+    angles = any(system.main_in_degrees for system in made.values())
+    hold_bands = ", ".join(f"{name} {s.hold_band:g} {_unit(s)}" for name, s in made.items())
     keys = {key for by_test in responses.values() for t in by_test.values() for key in t}
-    legend_below(figure, handles, response_caption(counts, markers, angles, len(keys)))
+    caption = response_caption(counts, markers, angles, len(keys), hold_bands)
+    legend_below(figure, handles, caption)
     return figure
 
 
