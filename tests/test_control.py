@@ -259,6 +259,19 @@ def test_linear_plant_design_at_a_period_is_the_lqr_of_a_power_n_and_the_held_su
     np.testing.assert_allclose(design.P, p, rtol=1e-8)
     expected_poles = np.sort_complex(np.linalg.eigvals(a_held - b_held @ gain))
     np.testing.assert_allclose(np.sort_complex(design.closed_loop_eigenvalues), expected_poles)
+    # Margins at the sample time N dt: |L(e^{j w T})| = 1 at the gain crossover w (rad/s) with
+    # T = N dt, L(z) = K (zI - A_N)^-1 B_N, and the phase margin is 180 deg + arg L there.
+    sample_time = period * LinearPlant().dt
+    crossover = design.margins.gain_crossover_frequency
+    z = np.exp(1j * crossover * sample_time)
+    loop = (gain @ np.linalg.solve(z * np.eye(2) - a_held, b_held))[0, 0]
+    assert abs(loop) == pytest.approx(1.0, rel=1e-9)
+    phase = 180.0 + np.degrees(np.angle(loop))
+    assert design.margins.phase_margin == pytest.approx(phase, rel=1e-9)
+    # The stable gain interval's ends put a closed-loop pole of A_N - k B_N K on the unit circle.
+    for factor in design.margins.gain_interval:
+        radius = np.max(np.abs(np.linalg.eigvals(a_held - factor * b_held @ gain)))
+        assert radius == pytest.approx(1.0, abs=1e-9)
 
 
 def test_the_period_changes_the_gain_enough_for_the_tests_to_tell() -> None:
