@@ -90,14 +90,23 @@ def test_every_env_accepts_every_render_mode(name, mode) -> None:
         env.close()
 
 
-def test_human_mode_draws_in_reset_and_step_and_close_releases_the_figure() -> None:
+def test_human_mode_draws_in_reset_and_step_and_close_releases_the_figure(monkeypatch) -> None:
     import matplotlib.pyplot as plt
 
+    drawn = []
+    frame = rd.Renderer.frame
+    monkeypatch.setattr(rd.Renderer, "frame", lambda self, state: drawn.append(state.copy()))
     env = gym.make(ENV_IDS["pendulum"], render_mode="human")
     env.reset(seed=0)
     renderer = env.unwrapped._renderer
     assert renderer is not None and renderer.mode == "human"
-    env.step(env.action_space.sample())
+    for _ in range(2):
+        env.step(env.action_space.sample())
+    # one frame of each state, as gymnasium's human mode: the start and each step's
+    assert len(drawn) == 3
+    np.testing.assert_array_equal(drawn[-1], env.unwrapped.state)
+    monkeypatch.setattr(rd.Renderer, "frame", frame)
+    assert env.render() is None  # human mode draws and returns nothing
     assert plt.fignum_exists(renderer.figure.number)
     number = renderer.figure.number
     env.close()
