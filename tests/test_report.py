@@ -238,33 +238,167 @@ def test_a_hybrid_that_never_settles_is_flagged_with_a_dash_not_nan():
     assert "settling time - vs " in flag and "nan" not in flag
 
 
-def test_the_end_of_run_summary_names_what_failed_and_the_report(tmp_path):
+def test_the_end_of_run_summary_is_one_line_per_check_and_sums_the_invocations(tmp_path):
+    """The terminal summary printed "impulse/step responses: 12 (" and six names on wrapped
+    lines; now one line per check with its count and worst failure, and the wall time of every
+    invocation."""
     import json
 
+    from leoc.experiments.report import response_check, swing_up_check
     from leoc.experiments.summary import summary_lines
 
     (tmp_path / "meta.json").write_text(
         json.dumps(
             {
                 "systems": ["pendulum"],
-                "controllers": ["linear", "ddpg_hybrid"],
-                "wall_seconds_last_invocation": 61.2,
+                "controllers": ["linear", "ddpg_hybrid", "ddpg_hybrid_roa", "sac_hybrid"],
+                "wall_seconds_last_invocation": 0.4,
+                "invocations": [{"wall_seconds": 61.2}, {"wall_seconds": 0.4}],
             }
         )
     )
-    flags = {
-        "responses": [],
-        "robustness": [],
-        "swing_up": ["**pendulum linear (LQR at dt)** does not swing up and hold: 0% ..."],
-        "roa": [],
+    evaluations = _evaluations(1.02)
+    evaluations["pendulum"]["ddpg_hybrid_roa"] = [
+        _run("ddpg_hybrid_roa", s, 1.5, -250.0, True) for s in range(3)
+    ]
+    responses = response_summary(evaluations)
+    checks = {
+        "responses": response_check(responses).to_json(),
+        "swing_up": swing_up_check(swing_up_summary(evaluations)).to_json(),
     }
-    responses = [{"system": "pendulum", "controller": "linear", "test": "impulse"}]
-    (tmp_path / "results.json").write_text(json.dumps({"responses": responses, "flags": flags}))
-    lines = summary_lines(tmp_path)
-    assert lines == [
-        "Finished: 1 system/controller pairs in the report, 61 s wall time.",
-        "Without results (failed; see their train.log): pendulum/ddpg_hybrid.",
-        "Failed checks, swing-up: 1 (pendulum linear (LQR at dt)).",
+    (tmp_path / "results.json").write_text(json.dumps({"responses": responses, "checks": checks}))
+    assert summary_lines(tmp_path) == [
+        "Finished: 4 system/controller pairs in the report; wall time 62 s over 2 invocations "
+        "(the last 0 s).",
+        "Without results (failed; see their train.log): pendulum/sac_hybrid.",
+        "Checks failed/checked, the worst failure of each (report.md lists all):",
+        "  impulse/step responses      4/4  worst: pendulum DDPG hybrid (ROA relevance) "
+        "(impulse) off by 50%",
+        "  swing-up                    1/3  worst: pendulum DDPG baseline 67% held",
         f"Report: {tmp_path / 'report.md'} (figures and CSV files beside it).",
         f"Redraw after a change: leoc plot {tmp_path}",
     ]
+
+
+# ------------------------------------------------------------------------------ the summary
+def _sizes_in_order(line: str) -> list[float]:
+    """The response sizes a summary line names, in its order (``off by 50%``)."""
+    import re
+
+    return [float(found) for found in re.findall(r"off by (\d+)%", line)]
+
+
+def test_the_summary_says_what_worked_and_what_failed_biggest_first():
+    from leoc.experiments.report import response_check, roa_check, robustness_check, swing_up_check
+    from leoc.experiments.summary import summary_markdown
+
+    evaluations = _evaluations(1.02)  # the DDPG hybrid 2% off its LQR's peak deviation
+    evaluations["pendulum"]["ddpg_hybrid_roa"] = [
+        _run("ddpg_hybrid_roa", s, 1.5, -250.0, True) for s in range(3)
+    ]  # 50% off
+    evaluations["pendulum"]["linear_pilco"] = [_run("linear_pilco", 0, 1.0, -1500.0, False)]
+    evaluations["pendulum"]["pilco_hybrid"] = [_run("pilco_hybrid", 0, 1.0, -200.0, True)]
+    swing_up = swing_up_summary(evaluations)
+    checks = {
+        "responses": response_check(response_summary(evaluations)).to_json(),
+        "swing_up": swing_up_check(swing_up).to_json(),
+        "robustness": robustness_check([]).to_json(),
+        "roa": roa_check([]).to_json(),
+    }
+    lines = summary_markdown(checks, ["pendulum/sac_hybrid"])
+    assert len(lines) <= 15 and lines[0] == "## Summary"
+    worked = lines.index("**What worked:**")
+    # 2 of 6 response tests match (the PILCO hybrid's), 3 of 4 learned controllers hold
+    assert lines[worked + 1] == (
+        "- impulse/step responses: 2 of 6 hybrid response tests match their LQR."
+    )
+    assert lines[worked + 2] == (
+        "- swing-up: 3 of 4 learned controllers swing up and hold in every episode."
+    )
+    (responses,) = [line for line in lines if line.startswith("- **impulse/step responses**")]
+    assert "4 of 6 hybrid response tests; biggest: pendulum DDPG hybrid (ROA relevance)" in (
+        responses
+    )
+    assert _sizes_in_order(responses) == [50.0, 50.0, 2.0]  # biggest first, 1 more untold
+    assert responses.endswith("; 1 more in its section.")
+    assert "threshold: each metric within 1% of the LQR's" in responses
+    (swing,) = [line for line in lines if line.startswith("- **swing-up**")]
+    assert "1 of 4 learned controllers; biggest: pendulum DDPG baseline 67% held." in swing
+    assert lines[-2] == "- **runs without results** (failed or not run yet): 1."
+    # the section keeps its full list in the order of its table
+    flags = response_flags(response_summary(evaluations))
+    assert [flag.split("**")[1] for flag in flags] == [
+        "pendulum DDPG hybrid",
+        "pendulum DDPG hybrid (ROA relevance)",
+        "pendulum DDPG hybrid",
+        "pendulum DDPG hybrid (ROA relevance)",
+    ]
+
+
+def test_a_summary_of_every_check_passing_says_so_in_few_lines():
+    from leoc.experiments.report import response_check
+    from leoc.experiments.summary import summary_markdown
+
+    lines = summary_markdown({"responses": response_check([]).to_json()}, [])
+    assert lines == ["## Summary", "", "**What failed:** nothing; every check passed.", ""]
+
+
+def test_the_summary_of_many_failures_keeps_to_fifteen_lines():
+    from leoc.experiments.summary import Failure, check_summary, summary_markdown
+
+    def check(count: int) -> dict:
+        failures = [Failure(f"case {k}", float(k), f"{k} units", "", "") for k in range(count)]
+        return check_summary(
+            count + 1, failures, cases="cases", threshold="0 units", worked="pass"
+        ).to_json()
+
+    checks = {key: check(30) for key in ("responses", "robustness", "swing_up", "roa")}
+    lines = summary_markdown(checks, [f"pendulum/c{k}" for k in range(20)])
+    assert len(lines) <= 15
+    failed = [line for line in lines if line.startswith("- **") and "threshold" in line]
+    assert len(failed) == 4
+    assert all(
+        "biggest: case 29 29 units; case 28 28 units; case 27 27 units;" in line for line in failed
+    )
+    assert all(line.endswith("; 27 more in its section.") for line in failed)
+
+
+def _selection_run(controller: str, seed: int, selection: str | None) -> dict:
+    run = _run(controller, seed, 1.0, -200.0, True)
+    if selection is not None:
+        run["curve"]["model_selection"] = selection
+    return run
+
+
+def test_the_model_selection_sentence_comes_from_what_the_runs_recorded():
+    from leoc.experiments.report import model_selection_text
+
+    evaluations = {
+        "pendulum": {
+            "linear": [_run("linear", 0, 1.0, -1500.0, False)],
+            "ddpg_hybrid": [_selection_run("ddpg_hybrid", s, "best_held") for s in range(3)],
+            "pilco_hybrid": [
+                _selection_run("pilco_hybrid", 0, "final"),
+                _selection_run(
+                    "pilco_hybrid", 1, "best evaluation of iterations >= 6 (iteration 8)"
+                ),
+                _selection_run(
+                    "pilco_hybrid", 2, "best evaluation of iterations >= 6 (iteration 7)"
+                ),
+            ],
+            "sac_baseline": [_selection_run("sac_baseline", 0, None)],
+        }
+    }
+    text = model_selection_text(evaluations)
+    assert text.startswith("Model selection, as each run recorded it: DDPG (3 runs): `best_held`, ")
+    assert "PILCO (1 run): `final`, the final controller" in text
+    # a PILCO selection's iteration differs per run: one rule, two runs
+    assert "PILCO (2 runs): best evaluation of iterations >= 6;" in text
+    assert "SAC (1 run): not recorded." in text
+    assert "optimistic" in text and "no selection" not in text
+    final_only = {"pendulum": {"pilco_hybrid": [_selection_run("pilco_hybrid", 0, "final")]}}
+    text = model_selection_text(final_only)
+    assert text == (
+        "Model selection, as each run recorded it: PILCO (1 run): `final`, the final "
+        "controller (at the end of its training budget)."
+    )

@@ -84,6 +84,39 @@ def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> Non
     assert (tmp_path / "responses.png").is_file()
 
 
+def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -> None:
+    """Rerunning a finished folder printed and reported "wall time of the last invocation:
+    0 s"; the invocations that ran keep their record, and the report and the terminal give
+    each and their sum."""
+    from leoc.experiments.summary import summary_lines
+
+    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    first = json.loads((tmp_path / "meta.json").read_text())
+    (only,) = first["invocations"]
+    assert only["wall_seconds"] > 0
+    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    again = json.loads((tmp_path / "meta.json").read_text())
+    assert again["invocations"] == first["invocations"]
+    assert again["machine"] == first["machine"] and again["versions"] == first["versions"]
+    wall = f"{only['wall_seconds']:.0f} s in one invocation"
+    assert f"Wall time: {wall}; summed wall time" in (tmp_path / "report.md").read_text()
+    assert summary_lines(tmp_path)[0].endswith(f"; wall time {wall}.")
+    # a second invocation that ran something: each, and the sum
+    reproduce(
+        tmp_path,
+        controllers=["linear"],
+        systems=["pendulum", "mountaincar"],
+        jobs=1,
+        echo=lambda _: None,
+    )
+    log = json.loads((tmp_path / "meta.json").read_text())["invocations"]
+    assert [item["runs_finished"] for item in log] == [1, 1]
+    total = sum(item["wall_seconds"] for item in log)
+    text = (tmp_path / "report.md").read_text()
+    assert f"Wall time: {total:.0f} s over 2 invocations (the last" in text
+    assert f"Resumed over 2 invocations ({total:.0f} s of wall time in all)" in text
+
+
 def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monkeypatch) -> None:
     """A study resumed over several sessions: each invocation is logged (interrupted ones
     too) and the report lists them; a published folder (numbers, no models) resumes."""
@@ -101,8 +134,9 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
 
     with monkeypatch.context() as patch:
         patch.setattr(reproduce_module, "sweep", interrupted)
-        with pytest.raises(KeyboardInterrupt):
-            reproduce(first, controllers=["linear"], systems=["pendulum"], jobs=1)
+        with pytest.raises(KeyboardInterrupt):  # with a run to do (a rerun with none is no
+            # invocation to log: test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time)
+            reproduce(first, controllers=["linear"], systems=["pendulum", "cartpole"], jobs=1)
     # the published folder travels to a new machine and carries on there
     moved = tmp_path / "moved"
     publish(first, moved)
@@ -241,7 +275,12 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
     assert {row["controller"] for row in results["responses"]} == set(DEFAULT_CONTROLLERS)
     _damaged_run_folders_are_one_line_errors(out, systems[0])
     report = (out / "report.md").read_text()
-    assert "## Summary" in report and "Model selection: the final controller" in report
+    assert "## Summary" in report and "**What worked:**" in report
+    # the selection each run recorded: DDPG's best_held, PILCO's final (the smoke profile's)
+    assert runs["ddpg_hybrid"]["curve"]["model_selection"] == "best_held"
+    assert runs["pilco_hybrid"]["curve"]["model_selection"] == "final"
+    assert f"DDPG ({2 * len(systems)} runs): `best_held`" in report
+    assert f"PILCO ({2 * len(systems)} runs): `final`" in report
 
 
 def _damaged_run_folders_are_one_line_errors(out: Path, system: str) -> None:

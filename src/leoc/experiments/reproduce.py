@@ -120,12 +120,14 @@ def code_commit() -> str | None:
 
 
 # ---------------------------------------------------------------------------------- training
-def _curve(rows: Sequence[dict[str, Any]]) -> dict[str, list[float]]:
-    """Return against interaction seconds of a learning curve (the trainer contract's rows)."""
+def _curve(rows: Sequence[dict[str, Any]], summary: dict[str, Any]) -> dict[str, Any]:
+    """Return against interaction seconds of a learning curve (the trainer contract's rows),
+    and the model selection the trainer recorded (its summary's ``model_selection``)."""
     return {
         "seconds": [float(row["interaction_seconds"]) for row in rows],
         "returns": [float(row["mean_return"]) for row in rows],
         "held_fraction": [float(row["held_fraction"]) for row in rows],
+        "model_selection": summary.get("model_selection"),
     }
 
 
@@ -141,7 +143,7 @@ def pilco_action_repeat(profile: Profile, system: str, variant: Variant = LEOC) 
 
 def train_controller(
     spec: RunSpec, profile: Profile, train_dir: Path, variant: Variant = LEOC
-) -> tuple[torch.nn.Module, dict[str, list[float]] | None]:
+) -> tuple[torch.nn.Module, dict[str, Any] | None]:
     """Design (linear) or train one controller under ``variant``; returns it (at its control
     period) and its learning curve."""
     system = variant.system(spec.system)
@@ -185,7 +187,7 @@ def train_controller(
             progress="lines",
             **settings,
         )
-    return result.policy, _curve(result.curve)
+    return result.policy, _curve(result.curve, result.summary)
 
 
 def certified_lqr(system: System, period: int, lqr_method: str = "discrete") -> tuple[Any, Any]:
@@ -401,6 +403,14 @@ def reproduce(
         },
         systems=list(systems),
         controllers=list(controllers),
+    )
+    if not any(_pending(out, spec, echo) for spec in specs):
+        # nothing to run: the report is rewritten, and the record of the invocations that ran
+        # (their wall times, machine, versions, workers) stays as they left it
+        write_json_atomic(meta_path, meta)
+        sweep(specs, ProfileRunner(profile, chosen.name), out, run_dir=run_dir_of, echo=echo)
+        return write_report(out)
+    meta.update(
         # the report says "on JOBS workers"
         jobs=jobs or ((os.cpu_count() or 1) if backend == "local" else "Ray cluster"),
         backend=backend,
@@ -482,6 +492,12 @@ class InvocationLog:
             interrupted=ended != FINISHED,
         )
         write_json_atomic(self.meta_path, self.meta)
+
+
+def _pending(out: Path, spec: RunSpec, echo: Callable[[str], None]) -> bool:
+    """Whether ``spec`` is still to run: no readable ``evaluation.json`` (a damaged one is set
+    aside with a message, as the sweep does)."""
+    return read_json_object(run_dir_of(out, spec) / EVALUATION_FILE, echo, "result") is None
 
 
 def _finished_runs(out: Path, specs: Sequence[RunSpec]) -> int:
