@@ -401,6 +401,10 @@ def test_report_animations_of_a_trained_hybrid(tmp_path) -> None:
     assert written == {"pendulum": tmp_path / "animations" / "pendulum.gif"}
     with Image.open(written["pendulum"]) as gif:
         assert gif.n_frames == 2 * (make_system("pendulum").episode_steps + 1)
+    # a report rewritten over the same runs keeps the animation instead of redrawing it
+    drawn_at = written["pendulum"].stat().st_mtime_ns
+    assert video.write_report_animations(tmp_path) == written
+    assert written["pendulum"].stat().st_mtime_ns == drawn_at
 
 
 # --------------------------------------------------------------------------- no prior import

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -202,34 +202,53 @@ def representative_run(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return ordered[(len(ordered) - 1) // 2]
 
 
-def write_report_animations(out_dir: str | Path) -> dict[str, Path]:
+def write_report_animations(
+    out_dir: str | Path, evaluations: Mapping[str, Mapping[str, list[dict[str, Any]]]] | None = None
+) -> dict[str, Path]:
     """``OUT/animations/SYSTEM.gif`` for one hybrid run per system of the ``leoc reproduce``
     folder ``out_dir``: the first hybrid controller (in report order) whose runs kept their
     trained controllers, at its seed of median swing-up return, on the plant of its variant.
 
-    Returns the animations written, by system; a system without such a run gets none (a
-    published folder keeps no trained controllers, so it gets none at all).
+    Parameters
+    ----------
+    out_dir : path
+        The ``leoc reproduce`` folder.
+    evaluations : mapping, optional
+        Its finished runs by system and controller (the report's, filtered by its
+        ``meta.json``); default every finished run
+        (:func:`~leoc.experiments.layout.load_evaluations`).
+
+    Returns
+    -------
+    dict
+        The animation of each system that has one; a system without a kept hybrid controller
+        gets none (a published folder keeps no trained controllers, so it gets none at all).
+        An animation newer than every ``evaluation.json`` of its controller is kept, not redrawn.
     """
     from leoc.experiments.controllers import load_trained_controller
-    from leoc.experiments.layout import load_evaluations
+    from leoc.experiments.layout import EVALUATION_FILE, load_evaluations
     from leoc.experiments.variants import get_variant
     from leoc.names import CONTROLLERS
 
     out_dir = Path(out_dir)
+    evaluations = load_evaluations(out_dir) if evaluations is None else evaluations
     written: dict[str, Path] = {}
-    for system_name, by_controller in load_evaluations(out_dir).items():
+    for system_name, by_controller in evaluations.items():
         for controller in (name for name in CONTROLLERS if "hybrid" in name):
-            runs = [
-                run
-                for run in by_controller.get(controller, [])
-                if _has_controller(_run_dir(out_dir, run))
-            ]
+            every_run = by_controller.get(controller, [])
+            runs = [run for run in every_run if _has_controller(_run_dir(out_dir, run))]
             if not runs:
                 continue
+            path = out_dir / ANIMATIONS_DIR / f"{system_name}.gif"
+            newest = max(
+                (_run_dir(out_dir, run) / EVALUATION_FILE).stat().st_mtime for run in every_run
+            )
+            if path.is_file() and path.stat().st_mtime > newest:
+                written[system_name] = path
+                break
             run = representative_run(runs)
             system = get_variant(run.get("variant", "leoc")).system(system_name)
             policy = load_trained_controller(_run_dir(out_dir, run), system=system_name)
-            path = out_dir / ANIMATIONS_DIR / f"{system_name}.gif"
             label = f"{system_name}/{controller}/seed{run['spec']['seed']}"
             written[system_name] = write_video(system, policy, path, label=label)
             break
