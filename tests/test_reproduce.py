@@ -424,3 +424,20 @@ def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path) ->
             assert row[key] == pytest.approx(value, rel=1e-6, abs=1e-10), (test, key)
     # the step's final value is the equilibrium of the biased loop, far from 0: informative
     assert abs(row["steady_state_error_mean"]) > 0.05
+
+
+def test_the_eta_costs_each_learner_at_its_own_speed() -> None:
+    """One speed factor for every run applied PILCO's 0.4x (its table stale) to SAC's runs,
+    which took 1.13x theirs (results/paper): a learner's finished runs now cost its own."""
+    from leoc.experiments.eta import Finished, Queued, estimate_remaining, kind_factors
+
+    finished = [Finished(400.0, 160.0, "pilco")] * 3 + [Finished(200.0, 226.0, "sac")]
+    factors = kind_factors(finished, [], ["pilco", "sac", "ddpg"])
+    pooled = (3 * 160.0 + 226.0 + 60.0) / (3 * 400.0 + 200.0 + 60.0)
+    assert factors["ddpg"] == pytest.approx(pooled)  # no run of its own yet: all runs' speed
+    assert factors["sac"] == pytest.approx((226.0 + 60.0 * pooled) / (200.0 + 60.0))
+    assert factors["pilco"] == pytest.approx((480.0 + 60.0 * pooled) / (1200.0 + 60.0))
+    sac_left = estimate_remaining(finished, [], [Queued(200.0, "sac")], 1)
+    one_factor = estimate_remaining([run._replace(kind="") for run in finished], [], [200.0], 1)
+    assert one_factor == pytest.approx(200.0 * pooled)
+    assert abs(sac_left - 226.0) < 0.2 * 226.0 < abs(one_factor - 226.0)

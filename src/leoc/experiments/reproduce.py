@@ -436,6 +436,7 @@ def reproduce(
             expected_seconds=profile.cost_model,
             progress_of=trainer_progress,
             on_finished=lambda _key: log.write(RUNNING),
+            kind_of=lambda spec: spec.framework,  # each learner's own speed (leoc.experiments.eta)
         )
     except BaseException:
         # Ctrl-C, SIGTERM (the command raises it as an exception) or an error: a study resumed

@@ -41,7 +41,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.experiments.eta import Finished, Running, estimate_remaining
+from leoc.experiments.eta import Finished, Queued, Running, estimate_remaining
 from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
 
 BACKENDS = ("local", "ray")
@@ -500,8 +500,10 @@ class _Driver:
         expected_seconds: Callable[[Any], float] | None = None,
         progress_of: Callable[[str], float | None] | None = None,
         on_finished: Callable[[str], None] | None = None,
+        kind_of: Callable[[Any], str] | None = None,
     ) -> None:
         self.expected_seconds, self.progress_of = expected_seconds, progress_of
+        self.kind_of = kind_of or (lambda spec: "")
         self.on_finished = on_finished
         self.finished: list[Finished] = []
         self.backend, self.out_dir, self.run_dir = backend, out_dir, run_dir
@@ -546,7 +548,7 @@ class _Driver:
             self.durations.append(wall)
             expected = self._expected(attempt.spec)
             if expected is not None:
-                self.finished.append(Finished(expected, wall))
+                self.finished.append(Finished(expected, wall, self.kind_of(attempt.spec)))
             self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
             if self.on_finished is not None:
                 self.on_finished(attempt.key)
@@ -582,14 +584,18 @@ class _Driver:
         return last_log_line(log, default="running")
 
     def _eta(self, now: float, pending: Sequence[_Attempt], lines: dict[str, str]) -> str:
-        queued = [self._expected(attempt.spec) for attempt in pending]
+        costs = [(self._expected(attempt.spec), self.kind_of(attempt.spec)) for attempt in pending]
         running = []
         for attempt in self.running.values():
             expected = self._expected(attempt.spec)
             fraction = self.progress_of(lines[attempt.key]) if self.progress_of else None
-            running.append((expected, Running(expected or 0.0, now - attempt.started, fraction)))
-        if any(cost is None for cost in queued) or any(e is None for e, _ in running):
+            kind = self.kind_of(attempt.spec)
+            running.append(
+                (expected, Running(expected or 0.0, now - attempt.started, fraction, kind))
+            )
+        if any(cost is None for cost, _ in costs) or any(e is None for e, _ in running):
             return "ETA after the first run"
+        queued = [Queued(cost, kind) for cost, kind in costs]  # type: ignore[arg-type]
         remaining = estimate_remaining(
             self.finished, [run for _, run in running], queued, self.backend.slots()
         )
@@ -651,6 +657,7 @@ def sweep(
     expected_seconds: Callable[[Any], float] | None = None,
     progress_of: Callable[[str], float | None] | None = None,
     on_finished: Callable[[str], None] | None = None,
+    kind_of: Callable[[Any], str] | None = None,
 ) -> SweepResult:
     """Run every spec not finished yet, on this machine or on a Ray cluster.
 
@@ -706,6 +713,9 @@ def sweep(
     on_finished : callable ``key -> None``, optional
         Called in the driver after each run's result is written (e.g. to keep a log of the
         invocation current, so that a machine lost mid-sweep loses at most the runs in flight).
+    kind_of : callable ``spec -> str``, optional
+        The kind of a run: runs of one kind share their speed factor in the ETA (e.g. the
+        learner; :func:`leoc.experiments.eta.kind_factors`). Default: one kind for all.
 
     Returns
     -------
@@ -752,6 +762,7 @@ def sweep(
         expected_seconds,
         progress_of,
         on_finished,
+        kind_of,
     )
     try:
         echo(
