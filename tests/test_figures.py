@@ -388,15 +388,16 @@ def test_the_learning_caption_names_each_kind_with_its_seeds():
     assert "A controller with one seed: its run's evaluation return, no band." in mixed
 
 
-def _many_roa_rows(value: float) -> list[dict]:
-    """Eleven controllers, as the paper's figure, all with 3-digit labels."""
+def _many_roa_rows() -> list[dict]:
+    """Eleven controllers, as the paper's figure: 3-digit labels side by side, and bars of 93%
+    under a certified tick at 100% (the mountain car's, where a label on its bar is crossed)."""
     return [
         {
             "system": system,
             "controller": controller,
-            "basin_box_fraction": value,
-            "certified_set_held": value,
-            "certified_box_fraction": value,
+            "basin_box_fraction": 0.93,
+            "certified_set_held": 1.0,
+            "certified_box_fraction": 1.0,
         }
         for system in ("pendulum", "cartpole", "mountaincar")
         for controller in CONTROLLERS
@@ -405,8 +406,8 @@ def _many_roa_rows(value: float) -> list[dict]:
 
 def test_bar_labels_are_readable_and_apart():
     """Every bar label is at least READABLE_POINTS, inside its panel, clear of the other
-    labels and of the certified ticks, at the saved size (eleven controllers of 100%)."""
-    figure = draw_basins(_many_roa_rows(1.0), CONTROLLER_LABELS)
+    labels and of the certified ticks, at the saved size."""
+    figure = draw_basins(_many_roa_rows(), CONTROLLER_LABELS)
     figure.canvas.draw()
     renderer = figure.canvas.get_renderer()
     for axis in figure.axes:
@@ -421,7 +422,7 @@ def test_bar_labels_are_readable_and_apart():
         for index, box in enumerate(boxes):
             assert not any(box.overlaps(other) for other in boxes[index + 1 :]), index
         (certified,) = axis.collections  # the ticks at the certified share, here 100%
-        tick_top = axis.transData.transform((0, 100.0))[1]
-        assert all(box.y0 > tick_top for box in boxes)
-        assert certified is not None
+        half_width = certified.get_linewidth()[0] * figure.dpi / 72 / 2
+        tick_top = axis.transData.transform((0, 100.0))[1] + half_width
+        assert all(box.y0 >= tick_top for box in boxes)
     pyplot().close(figure)
