@@ -22,6 +22,7 @@ shared with the ablation's re-selection (:func:`leoc.experiments.ablation.delive
 from __future__ import annotations
 
 import copy
+import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -31,6 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from leoc.ddpg.config import MODEL_SELECTIONS
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
+from leoc.progress import evaluation_text, steps_line
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
 __all__ = [
@@ -97,10 +99,12 @@ class LearningCurveCallback(BaseCallback):
     save_best : callable, optional
         Called with the SB3 model whenever the mean return improves (saves ``best_model.zip``).
     progress : bool or "lines"
-        True: a tqdm progress bar over the total steps; ``"lines"``: a plain line (for a log
-        file) every ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation:
-        ``[ddpg] step K/N (P%), R steps/s, last evaluation: return X, held H%`` (the
-        algorithm's name in the brackets: ``label``).
+        True: a tqdm progress bar over the total steps on a terminal (plain lines when stderr
+        is not one); ``"lines"``: a plain line (for a log file) every
+        ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation, never the same line
+        twice in a row: ``[ddpg] step K/N (P%), R steps/s, ETA T, last evaluation: return X,
+        held H%`` (:func:`leoc.progress.steps_line`; the algorithm's name in the brackets:
+        ``label``).
     total_steps : int
         Length of the progress bar.
     model_selection : {"final", "best_last_third", "best_held"}
@@ -162,11 +166,16 @@ class LearningCurveCallback(BaseCallback):
         self._started = time.monotonic()
         self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
         self._last: Evaluation | None = None
+        self._last_line = ""
+        self._steps_at_start = 0
 
     def _on_training_start(self) -> None:
         self._started = time.monotonic()
         self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
-        if self.progress is True:
+        self._steps_at_start = int(self.num_timesteps)
+        if self.progress is True and not _is_terminal(sys.stderr):
+            self._lines = True  # a log file or a pipe: plain lines, not a bar's redraws
+        elif self.progress is True:
             from tqdm.auto import tqdm
 
             self._bar = tqdm(total=self.total_steps, unit="step", desc="train", leave=True)
@@ -185,23 +194,23 @@ class LearningCurveCallback(BaseCallback):
         return True
 
     def progress_line(self) -> str:
-        """``[LABEL] step K/N (P%), R steps/s, last evaluation: return X, held H%``."""
-        steps = int(self.num_timesteps)
-        elapsed = max(time.monotonic() - self._started, 1e-9)
-        share = steps / self.total_steps if self.total_steps else 0.0
-        text = (
-            f"[{self.label}] step {steps}/{self.total_steps} ({share:.0%}), "
-            f"{steps / elapsed:.0f} steps/s"
+        """``[LABEL] step K/N (P%), R steps/s, ETA T, last evaluation: return X, held H%``
+        (:func:`leoc.progress.steps_line`: the rate of this invocation's steps so far)."""
+        last = self._last
+        return steps_line(
+            self.label,
+            int(self.num_timesteps),
+            self.total_steps,
+            time.monotonic() - self._started,
+            evaluation_text(last.mean_return, last.held_fraction) if last is not None else "",
+            self._steps_at_start,
         )
-        if self._last is not None:
-            text += (
-                f", last evaluation: return {self._last.mean_return:.1f}, "
-                f"held {self._last.held_fraction:.0%}"
-            )
-        return text
 
     def _print_line(self) -> None:
-        print(self.progress_line(), flush=True)
+        line = self.progress_line()
+        if line != self._last_line:  # a stalled run prints nothing new
+            print(line, flush=True)
+            self._last_line = line
         self._next_line = time.monotonic() + PROGRESS_LINE_INTERVAL_S
 
     def _on_training_end(self) -> None:
@@ -248,6 +257,13 @@ class LearningCurveCallback(BaseCallback):
             self._selected_key = key
             self.selected_steps = steps
             self._selected_actor = copy.deepcopy(self.model.actor.state_dict())
+
+
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
 
 
 class HeldOutEvaluationCallback(BaseCallback):

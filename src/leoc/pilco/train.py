@@ -49,6 +49,7 @@ from leoc.pilco.objective import PolicyOptimisation, optimise_policy
 from leoc.pilco.policy import build_policy, redraw_rbf
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
+from leoc.progress import ProgressLine, evaluation_text, iterations_line
 from leoc.systems import StepRules, make_system
 from leoc.systems.base import System
 from leoc.systems.rollout import RandomController
@@ -120,15 +121,30 @@ def _default_run_dir(config: PilcoConfig) -> Path:
     return DEFAULT_RUN_ROOT / f"pilco_{config.system}_{kind}_seed{config.seed}"
 
 
-def _progress_line(row: dict[str, Any], total: int) -> str:
-    cost = row["predicted_cost"]
-    cost_text = "      -" if cost is None else f"{cost:7.3f}"
-    return (
-        f"[pilco] iter {row['iteration']:2d}/{total} predicted cost {cost_text} "
-        f"rollout return {row['rollout_return']:9.2f} eval return {row['mean_return']:9.2f} "
-        f"held {row['held_fraction']:4.0%} data {row['data_size']:4d} "
-        f"interaction {row['interaction_seconds']:6.2f} s wall {row['wall_seconds']:6.1f} s"
-    )
+def _progress_line(log: list[dict[str, Any]], total: int) -> str:
+    """``[pilco] iter K/N, S s/iter so far, ETA T, last evaluation: ...``: the ETA is the mean
+    wall time of the iterations so far (iteration 0, the random rollouts, apart) times the
+    iterations left; PILCO's iterations do not cost alike (7-40 s in one quick-profile run), so
+    it is rough early on. The predicted cost, rollout return and data size of each iteration
+    are in the run's ``curve.json``."""
+    row = log[-1]
+    walls = [entry["wall_seconds"] for entry in log if entry["iteration"] > 0]
+    per_iteration = sum(walls) / len(walls) if walls else None
+    evaluation = evaluation_text(row["mean_return"], row["held_fraction"])
+    return iterations_line("pilco", row["iteration"], total, per_iteration, evaluation)
+
+
+def _show_progress(log: list[dict[str, Any]], total: int) -> ProgressLine:
+    """The run's progress (:mod:`leoc.progress`), showing where it starts (or resumes)."""
+    shown = ProgressLine(total, "iter", "pilco", initial=log[-1]["iteration"])
+    _update_progress(shown, log, total)
+    return shown
+
+
+def _update_progress(shown: ProgressLine, log: list[dict[str, Any]], total: int) -> None:
+    row = log[-1]
+    evaluation = evaluation_text(row["mean_return"], row["held_fraction"])
+    shown.update(row["iteration"], _progress_line(log, total), evaluation, force=True)
 
 
 def _evaluate(system: System, config: PilcoConfig, policy: nn.Module, starts: np.ndarray) -> Any:
@@ -287,7 +303,8 @@ def train_pilco(
     resume : bool
         Continue from ``run_dir/checkpoint.pt`` if present (same configuration required).
     progress : bool
-        Print one line per iteration.
+        Show the progress (:mod:`leoc.progress`): a live bar on a terminal, one line per
+        iteration elsewhere, each with an ETA from the mean time per iteration so far.
     **overrides
         Any :class:`PilcoConfig` field (``horizon=...``, ``num_basis=...``, ``gp_<field>=...``).
 
@@ -317,11 +334,10 @@ def train_pilco(
         state, policy = _first_state(plant, config, rng, generator, starts)
         write_text_atomic(run_path / CONFIG_FILE, json.dumps(config.to_dict(), indent=2))
         save_checkpoint(run_path, config, state, policy, None, generator)
-        if progress:
-            print(_progress_line(state.log[0], config.iterations), flush=True)
     else:
         state, policy, model = resumed
         rng.bit_generator.state = state.rng_state
+    shown = _show_progress(state.log, config.iterations) if progress else None
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
     ):
@@ -330,8 +346,10 @@ def train_pilco(
         state = state._replace(best=_best_policy(config, state, policy, kept))
         save_checkpoint(run_path, config, state, policy, model, generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
-        if progress:
-            print(_progress_line(state.log[-1], config.iterations), flush=True)
+        if shown is not None:
+            _update_progress(shown, state.log, config.iterations)
+    if shown is not None:
+        shown.close()
     summary = curve_summary(state.log, plant.dt)
     if state.best is not None:
         policy.load_state_dict(state.best.policy_state)
