@@ -235,3 +235,51 @@ def read_config(run_dir: Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"run folder: {path}: expected a JSON object, found {type(data).__name__}")
     return data
+
+
+#: Keys of ``config.json`` that describe the machine a run was trained on, not the run: a rerun
+#: on another machine is the same run.
+MACHINE_KEYS = ("versions",)
+
+
+def config_differences(saved: dict[str, Any], config: dict[str, Any]) -> list[str]:
+    """``"key: A there, B here"`` for each setting where ``saved`` and ``config`` differ."""
+    keys = sorted((set(saved) | set(config)) - set(MACHINE_KEYS))
+    return [
+        f"{key}: {saved.get(key)!r} there, {config.get(key)!r} here"
+        for key in keys
+        if saved.get(key) != config.get(key)
+    ]
+
+
+def same_run(run_dir: str | Path, config: dict[str, Any], overwrite: bool = False) -> bool:
+    """Whether ``run_dir`` already holds a run of ``config`` (so a trainer resumes or reuses
+    it), the one rule of a rerun for every learner.
+
+    A folder without ``config.json`` is new (False). One whose config equals ``config`` (both
+    as JSON; library versions aside) holds the same run (True). One with another config is
+    refused, unless ``overwrite``, in which case it is treated as new (False) and the trainer
+    replaces its files.
+
+    Raises
+    ------
+    ValueError
+        ``run_dir`` holds a run of another configuration and ``overwrite`` is False (naming the
+        folder and the first differing settings).
+    """
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        return False
+    saved = read_config(Path(run_dir))
+    differences = config_differences(saved, json.loads(json.dumps(config)))
+    if not differences:
+        return True
+    if overwrite:
+        return False
+    shown = "; ".join(differences[:3]) + (
+        f"; and {len(differences) - 3} more" if len(differences) > 3 else ""
+    )
+    raise ValueError(
+        f"run folder: {str(run_dir)!r} holds a run of another configuration ({shown}); pass "
+        "--overwrite (overwrite=True) to replace it, or choose another folder (--out)"
+    )

@@ -53,7 +53,7 @@ def _interrupted(args: argparse.Namespace, code: int) -> int:
     if args.command in RESUMABLE_COMMANDS:
         print(
             f"leoc {args.command}: interrupted; finished runs and checkpoints are kept, run the "
-            "same command again to resume",
+            "same command again to resume from the last checkpoint",
             file=sys.stderr,
         )
     else:

@@ -22,7 +22,11 @@ def add_parser(commands: Any) -> None:
         "the operating point, the learned policy elsewhere) with PILCO, DDPG, TD3 or SAC (for "
         "SAC the hybrid is its deterministic action, the squashed mean; it explores with its "
         "own Gaussian around it). The run folder keeps the weights, config, learning curve and "
-        "checkpoints; rerunning the same command resumes an interrupted PILCO run.",
+        "checkpoints. Rerunning the same command resumes an interrupted run from its last "
+        "checkpoint (PILCO: every iteration; DDPG/TD3/SAC: every 1000 steps, exactly as if it "
+        "had not stopped) and returns a finished one without training; PILCO extends a run "
+        "given more --iterations. A run folder holding another configuration is refused "
+        "unless --overwrite.",
     )
     train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
@@ -37,6 +41,12 @@ def add_parser(commands: Any) -> None:
         type=positive_int,
         help="DDPG/TD3/SAC environment steps (default per system: 10k for the pendulum, 21k for "
         "the cart-pole, 20k for the mountain car)",
+    )
+    train.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="train afresh in the run folder even if it holds a run of another configuration "
+        "(default: refuse, naming the settings that differ)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(run=run)
@@ -70,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             run_dir=run_dir,
             iterations=args.iterations,
+            resume=not args.overwrite,
             progress=not args.quiet,
         )
     else:
@@ -82,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             run_dir=run_dir,
             total_steps=args.steps,
+            overwrite=args.overwrite,
             progress=not args.quiet,
         )
     print(f"run folder: {result.run_dir}")

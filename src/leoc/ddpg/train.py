@@ -35,19 +35,27 @@ from stable_baselines3.common.logger import Logger
 
 from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
 from leoc.ddpg.callbacks import LearningCurveCallback, selection_start
+from leoc.ddpg.checkpoint import (
+    CHECKPOINT_FILE,
+    CHECKPOINT_INTERVAL_STEPS,
+    CheckpointCallback,
+    load_checkpoint,
+)
 from leoc.ddpg.config import DDPGConfig
 from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
 from leoc.ddpg.sac import LeocSAC, build_sac_model
-from leoc.io import write_bytes_atomic, write_text_atomic
+from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
 from leoc.training import (
     CONFIG_FILE,
+    CURVE_JSON,
     TrainResult,
     curve_summary,
     evaluation_starts,
     held_and_reached,
     read_config,
+    same_run,
     write_curve,
 )
 
@@ -145,6 +153,8 @@ def train_ddpg(
     total_steps: int | None = None,
     progress: bool | str = True,
     callbacks: Sequence[BaseCallback] = (),
+    overwrite: bool = False,
+    checkpoint_interval: int = CHECKPOINT_INTERVAL_STEPS,
     **overrides: Any,
 ) -> DDPGResult:
     """Train DDPG, TD3 or SAC (baseline MLP actor or LEOC hybrid) on ``system``; save the run.
@@ -175,7 +185,16 @@ def train_ddpg(
     callbacks : sequence of stable_baselines3.common.callbacks.BaseCallback
         Further SB3 callbacks (e.g. :class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback`).
         They run before the learning-curve callback, so at the end of training they see the
-        final actor, before model selection restores the selected one.
+        final actor, before model selection restores the selected one. Those with a
+        ``checkpoint_state`` (:class:`~leoc.ddpg.checkpoint.CheckpointedState`) resume with
+        the run.
+    overwrite : bool
+        ``run_dir`` holding a run of another configuration is refused (ValueError naming the
+        settings that differ) unless True, which trains afresh there. A folder holding the
+        same run is resumed from its checkpoint (exactly: the resumed run equals the
+        uninterrupted one), or, when complete, returned as it is without training.
+    checkpoint_interval : int
+        Environment steps between checkpoints (:mod:`leoc.ddpg.checkpoint`).
     **overrides
         Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...).
 
@@ -195,17 +214,37 @@ def train_ddpg(
     config = DDPGConfig.for_system(system, algo, hybrid=hybrid, **overrides)
     kind = "hybrid" if hybrid else "baseline"
     run_path = Path(run_dir or DEFAULT_RUN_ROOT / f"{system}-{algo}-{kind}-seed{seed}")
-    run_path.mkdir(parents=True, exist_ok=True)
     config_dict = {**config.as_dict(), "seed": seed}
-    write_text_atomic(
-        run_path / CONFIG_FILE,
-        json.dumps({**config_dict, "versions": _versions()}, indent=2),
-    )
+    checkpoint_path = run_path / CHECKPOINT_FILE
+    resumed = None
+    if same_run(run_path, config_dict, overwrite):
+        resumed = load_checkpoint(checkpoint_path, label=algo)
+        done = None if resumed is not None else _completed_result(run_path, config_dict, algo)
+        if done is not None:
+            if progress:
+                print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
+            return done
+    else:
+        run_path.mkdir(parents=True, exist_ok=True)
+        checkpoint_path.unlink(missing_ok=True)
+        write_text_atomic(
+            run_path / CONFIG_FILE,
+            json.dumps({**config_dict, "versions": _versions()}, indent=2),
+        )
 
     # the edge: the config's name, resolved once, stepping under the config's rules
     system_obj = make_system(system).with_rules(StepRules(**config.step_rules))
-    env = make_env(system_obj)
-    model = build_model(config, seed, env)
+    if resumed is None:
+        env = make_env(system_obj)
+        model = build_model(config, seed, env)
+    else:
+        model = resumed["model"]
+        env = model.get_env()
+        if progress:
+            print(
+                f"[{algo}] resuming {run_path} from its checkpoint at step {resumed['steps']}",
+                flush=True,
+            )
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger
     model.set_logger(Logger(folder=None, output_formats=[]))
     callback = LearningCurveCallback(
@@ -221,9 +260,14 @@ def train_ddpg(
         ),
         label=algo,
     )
+    checkpoint = CheckpointCallback(
+        checkpoint_path, checkpoint_interval, (*callbacks, callback), resumed
+    )
+    checkpoint.restore_callbacks()
     model.learn(
-        total_timesteps=config.total_steps,
-        callback=CallbackList([*callbacks, callback]) if callbacks else callback,
+        total_timesteps=config.total_steps - model.num_timesteps,
+        callback=CallbackList([checkpoint, *callbacks, callback]),
+        reset_num_timesteps=resumed is None,
     )
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
     env.close()
@@ -234,8 +278,25 @@ def train_ddpg(
         "selected_steps": callback.selected_steps,
     }
     write_curve(run_path, callback.curve, summary, f"{system} {algo.upper()} {kind} (seed {seed})")
+    checkpoint_path.unlink(missing_ok=True)  # the run is complete: model.zip and curve.json
     return TrainResult(
         physical_policy(model.actor), run_path, callback.curve, config_dict, summary, model
+    )
+
+
+def _completed_result(run_path: Path, config_dict: dict[str, Any], algo: str) -> DDPGResult | None:
+    """The result of the finished run in ``run_path`` (a rerun of the same command), or None
+    when it did not finish (no controller or no curve; a damaged curve is set aside)."""
+    if not (run_path / MODEL_FILES["final"]).is_file():
+        return None
+    saved = read_json_object(
+        run_path / CURVE_JSON, lambda line: print(f"[{algo}] {line}", flush=True), "curve"
+    )
+    if saved is None or "curve" not in saved or "summary" not in saved:
+        return None
+    model = load_ddpg_model(run_path)
+    return TrainResult(
+        physical_policy(model.actor), run_path, saved["curve"], config_dict, saved["summary"], model
     )
 
 

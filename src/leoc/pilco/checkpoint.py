@@ -22,6 +22,7 @@ from leoc.pilco.policy import build_policy
 from leoc.policies import HeldPolicy
 from leoc.systems import make_system
 from leoc.systems.base import System
+from leoc.training import config_differences
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CONTROLLER_NAME = "controller.pt"
@@ -110,9 +111,17 @@ def resume_checkpoint(
         )
         return None
     if dataclasses.replace(old, iterations=config.iterations) != config:
+        differences = config_differences(saved["config"], config.to_dict())
         raise ValueError(
-            f"resume: the checkpoint in {run_dir} was written with another configuration "
-            f"({saved['config']}); use a new run_dir or resume=False"
+            f"run folder: {str(run_dir)!r} holds a PILCO run of another configuration "
+            f"({'; '.join(differences[:3])}); pass --overwrite (resume=False) to replace it, or "
+            "choose another folder (--out)"
+        )
+    if saved["iteration"] > config.iterations:
+        raise ValueError(
+            f"iterations: {str(run_dir)!r} holds a PILCO run of {saved['iteration']} iterations, "
+            f"more than the {config.iterations} asked for; ask for at least "
+            f"{saved['iteration']} to extend it, or pass --overwrite (resume=False) to replace it"
         )
     generator.set_state(saved["torch_rng_state"])
     policy = build_policy(system, config, generator)

@@ -1,0 +1,86 @@
+"""A rerun of a DDPG/TD3/SAC run resumes it exactly, reuses it when complete, and refuses
+another configuration unless told to overwrite (``leoc.ddpg.checkpoint``, ``train_ddpg``)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+
+from leoc.ddpg.checkpoint import CHECKPOINT_FILE
+from leoc.ddpg.train import train_ddpg
+
+# small networks and budgets: the point is the bookkeeping, not learning
+TINY = {
+    "total_steps": 300,
+    "learning_starts": 50,
+    "eval_interval": 100,
+    "eval_episodes": 1,
+    "actor_hidden": (16, 16),
+    "critic_hidden": (16, 16),
+    "checkpoint_interval": 100,
+    "progress": False,
+}
+STOP_AT = 250  # between the checkpoints at 200 and 300
+
+
+class StopAt(BaseCallback):
+    """Interrupts training (as Ctrl-C does) once ``steps`` environment steps are done."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = steps
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps == self.steps:
+            raise KeyboardInterrupt
+        return True
+
+
+def _parameters(result) -> torch.Tensor:
+    return torch.nn.utils.parameters_to_vector(result.model.policy.parameters()).detach()
+
+
+@pytest.mark.parametrize(
+    ("algo", "system"), [("ddpg", "cartpole"), ("td3", "pendulum"), ("sac", "mountaincar")]
+)
+def test_an_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path, algo, system) -> None:
+    """Interrupted at step 250 (last checkpoint at 200) and rerun, the run ends with the same
+    weights and the same learning curve as the run that was never interrupted, to the last bit;
+    the checkpoint is removed once the run is complete."""
+    whole = train_ddpg(system, algo=algo, hybrid=True, seed=3, run_dir=tmp_path / "whole", **TINY)
+    cut = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        train_ddpg(
+            system, algo=algo, hybrid=True, seed=3, run_dir=cut, callbacks=[StopAt(STOP_AT)], **TINY
+        )
+    assert (cut / CHECKPOINT_FILE).is_file() and not (cut / "model.zip").exists()
+    resumed = train_ddpg(system, algo=algo, hybrid=True, seed=3, run_dir=cut, **TINY)
+    assert torch.equal(_parameters(whole), _parameters(resumed))
+    assert resumed.curve == whole.curve
+    assert [row["steps"] for row in resumed.curve] == [0, 100, 200, 300]
+    assert not (cut / CHECKPOINT_FILE).exists()
+    assert json.loads((cut / "curve.json").read_text()) == json.loads(
+        (tmp_path / "whole" / "curve.json").read_text()
+    )
+
+
+def test_a_complete_run_is_reused_and_another_budget_refused(tmp_path, capsys) -> None:
+    """Rerunning a finished run trains nothing and returns it; another budget in the same
+    folder is refused in one line naming the setting, and replaced only with overwrite."""
+    run = tmp_path / "run"
+    first = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **TINY)
+    model_bytes = (run / "model.zip").read_bytes()
+    again = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **{**TINY, "progress": True})
+    assert "complete: nothing to train" in capsys.readouterr().out
+    assert (run / "model.zip").read_bytes() == model_bytes
+    assert again.curve == first.curve and torch.equal(_parameters(again), _parameters(first))
+    other = {**TINY, "total_steps": 200}
+    with pytest.raises(ValueError, match=r"total_steps: 300 there, 200 here.*--overwrite"):
+        train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **other)
+    assert (run / "model.zip").read_bytes() == model_bytes
+    replaced = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, overwrite=True, **other)
+    assert replaced.curve[-1]["steps"] == 200
+    assert json.loads((run / "config.json").read_text())["total_steps"] == 200
