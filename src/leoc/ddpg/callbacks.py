@@ -179,7 +179,11 @@ class LearningCurveCallback(BaseCallback):
             from tqdm.auto import tqdm
 
             self._bar = tqdm(total=self.total_steps, unit="step", desc="train", leave=True)
-        self._evaluate()
+        self._bar_position = int(self.num_timesteps)
+        if self._bar is not None:
+            self._bar.update(self._bar_position)
+        if self._last_eval_step != self.num_timesteps:  # a resumed run evaluated this step
+            self._evaluate()
 
     def _on_step(self) -> bool:
         steps = self.num_timesteps
@@ -242,6 +246,27 @@ class LearningCurveCallback(BaseCallback):
         if self._lines:
             self._print_line()
         return result
+
+    #: Attributes a checkpoint keeps (:mod:`leoc.ddpg.checkpoint`): the curve, the best
+    #: return, the model selection's candidate, the step last evaluated and its result.
+    CHECKPOINTED = (
+        "curve",
+        "best_return",
+        "selected_steps",
+        "_selected_key",
+        "_selected_actor",
+        "_last_eval_step",
+        "_last",
+    )
+
+    def checkpoint_state(self) -> dict[str, Any]:
+        """What a checkpoint keeps of this callback (:data:`CHECKPOINTED`)."""
+        return copy.deepcopy({name: getattr(self, name) for name in self.CHECKPOINTED})
+
+    def restore_checkpoint_state(self, state: dict[str, Any]) -> None:
+        """Take back :meth:`checkpoint_state` before a resumed run's training starts."""
+        for name in self.CHECKPOINTED:
+            setattr(self, name, copy.deepcopy(state[name]))
 
     def restore_selected(self) -> None:
         """Load the selected actor into the model (no-op with ``"final"``)."""
@@ -308,12 +333,21 @@ class HeldOutEvaluationCallback(BaseCallback):
         self.rows: list[dict[str, Any]] = []
 
     def _on_training_start(self) -> None:
-        self._evaluate()
+        if not self.rows or self.rows[-1]["steps"] != self.num_timesteps:
+            self._evaluate()
 
     def _on_step(self) -> bool:
         if self.num_timesteps % self.eval_interval == 0:
             self._evaluate()
         return True
+
+    def checkpoint_state(self) -> list[dict[str, Any]]:
+        """What a checkpoint keeps of this callback: its rows."""
+        return copy.deepcopy(self.rows)
+
+    def restore_checkpoint_state(self, state: list[dict[str, Any]]) -> None:
+        """Take back :meth:`checkpoint_state` before a resumed run's training starts."""
+        self.rows = copy.deepcopy(state)
 
     def _on_training_end(self) -> None:
         if not self.rows or self.rows[-1]["steps"] != self.num_timesteps:

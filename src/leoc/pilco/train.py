@@ -337,6 +337,8 @@ def train_pilco(
     else:
         state, policy, model = resumed
         rng.bit_generator.state = state.rng_state
+        # a rerun with a larger budget extends the run: its config records the new budget
+        write_text_atomic(run_path / CONFIG_FILE, json.dumps(config.to_dict(), indent=2))
     shown = _show_progress(state.log, config.iterations) if progress else None
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
