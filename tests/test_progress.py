@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import re
+import time
 
 import pytest
 
@@ -118,3 +119,29 @@ def test_iterations_line_reads_the_mean_time_per_iteration() -> None:
         "[pilco] iter 3/10, 9.8 s/iter so far, ETA 1m09s, last evaluation: return -330.4, held 100%"
     )
     assert trainer_progress(line) is None  # PILCO's lines do not measure the sweep's progress
+
+
+def test_a_sweep_report_shows_a_run_s_log_line_only_when_it_changed(tmp_path) -> None:
+    """`leoc reproduce` printed every running run's last log line every 15 s, unchanged (a PILCO
+    iteration lasts longer than that)."""
+    from leoc.experiments.sweep import sweep
+
+    messages: list[str] = []
+    sweep(["slow"], _quiet_runner, tmp_path, jobs=1, progress_interval_s=0.2, echo=messages.append)
+    reports = [m for m in messages if " running, " in m]
+    shown = [m for m in messages if m.startswith("  slow (")]
+    assert len(reports) >= 4  # a report every 0.2 s over the run's 1.2 s
+    logged = [m.split(": ", 1)[1] for m in shown]
+    assert "iteration 1" in logged and len(logged) == len(set(logged)) <= 3, logged
+
+
+def _quiet_runner(spec: str, out_dir) -> dict[str, object]:
+    from leoc.experiments.sweep import default_run_dir
+
+    run_dir = default_run_dir(out_dir, spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with open(run_dir / "train.log", "a", buffering=1) as log:
+        for iteration in (1, 2):
+            log.write(f"iteration {iteration}\n")
+            time.sleep(0.6)
+    return {"spec": spec}

@@ -518,6 +518,7 @@ class _Driver:
         self.retried: dict[str, int] = {}
         self.durations: list[float] = []
         self.running: dict[Any, _Attempt] = {}
+        self._shown: dict[tuple[str, int], str] = {}  # each attempt's log line last shown
 
     def _done_path(self, spec: Any) -> Path:
         return self.run_dir(self.out_dir, spec) / self.done_file
@@ -613,6 +614,10 @@ class _Driver:
         for line in fit_lines(header, width):
             self.echo(line)
         for attempt in sorted(self.running.values(), key=lambda a: a.key):
+            shown = (attempt.key, attempt.number)
+            if self._shown.get(shown) == lines[attempt.key]:
+                continue  # its log has not moved since the last report: no repeated line
+            self._shown[shown] = lines[attempt.key]
             age = format_seconds(now - attempt.started)
             for line in fit_lines(f"  {attempt.key} ({age}): {lines[attempt.key]}", width):
                 self.echo(line)
@@ -698,7 +703,8 @@ def sweep(
         Times a run is started again after its worker process, Ray worker or node died.
     progress_interval_s : float
         Seconds between progress reports (done / running / queued, elapsed, ETA, and each
-        running run's last log line); the first comes as soon as the first runs start.
+        running run's last log line when it changed since the last report); the first comes as
+        soon as the first runs start.
     echo : callable
         Receives every progress line (default ``print``); lines are wrapped to the terminal's
         width.
