@@ -1089,7 +1089,10 @@ def model_selection_text(evaluations: Evaluations) -> str:
             "for those runs."
         )
     if any(rule == NOT_RECORDED for _, rule in groups):
-        text += " 'not recorded': runs written before runs recorded their selection."
+        text += (
+            " 'Not recorded': runs written before leoc kept each run's selection (in its "
+            "curve's model_selection)."
+        )
     return text
 
 
