@@ -69,6 +69,9 @@ VARIANT_NAMES = ("leoc", "authors")
 """Implementations (``leoc.experiments.variants``): leoc's defaults, or the authors' choices."""
 METRIC_SET_NAMES = ("leoc", "authors")
 """Response metric sets (``leoc.evaluation.metric_sets``)."""
+RELEVANCE_NAMES = ("paper", "roa")
+"""Relevance functions of a hybrid (``leoc.policies.relevance.RELEVANCE_KINDS``): the paper's
+r(x) = (1 + d)^-2, or the ROA relevance, exactly 1 on the LQR's certified region."""
 LQR_METHODS = ("discrete", "continuous", "authors")
 """LQR designs of ``leoc.control.design_lqr``."""
 

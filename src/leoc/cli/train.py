@@ -7,9 +7,12 @@ from pathlib import Path
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, non_negative_int, positive_int, system_name
+from leoc.names import PROFILE_NAMES, RELEVANCE_NAMES, VARIANT_NAMES
 
 ALGO_CHOICES = ("pilco", "ddpg", "td3", "sac")
 MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.ddpg.config.ALGOS, without importing SB3
+#: The learner whose settings (leoc.names.FRAMEWORKS) each algorithm takes: TD3 takes DDPG's.
+FRAMEWORK_OF = {"pilco": "pilco", "ddpg": "ddpg", "td3": "ddpg", "sac": "sac"}
 DEFAULT_RUNS_DIR = Path("runs")
 
 
@@ -31,6 +34,26 @@ def add_parser(commands: Any) -> None:
     train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
     train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
+    train.add_argument(
+        "--relevance",
+        choices=RELEVANCE_NAMES,
+        help="the hybrid's relevance: 'paper', r(x) = (1 + d)^-2 (default), or 'roa', exactly 1 "
+        "on the LQR's proved region of attraction; only with --hybrid",
+    )
+    train.add_argument(
+        "--variant",
+        choices=VARIANT_NAMES,
+        default="leoc",
+        help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR and sin "
+        "squash, their step rules, DDPG and PILCO settings and budgets); default leoc",
+    )
+    train.add_argument(
+        "--profile",
+        choices=PROFILE_NAMES,
+        help="budgets and settings of a 'leoc reproduce' profile (quick: reduced budgets; "
+        "smoke: a tiny pipeline check whose controller is not trained); default: the learner's "
+        "own (the variant's budgets); --steps/--iterations override its budget",
+    )
     train.add_argument("--seed", type=non_negative_int, default=0, help="seed (default 0)")
     train.add_argument("--out", type=Path, help="run folder (default runs/SYSTEM_ALGO_KIND_seedN)")
     train.add_argument(
@@ -66,11 +89,48 @@ def check_budget_arguments(args: argparse.Namespace) -> None:
         )
 
 
+def default_run_dir(args: argparse.Namespace) -> Path:
+    """``runs/SYSTEM_ALGO_KIND[_authors]_seedN``: KIND is ``baseline``, ``hybrid`` or
+    ``hybrid_roa`` (the names of ``leoc reproduce``'s controllers)."""
+    kind = "hybrid" if args.hybrid else "baseline"
+    if args.hybrid and args.relevance == "roa":
+        kind += "_roa"
+    variant = "" if args.variant == "leoc" else f"_{args.variant}"
+    return DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}{variant}_seed{args.seed}"
+
+
+def run_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Config fields of the run ``args`` describe: the variant's settings at the profile's (or
+    the given) budget, the profile's overrides and the relevance
+    (:meth:`leoc.experiments.profiles.Profile.training_settings`, as ``leoc reproduce``)."""
+    from leoc.experiments.profiles import Profile, get_profile
+    from leoc.experiments.variants import get_variant
+
+    profile = get_profile(args.profile) if args.profile else Profile("default", (), {}, {})
+    budget = args.iterations if args.algo == "pilco" else args.steps
+    settings = profile.training_settings(
+        get_variant(args.variant),
+        FRAMEWORK_OF[args.algo],
+        args.system,
+        args.hybrid,
+        args.relevance or "paper",
+        budget,
+    )
+    if not args.hybrid:
+        settings.pop("relevance")  # a baseline has none: its config keeps the default
+    return settings
+
+
 def run(args: argparse.Namespace) -> int:
     """Train the controller ``args`` describe; prints the run folder."""
     check_budget_arguments(args)
-    kind = "hybrid" if args.hybrid else "baseline"
-    run_dir = args.out or DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}_seed{args.seed}"
+    if args.relevance is not None and not args.hybrid:
+        raise ValueError(
+            f"--relevance: only with --hybrid (a baseline has no relevance), found --relevance "
+            f"{args.relevance} without it"
+        )
+    run_dir = args.out or default_run_dir(args)
+    settings = run_settings(args)
     if args.algo == "pilco":
         from leoc.pilco.train import train_pilco
 
@@ -79,9 +139,9 @@ def run(args: argparse.Namespace) -> int:
             hybrid=args.hybrid,
             seed=args.seed,
             run_dir=run_dir,
-            iterations=args.iterations,
             resume=not args.overwrite,
             progress=not args.quiet,
+            **settings,
         )
     else:
         from leoc.ddpg.train import train_ddpg
@@ -92,9 +152,9 @@ def run(args: argparse.Namespace) -> int:
             hybrid=args.hybrid,
             seed=args.seed,
             run_dir=run_dir,
-            total_steps=args.steps,
             overwrite=args.overwrite,
             progress=not args.quiet,
+            **settings,
         )
     print(f"run folder: {result.run_dir}")
     return 0

@@ -94,6 +94,29 @@ class Profile:
         """DDPG (and SAC) steps of ``system`` (None: the DDPG default)."""
         return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
+    def training_settings(
+        self,
+        variant: Any,
+        framework: str,
+        system: str,
+        hybrid: bool,
+        relevance: str = "paper",
+        budget: int | None = None,
+    ) -> dict[str, Any]:
+        """Config fields of one run under this profile: the variant's settings
+        (:meth:`~leoc.experiments.variants.Variant.training_settings`) at this profile's
+        budget, or ``budget`` where given, then this profile's overrides, then the relevance.
+        The one assembly ``leoc reproduce`` and ``leoc train`` share. ``framework`` is a
+        learner of ``leoc.names.FRAMEWORKS`` (TD3 takes DDPG's settings)."""
+        if budget is None:
+            budget = self.iterations_for(system) if framework == "pilco" else self.steps_for(system)
+        overrides = self.pilco_overrides if framework == "pilco" else self.ddpg_overrides
+        return {
+            **variant.training_settings(framework, system, hybrid, budget),
+            **overrides,
+            "relevance": relevance,
+        }
+
 
 FALLBACK_RUN_SECONDS = {"linear": 5.0, "ddpg": 120.0, "sac": 360.0, "pilco": 250.0}
 """Expected wall time of a run kind a profile has no measurement for (a user's system)."""

@@ -156,14 +156,9 @@ def train_controller(
         return variant.linear_controller(system, repeat), None
     # the variant's settings, then the profile's budgets and overrides, then the run's relevance
     # SAC runs at DDPG's budgets and with the profile's DDPG overrides
-    budget = (profile.pilco_iterations if spec.framework == "pilco" else profile.ddpg_steps).get(
-        spec.system
+    settings = profile.training_settings(
+        variant, spec.framework, spec.system, spec.hybrid, spec.relevance
     )
-    settings = {
-        **variant.training_settings(spec.framework, spec.system, spec.hybrid, budget),
-        **(profile.pilco_overrides if spec.framework == "pilco" else profile.ddpg_overrides),
-        "relevance": spec.relevance,
-    }
     if spec.framework == "pilco":
         from leoc.pilco.train import train_pilco
 

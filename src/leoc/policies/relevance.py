@@ -89,6 +89,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from leoc.names import RELEVANCE_NAMES
 from leoc.systems.observation import as_observation_map
 
 from ._checks import as_float_tensor, check_finite, check_last_dim, check_shape
@@ -105,8 +106,8 @@ __all__ = [
 ]
 
 #: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
-#: the certified set.
-RELEVANCE_KINDS = ("paper", "roa")
+#: the certified set (named in :mod:`leoc.names`, where the command line reads them).
+RELEVANCE_KINDS = RELEVANCE_NAMES
 RELEVANCE_PARAMETRISATIONS = ("log_lambda", "precision")
 r"""How the paper's relevance keeps its weights: ``log_lambda`` (:math:`\lambda = e^{\ell}`,
 positive; :class:`PaperRelevance`) or ``precision`` (:math:`S = \Lambda^{-1}` itself,
