@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, NamedTuple
 
-from leoc.ddpg.config import PAPER_TOTAL_STEPS, TOTAL_STEPS_BY_SYSTEM
 from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework
 from leoc.systems import SYSTEM_NAMES, system_names
 
@@ -53,8 +52,11 @@ class Profile:
         Further keyword settings passed to the trainers (``ddpg_overrides`` to SAC's too).
     run_seconds : dict ``"system/controller"`` -> float
         Measured wall time of one run of that kind on one worker (the ETA's expected costs,
-        :mod:`leoc.experiments.eta`); kinds not listed: :data:`FALLBACK_RUN_SECONDS` of their
-        framework.
+        :mod:`leoc.experiments.eta`) under leoc's variant; kinds not listed: see
+        :meth:`expected_seconds`.
+    variant_run_seconds : dict variant -> dict ``"system/controller"`` -> float
+        The same measured under another variant (``authors``), where it costs otherwise; see
+        :meth:`for_variant`.
     """
 
     name: str
@@ -67,6 +69,16 @@ class Profile:
     ddpg_overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
     description: str = ""
     run_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+    variant_run_seconds: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+
+    def for_variant(self, variant: str) -> Profile:
+        """This profile costed as it runs under ``variant`` (a name of
+        :mod:`leoc.experiments.variants`): its :attr:`variant_run_seconds` in place of leoc's,
+        kind by kind; the kinds that variant's study did not run keep leoc's costs."""
+        measured = self.variant_run_seconds.get(variant)
+        if not measured:
+            return self
+        return dataclasses.replace(self, run_seconds={**self.run_seconds, **measured})
 
     def expected_seconds(self, spec: RunSpec) -> float:
         """Expected wall time of ``spec`` on one worker: its measured kind, else the mean of
@@ -118,66 +130,79 @@ class Profile:
         }
 
 
-FALLBACK_RUN_SECONDS = {"linear": 5.0, "ddpg": 120.0, "sac": 360.0, "pilco": 250.0}
-"""Expected wall time of a run kind a profile has no measurement for (a user's system)."""
-
-# Measured run costs [s]: the median over seeds of each kind's wall time (training and
-# evaluation) in results/paper (leoc commit 008e601, 2 workers on a 2-core AMD EPYC), at the
-# budgets of then (DDPG: the paper's); the DDPG runs are scaled to today's budgets below.
+# Measured run costs [s], the ETA's expected costs (leoc.experiments.eta): the median over seeds
+# of each kind's wall time (training and evaluation on one worker, evaluation.json's
+# wall_seconds) in the published studies, both run at leoc commit b22ddf0 at today's budgets,
+# 2 workers on a 2-core AMD EPYC (torch's AVX2 kernels). Printed by
+# benchmarks/bench_eta_costs.py (leoc.experiments.eta.measured_run_seconds); not typed by hand:
+# tests/test_eta_costs.py checks each table still equals what the function gives on results/.
+# leoc's variant: results/paper (141 runs, seeds 0-4).
 PAPER_RUN_SECONDS = {
-    "pendulum/linear": 4.0,
-    "pendulum/linear_pilco": 5.0,
-    "pendulum/ddpg_baseline": 107.0,
-    "pendulum/ddpg_hybrid": 111.0,
-    "pendulum/ddpg_hybrid_roa": 120.0,
-    "pendulum/pilco_baseline": 224.0,
-    "pendulum/pilco_hybrid": 238.0,
-    "pendulum/pilco_hybrid_roa": 229.0,
-    "cartpole/linear": 5.0,
-    "cartpole/linear_pilco": 5.0,
-    "cartpole/ddpg_baseline": 190.0,
-    "cartpole/ddpg_hybrid": 150.0,
-    "cartpole/ddpg_hybrid_roa": 180.0,
-    "cartpole/pilco_baseline": 368.0,
-    "cartpole/pilco_hybrid": 454.0,
-    "cartpole/pilco_hybrid_roa": 469.0,
-    "mountaincar/linear": 4.0,
-    "mountaincar/linear_pilco": 5.0,
-    "mountaincar/ddpg_baseline": 95.0,
-    "mountaincar/ddpg_hybrid": 116.0,
-    "mountaincar/ddpg_hybrid_roa": 134.0,
-    "mountaincar/pilco_baseline": 239.0,
-    "mountaincar/pilco_hybrid": 264.0,
-    "mountaincar/pilco_hybrid_roa": 270.0,
+    "pendulum/linear": 0.9,
+    "pendulum/linear_pilco": 1.3,
+    "pendulum/ddpg_baseline": 46.3,
+    "pendulum/ddpg_hybrid": 52.2,
+    "pendulum/ddpg_hybrid_roa": 55.3,
+    "pendulum/sac_baseline": 168.1,
+    "pendulum/sac_hybrid": 181.2,
+    "pendulum/sac_hybrid_roa": 190.5,
+    "pendulum/pilco_baseline": 86.1,
+    "pendulum/pilco_hybrid": 90.3,
+    "pendulum/pilco_hybrid_roa": 107.1,
+    "cartpole/linear": 1.3,
+    "cartpole/linear_pilco": 1.2,
+    "cartpole/ddpg_baseline": 94.2,
+    "cartpole/ddpg_hybrid": 101.2,
+    "cartpole/ddpg_hybrid_roa": 106.7,
+    "cartpole/sac_baseline": 360.1,
+    "cartpole/sac_hybrid": 396.8,
+    "cartpole/sac_hybrid_roa": 579.2,
+    "cartpole/pilco_baseline": 164.6,
+    "cartpole/pilco_hybrid": 176.2,
+    "cartpole/pilco_hybrid_roa": 172.8,
+    "mountaincar/linear": 0.9,
+    "mountaincar/linear_pilco": 0.9,
+    "mountaincar/ddpg_baseline": 86.8,
+    "mountaincar/ddpg_hybrid": 99.1,
+    "mountaincar/ddpg_hybrid_roa": 96.5,
+    "mountaincar/sac_baseline": 359.3,
+    "mountaincar/sac_hybrid": 387.2,
+    "mountaincar/sac_hybrid_roa": 398.3,
+    "mountaincar/pilco_baseline": 98.0,
+    "mountaincar/pilco_hybrid": 102.6,
+    "mountaincar/pilco_hybrid_roa": 100.7,
 }
-PAPER_RUN_SECONDS.update(
-    {
-        kind: seconds
-        * TOTAL_STEPS_BY_SYSTEM[kind.split("/")[0]]
-        / PAPER_TOTAL_STEPS[kind.split("/")[0]]
-        for kind, seconds in PAPER_RUN_SECONDS.items()
-        if "/ddpg_" in kind
-    }
-)
-# SAC's run costs [s] at leoc's budgets: the median over seeds 0-4 of each kind's wall time in
-# SAC's 5-seed validation (results/sac-defaults, leoc commit 75ea5b3, 2 workers on an idle
-# 2-core AMD EPYC). The cart-pole's: the runs that had the machine to themselves (baseline
-# seeds 0-4, hybrid seeds 3 and 4; the others shared it with CI); its ROA hybrid had none, so
-# it takes its hybrid's cost, as on the other two systems (within 1%).
-PAPER_RUN_SECONDS.update(
-    {
-        "pendulum/sac_baseline": 173.0,
-        "pendulum/sac_hybrid": 178.0,
-        "pendulum/sac_hybrid_roa": 177.0,
-        "cartpole/sac_baseline": 351.0,
-        "cartpole/sac_hybrid": 374.0,
-        "cartpole/sac_hybrid_roa": 374.0,
-        "mountaincar/sac_baseline": 353.0,
-        "mountaincar/sac_hybrid": 365.0,
-        "mountaincar/sac_hybrid_roa": 364.0,
-    }
-)
-# The quick profile's run costs [s]: each default run's wall time in one invocation on an idle
+# The authors' variant (``--variant authors``): results/paper-authors (42 runs, seeds 0-2), on
+# the same machine: its runs take 0.55-1.2x leoc's of the same kind (costed with leoc's former
+# table, its first ETA was 182% high). It has no SAC or ROA-relevance hybrid runs: those kinds
+# keep leoc's costs (Profile.for_variant).
+AUTHORS_RUN_SECONDS = {
+    "pendulum/linear": 1.2,
+    "pendulum/linear_pilco": 1.1,
+    "pendulum/ddpg_baseline": 49.6,
+    "pendulum/ddpg_hybrid": 56.1,
+    "pendulum/pilco_baseline": 98.8,
+    "pendulum/pilco_hybrid": 108.7,
+    "cartpole/linear": 1.5,
+    "cartpole/linear_pilco": 1.5,
+    "cartpole/ddpg_baseline": 70.3,
+    "cartpole/ddpg_hybrid": 78.0,
+    "cartpole/pilco_baseline": 131.7,
+    "cartpole/pilco_hybrid": 156.1,
+    "mountaincar/linear": 1.0,
+    "mountaincar/linear_pilco": 1.2,
+    "mountaincar/ddpg_baseline": 48.0,
+    "mountaincar/ddpg_hybrid": 53.1,
+    "mountaincar/pilco_baseline": 87.7,
+    "mountaincar/pilco_hybrid": 106.3,
+}
+FALLBACK_RUN_SECONDS = {"linear": 1.1, "ddpg": 92.1, "sac": 364.7, "pilco": 102.6}
+"""Expected wall time [s] of a run whose controller a profile has no measurement for (a user's
+system's runs take their controller's mean over the measured systems first): the median of
+each learner's runs in results/paper (:func:`leoc.experiments.eta.measured_learner_seconds`),
+as the tables above."""
+# The quick profile's run costs [s] (not re-measured with the tables above: no quick study is
+# published under results/): each default run's wall time in one invocation on an idle
 # 2-core AMD EPYC (`leoc reproduce --profile quick --jobs 2`, leoc commit e66f953, 522 s in
 # all); the ROA hybrids, which the quick profile does not run by default, are their paper-
 # relevance hybrid's time scaled by the ratio of the two in the paper profile.
@@ -258,6 +283,7 @@ PROFILES: dict[str, Profile] = {
             "the paper's 15k and 10k did not learn on 4 of 5 seeds)"
         ),
         run_seconds=PAPER_RUN_SECONDS,
+        variant_run_seconds={"authors": AUTHORS_RUN_SECONDS},
     ),
 }
 PROFILE_NAMES = tuple(PROFILES)

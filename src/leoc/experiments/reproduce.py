@@ -366,6 +366,7 @@ def reproduce(
     out = Path(out_dir)
     profile = get_profile(profile_name, seeds)
     chosen = get_variant(variant)
+    profile = profile.for_variant(chosen.name)  # its runs' measured costs (the ETA's)
     if jobs is not None and (int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
     check_backend(backend, address)  # before anything is written
