@@ -22,6 +22,7 @@ from PIL import Image
 
 from leoc.cli import main
 from leoc.evaluation import video
+from leoc.experiments import animations
 from leoc.names import BUILTIN_ENV_IDS
 from leoc.systems import LeocEnv, make_system
 from leoc.systems import rendering as rd
@@ -366,8 +367,8 @@ def test_the_representative_run_is_the_median_by_swing_up_return() -> None:
         for seed, value in enumerate([-5.0, -1.0, -3.0, -4.0])
     ]
     # returns sorted: -5 (seed 0), -4 (3), -3 (2), -1 (1): the lower median is seed 3
-    assert video.representative_run(runs)["spec"]["seed"] == 3
-    assert video.representative_run(runs[:3])["spec"]["seed"] == 2
+    assert animations.representative_run(runs)["spec"]["seed"] == 3
+    assert animations.representative_run(runs[:3])["spec"]["seed"] == 2
 
 
 def test_a_folder_without_trained_controllers_gets_no_animations(tmp_path) -> None:
@@ -379,8 +380,8 @@ def test_a_folder_without_trained_controllers_gets_no_animations(tmp_path) -> No
     runs.mkdir(parents=True)
     source = published / "runs" / "pendulum" / "ddpg_hybrid" / "seed0" / "evaluation.json"
     (runs / "evaluation.json").write_text(source.read_text())
-    assert video.write_report_animations(tmp_path) == {}
-    assert not (tmp_path / video.ANIMATIONS_DIR).exists()
+    assert animations.write_report_animations(tmp_path) == {}
+    assert not (tmp_path / animations.ANIMATIONS_DIR).exists()
 
 
 @pytest.mark.slow
@@ -397,13 +398,13 @@ def test_report_animations_of_a_trained_hybrid(tmp_path) -> None:
         "swing_up": {"mean_return": -1.0},
     }
     (run / "evaluation.json").write_text(json.dumps(record))
-    written = video.write_report_animations(tmp_path)
+    written = animations.write_report_animations(tmp_path)
     assert written == {"pendulum": tmp_path / "animations" / "pendulum.gif"}
     with Image.open(written["pendulum"]) as gif:
         assert gif.n_frames == 2 * (make_system("pendulum").episode_steps + 1)
     # a report rewritten over the same runs keeps the animation instead of redrawing it
     drawn_at = written["pendulum"].stat().st_mtime_ns
-    assert video.write_report_animations(tmp_path) == written
+    assert animations.write_report_animations(tmp_path) == written
     assert written["pendulum"].stat().st_mtime_ns == drawn_at
 
 

@@ -20,6 +20,9 @@ if TYPE_CHECKING:
 PILCO_MARKER = "controller.pt"
 DDPG_MARKER = "model.zip"
 REPRODUCE_TRAIN_DIR = "train"
+REPRODUCE_EVALUATION = "evaluation.json"
+#: Controllers of ``leoc reproduce`` that are designed, not trained (leoc.names.CONTROLLERS).
+LINEAR_RUNS = ("linear", "linear_pilco")
 
 
 def trainer_dir(run_dir: str | Path) -> Path:
@@ -30,11 +33,32 @@ def trainer_dir(run_dir: str | Path) -> Path:
     for candidate in (path, path / REPRODUCE_TRAIN_DIR):
         if (candidate / PILCO_MARKER).is_file() or (candidate / DDPG_MARKER).is_file():
             return candidate
+    recorded = _reproduce_record(path)
+    spec = recorded.get("spec") if isinstance(recorded.get("spec"), dict) else {}
+    if spec.get("controller") in LINEAR_RUNS:
+        command = f"leoc simulate {spec.get('system')} --variant {recorded.get('variant')}"
+        if recorded.get("action_repeat", 1) != 1:
+            command += f" --action-repeat {recorded.get('action_repeat')}"
+        raise FileNotFoundError(
+            f"controller: {str(path)!r} is a linear reference of 'leoc reproduce' (designed, not "
+            f"trained: it holds no controller file); simulate it as '{command}'"
+        )
     raise FileNotFoundError(
         f"controller: expected 'linear' or a run folder holding {PILCO_MARKER} (PILCO) or "
         f"{DDPG_MARKER} (DDPG/TD3), directly or in {REPRODUCE_TRAIN_DIR}/, found neither in "
         f"{str(path)!r}"
     )
+
+
+def _reproduce_record(path: Path) -> dict:
+    """What a ``leoc reproduce`` run folder records (its ``evaluation.json``), or {}."""
+    import json
+
+    try:
+        record = json.loads((path / REPRODUCE_EVALUATION).read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
 
 
 def trained_system(run_dir: str | Path) -> str:

@@ -25,6 +25,7 @@ from leoc.evaluation.plots.responses import plot_responses
 from leoc.evaluation.plots.robustness import plot_robustness
 from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALED_PARAMETERS
 from leoc.evaluation.rollout import IMPULSE_MAGNITUDE, RESPONSE_TESTS, STEP_MAGNITUDE
+from leoc.experiments.animations import write_report_animations
 from leoc.experiments.appendix_d import appendix_d_section
 from leoc.experiments.claims_report import (
     hybrid_claims_section,
@@ -968,6 +969,13 @@ def write_report(out_dir: str | Path) -> Path:
         figures.append(("Empirical basins and the certified region of attraction", "basins.png"))
     if write_relevance_figure(evaluations, out / "relevance.png"):
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
+    for system, animation in write_report_animations(out, evaluations).items():
+        figures.append(
+            (
+                f"{system}: a hybrid's swing-up and impulse response, r(x) shown",
+                animation.relative_to(out).as_posix(),
+            )
+        )
     path = out / "report.md"
     document = render_markdown(
         meta,
