@@ -6,7 +6,7 @@ import argparse
 import dataclasses
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from leoc.cli._args import (
     SYSTEM_HELP,
@@ -28,7 +28,8 @@ def add_parser(commands: Any) -> None:
         "which V decreases along the nonlinear, saturated, held closed loop, inside the allowed "
         "region (interval arithmetic on adaptively bisected boxes; the sampled estimate after "
         "Najafi et al. 2016, printed beside it, is its target), and simulate seeded starts in a "
-        "box for the LQR and each --controller.",
+        "box for the LQR and each --controller. With --controller, the LQR is the runs' own: "
+        "the design method in their config, their control period and their output squash.",
     )
     roa.add_argument(
         "system",
@@ -41,13 +42,14 @@ def add_parser(commands: Any) -> None:
         "--controller",
         nargs="+",
         help="run folders written by 'leoc train' or printed by 'leoc reproduce' (basins of "
-        "each); the LQR is certified on their plant (the integrator they were trained with)",
+        "each); the LQR certified is the one they were trained with (its design method, "
+        "control period and squash), on their plant (the integrator they were trained with)",
     )
     roa.add_argument(
         "--action-repeat",
         type=positive_int,
-        default=1,
-        help="control period of the LQR in simulator steps (default 1)",
+        help="control period of the LQR in simulator steps (default 1; with --controller the "
+        "runs' own period, and another one is refused)",
     )
     roa.add_argument(
         "--samples",
@@ -129,13 +131,135 @@ def roa_plant(args: argparse.Namespace):
     return make_system(args.system).with_rules(plant)
 
 
-def _roa_controllers(args: argparse.Namespace, design) -> dict:
-    """The LQR (at the design's period) and every ``--controller`` run folder, by label."""
-    from leoc.control import lqr_closed_loop
+class CertifiedLQR(NamedTuple):
+    """Which LQR ``leoc roa`` designs and certifies: that of the ``--controller`` runs, else
+    leoc's discrete design at ``--action-repeat`` clipped by the actuator."""
 
-    controllers = {f"LQR (period {design.action_repeat})": lqr_closed_loop(design)}
-    for spec in args.controller or []:
-        controllers[Path(spec).name] = load_controller(spec, args.system)
+    method: str
+    """``method`` of :func:`leoc.control.design_lqr` (a run's config ``lqr_method``)."""
+    action_repeat: int
+    """Control period in simulator steps (a run's: that of its loaded controller)."""
+    saturation: str
+    """Squash of the linear part, :func:`leoc.policies.hybrid.saturated_lqr`'s ``saturation``:
+    ``clip`` (the actuator's, in the step) or a run's own (PILCO: ``sin``)."""
+
+
+DEFAULT_LQR_METHOD = "discrete"
+"""The LQR of ``leoc roa SYSTEM`` and of a run whose config records no ``lqr_method``."""
+DEFAULT_ACTION_REPEAT = 1
+"""The control period of ``leoc roa SYSTEM`` without ``--action-repeat``."""
+LINEAR_PART_RTOL = 1e-9
+LINEAR_PART_ATOL = 1e-12
+"""Agreement of a run's saved linear part with its redesigned LQR (float64 copies of one
+design: equal up to rounding)."""
+
+
+def _output_saturation(controller) -> str:
+    """The squash of a loaded run's output: that of its outermost module with a ``saturation``
+    (the hybrid's or PILCO's ``sin``); ``clip`` when it has none or it is the actuator's."""
+    from leoc.policies.hybrid import ACTUATOR_CLIPS
+
+    for module in controller.modules():
+        saturation = getattr(module, "saturation", None)
+        if isinstance(saturation, str):
+            return "clip" if saturation in ACTUATOR_CLIPS else saturation
+    return "clip"
+
+
+def run_lqr(spec: str, controller) -> CertifiedLQR:
+    """The LQR the run in ``spec`` (loaded as ``controller``) was trained with: its config's
+    ``lqr_method``, the loaded controller's control period and output squash."""
+    from leoc.experiments.controllers import trainer_dir
+    from leoc.systems.rollout import control_period
+    from leoc.training import read_config
+
+    method = read_config(trainer_dir(spec)).get("lqr_method") or DEFAULT_LQR_METHOD
+    return CertifiedLQR(str(method), control_period(controller), _output_saturation(controller))
+
+
+def certified_lqr_choice(args: argparse.Namespace, runs: dict) -> CertifiedLQR:
+    """The one LQR of ``runs`` (run folder -> loaded controller), or leoc's at
+    ``--action-repeat`` without runs.
+
+    Raises
+    ------
+    ValueError
+        The runs differ in a choice (one line naming it and each run's value), or an explicit
+        ``--action-repeat`` is not the runs' period.
+    """
+    if not runs:
+        repeat = DEFAULT_ACTION_REPEAT if args.action_repeat is None else args.action_repeat
+        return CertifiedLQR(DEFAULT_LQR_METHOD, repeat, "clip")
+    choices = {spec: run_lqr(spec, controller) for spec, controller in runs.items()}
+    for field in CertifiedLQR._fields:
+        values = {spec: getattr(choice, field) for spec, choice in choices.items()}
+        if len(set(values.values())) > 1:
+            found = ", ".join(f"{spec!r}: {value!r}" for spec, value in values.items())
+            raise ValueError(
+                f"--controller: expected runs trained with one LQR (a certificate is of one "
+                f"closed loop), found {field} {found}; certify them in separate 'leoc roa' calls"
+            )
+    chosen = next(iter(choices.values()))
+    if args.action_repeat is not None and args.action_repeat != chosen.action_repeat:
+        raise ValueError(
+            f"--action-repeat: the runs' LQR runs at period {chosen.action_repeat}, found "
+            f"{args.action_repeat}; leave it out to certify the LQR they were trained with"
+        )
+    return chosen
+
+
+def _check_linear_part(spec: str, controller, design, lqr: CertifiedLQR) -> None:
+    """Refuse when the hybrid in ``controller`` has another linear part than ``design``'s
+    ``W, b`` (a run whose LQR cannot be redesigned from its config); baselines have none."""
+    import numpy as np
+
+    from leoc.policies import HybridPolicy
+
+    hybrid = next((m for m in controller.modules() if isinstance(m, HybridPolicy)), None)
+    if hybrid is None:
+        return
+    gain = hybrid.linear.W.detach().cpu().numpy()
+    bias = hybrid.linear.b.detach().cpu().numpy()
+    if not (
+        np.allclose(gain, design.W, rtol=LINEAR_PART_RTOL, atol=0.0)
+        and np.allclose(bias, design.b, rtol=LINEAR_PART_RTOL, atol=LINEAR_PART_ATOL)
+    ):
+        raise ValueError(
+            f"--controller: the linear part of {spec!r} (W = {gain.tolist()}) is not the "
+            f"{lqr.method!r} LQR at period {lqr.action_repeat} (W = {design.W.tolist()}); "
+            "its LQR cannot be certified from its config"
+        )
+
+
+def _flat_top(controller, design) -> dict:
+    """``flat_top_rho`` (the level ``rho_in`` on which an ROA hybrid's relevance is 1) and
+    ``flat_top_same_P`` (its V is the certificate's), for a controller with an ROA relevance;
+    empty otherwise."""
+    import numpy as np
+
+    from leoc.policies import ROARelevance
+
+    modules = controller.modules() if hasattr(controller, "modules") else ()
+    module = next((m for m in modules if isinstance(m, ROARelevance)), None)
+    if module is None:
+        return {}
+    matrix = module.lyapunov_matrix.detach().cpu().numpy()
+    return {
+        "flat_top_rho": float(module.rho_in),
+        "flat_top_same_P": bool(np.allclose(matrix, design.P, rtol=LINEAR_PART_RTOL, atol=0.0)),
+    }
+
+
+def _roa_controllers(system, design, lqr: CertifiedLQR, runs: dict) -> dict:
+    """The certified LQR (at the design's period, with the runs' squash) and every
+    ``--controller`` run, by label."""
+    from leoc.policies.hybrid import saturated_lqr
+
+    controllers = {
+        f"LQR (period {design.action_repeat})": saturated_lqr(system, design, lqr.saturation)
+    }
+    for spec, controller in runs.items():
+        controllers[Path(spec).name] = controller
     return controllers
 
 
@@ -149,35 +273,45 @@ def run(args: argparse.Namespace) -> int:
         basin_starts,
         box_fraction,
         certified_set_check,
-        certify_lqr,
         default_basin_box,
         design_lqr,
         empirical_basin,
         plot_basins,
         slice_grid,
     )
+    from leoc.policies.hybrid import lqr_certificate
 
     torch.set_num_threads(1)
     started = time.perf_counter()
     system = roa_plant(args)
-    design = design_lqr(system, action_repeat=args.action_repeat)
-    certificate = certify_lqr(system, design, samples=args.samples, seed=args.seed)
+    runs = {spec: load_controller(spec, args.system) for spec in args.controller or []}
+    lqr = certified_lqr_choice(args, runs)
+    design = design_lqr(system, method=lqr.method, action_repeat=lqr.action_repeat)  # type: ignore[arg-type]
+    for spec, controller in runs.items():
+        _check_linear_part(spec, controller, design, lqr)
+    # The closed loop the runs' ROA hybrids are flat on (leoc.policies.roa_hybrid and the
+    # DDPG hybrids' relevance certify it with this one function).
+    certificate = lqr_certificate(
+        system, design, lqr.saturation, samples=args.samples, seed=args.seed
+    )
     box = default_basin_box(system) if args.box is None else np.asarray(args.box, dtype=float)
     fraction, error = box_fraction(certificate, box, seed=args.seed)
     starts = basin_starts(system, box, args.starts, seed=args.seed)
     basins = {}
-    for label, controller in _roa_controllers(args, design).items():
+    for label, controller in _roa_controllers(system, design, lqr, runs).items():
         basin = empirical_basin(system, controller, starts, box=box)
         inside = certified_set_check(system, controller, certificate, args.starts, args.seed)
         basins[label] = {
             "controller": controller,
             "box_held": basin.fraction,
             "certified_set_held": inside.fraction,
+            **_flat_top(controller, design),
         }
     report = {
         "system": args.system,
         "plant": dataclasses.asdict(system.rules.plant()),
         "action_repeat": design.action_repeat,
+        "lqr": {**lqr._asdict(), "from_runs": bool(runs)},
         "certificate": certificate.summary(),
         "box": box.tolist(),
         "box_fraction": fraction,
@@ -210,9 +344,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_roa(system, certificate, report: dict) -> None:
     names = ", ".join(system.state_names)
+    lqr = report["lqr"]
+    whose = "the runs' own: " if lqr["from_runs"] else ""
     print(
-        f"Region of attraction of the LQR on {report['system']} (control period "
-        f"{report['action_repeat']} step(s), dt = {system.dt} s"
+        f"Region of attraction of the LQR ({whose}{lqr['method']} design, {lqr['saturation']} "
+        f"squash) on {report['system']} (control period {report['action_repeat']} step(s), "
+        f"dt = {system.dt} s"
         f"{LEGACY_PLANT_NOTE if report['plant']['legacy_integrator'] else ''}"
         f"); state: {names}"
     )
@@ -232,9 +369,16 @@ def _print_roa(system, certificate, report: dict) -> None:
     )
     print(f"empirical basins ({report['basin_starts']} seeded starts, converge and hold):")
     for label, entry in report["basins"].items():
+        flat = entry.get("flat_top_rho")
+        top = (
+            ""
+            if flat is None
+            else f" (ROA relevance: r = 1 on V <= {flat:.6g}"
+            f"{'' if entry['flat_top_same_P'] else ', another V'})"
+        )
         print(
             f"  {label}: {entry['box_held']:.1%} of the box; {entry['certified_set_held']:.1%} of "
-            "the certified set"
+            f"the certified set{top}"
         )
     if "plot" in report:
         print(f"figure written to {report['plot']}")

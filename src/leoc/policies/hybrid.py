@@ -74,7 +74,15 @@ from .linear import LinearController
 from .relevance import DEFAULT_ROA_WIDTH, ROARelevance, paper_relevance
 from .saturation import apply_saturation, check_saturation_mode
 
-__all__ = ["HybridOutput", "HybridPolicy", "SMOOTH_SATURATION_ATOL", "roa_hybrid"]
+__all__ = [
+    "ACTUATOR_CLIPS",
+    "HybridOutput",
+    "HybridPolicy",
+    "SMOOTH_SATURATION_ATOL",
+    "lqr_certificate",
+    "roa_hybrid",
+    "saturated_lqr",
+]
 
 DEFAULT_LAMBDA = 1.0  # the paper's initial Lambda: the identity
 SMOOTH_SATURATION_ATOL = 1e-9
@@ -427,23 +435,10 @@ def roa_hybrid(
         If the certificate does not match the design, has no certified set, or ``rho_in`` is
         not in (0, rho].
     """
-    from leoc.control.roa import certify_lqr
-
-    from .held import with_control_period
-
     limit = float(system.action_limit if action_limit is None else action_limit)
     linear = LinearController(design.W, design.b)
     if certificate is None:
-        check_saturation_mode(saturation, "saturation")
-        limit_t = torch.tensor(limit, dtype=linear.W.dtype)
-
-        def saturated_linear(obs: Tensor) -> Tensor:
-            # G written out (not linear(obs)) so that the certificate's interval proof can
-            # evaluate it on interval enclosures (leoc.control.intervals).
-            return apply_saturation(obs @ linear.W.T + linear.b, limit_t, saturation)
-
-        closed_loop = with_control_period(_Callable(saturated_linear), design.action_repeat)
-        certificate = certify_lqr(system, design, closed_loop, **certify_options)
+        certificate = lqr_certificate(system, design, saturation, limit, **certify_options)
     elif certificate.action_repeat != design.action_repeat or not np.array_equal(
         certificate.P, design.P
     ):
@@ -477,6 +472,72 @@ def roa_hybrid(
         saturation=saturation,
         relevance=relevance,
     )
+
+
+ACTUATOR_CLIPS = ("clip", "none")
+"""Saturations of G that are the actuator's own clip (the step clips every action to
+``system.action_limit``), so that the saturated LQR is the design's plain ``G``."""
+
+
+def saturated_lqr(
+    system: Any, design: Any, saturation: str = "clip", action_limit: float | None = None
+) -> Any:
+    r"""The closed loop :math:`\operatorname{sat}(G)`, :math:`G(o) = W o + b` of ``design``, at
+    the design's control period: the linear part of a hybrid with this ``saturation``.
+
+    Parameters
+    ----------
+    system : leoc.systems.System
+    design : LQRDesign
+    saturation : {"clip", "none", "sin", "tanh"}
+        ``clip`` or ``none`` at the system's limit: the design's
+        :func:`~leoc.control.lqr_closed_loop` (the step clips every action); otherwise
+        :math:`G` written out and saturated, so that the interval proof of a certificate can
+        evaluate it.
+    action_limit : float, optional
+        :math:`u_{max}` of the saturation; default ``system.action_limit``.
+    """
+    from leoc.control.roa import lqr_closed_loop
+
+    from .held import with_control_period
+
+    check_saturation_mode(saturation, "saturation")
+    limit = float(system.action_limit if action_limit is None else action_limit)
+    if saturation in ACTUATOR_CLIPS and limit == float(system.action_limit):
+        return lqr_closed_loop(design)
+    gain = torch.as_tensor(np.asarray(design.W), dtype=torch.float64)
+    bias = torch.as_tensor(np.asarray(design.b), dtype=torch.float64)
+    limit_t = torch.tensor(limit, dtype=torch.float64)
+
+    def saturated_linear(obs: Tensor) -> Tensor:
+        # G written out (not a LinearController) so that the certificate's interval proof can
+        # evaluate it on interval enclosures (leoc.control.intervals).
+        return apply_saturation(obs @ gain.T + bias, limit_t, saturation)
+
+    return with_control_period(_Callable(saturated_linear), design.action_repeat)
+
+
+def lqr_certificate(
+    system: Any,
+    design: Any,
+    saturation: str = "clip",
+    action_limit: float | None = None,
+    **certify_options: Any,
+) -> Any:
+    r"""Certificate (:func:`leoc.control.certify_lqr`) of :func:`saturated_lqr` at the design's
+    period: the region of attraction an ROA hybrid is flat on (:func:`roa_hybrid`; a DDPG/TD3/SAC
+    hybrid's is the ``clip`` case, :func:`leoc.ddpg.policies.roa_relevance_kwargs`), and the one
+    ``leoc roa --controller`` certifies for a trained run.
+
+    ``clip``/``none`` at the system's limit is the design's own certificate (cached per process);
+    ``certify_options`` are :func:`~leoc.control.certify_level`'s keywords.
+    """
+    from leoc.control.roa import LinearClosedLoop, certify_lqr
+
+    closed_loop = saturated_lqr(system, design, saturation, action_limit)
+    if isinstance(closed_loop, LinearClosedLoop):
+        return certify_lqr(system, design, **certify_options)
+    return certify_lqr(system, design, closed_loop, **certify_options)
 
 
 class _Callable(nn.Module):
