@@ -192,7 +192,8 @@ def train_ddpg(
         ``run_dir`` holding a run of another configuration is refused (ValueError naming the
         settings that differ) unless True, which trains afresh there. A folder holding the
         same run is resumed from its checkpoint (exactly: the resumed run equals the
-        uninterrupted one), or, when complete, returned as it is without training.
+        uninterrupted one), or, when complete, returned as it is without training (with
+        ``callbacks`` given, trained again, since they must watch it: the same result).
     checkpoint_interval : int
         Environment steps between checkpoints (:mod:`leoc.ddpg.checkpoint`).
     **overrides
@@ -219,7 +220,10 @@ def train_ddpg(
     resumed = None
     if same_run(run_path, config_dict, overwrite):
         resumed = load_checkpoint(checkpoint_path, label=algo)
-        done = None if resumed is not None else _completed_result(run_path, config_dict, algo)
+        # a finished run is returned as it is, unless callbacks must watch it train (they would
+        # see nothing): then it trains again, to the same result (runs are deterministic)
+        reusable = resumed is None and not callbacks
+        done = _completed_result(run_path, config_dict, algo) if reusable else None
         if done is not None:
             if progress:
                 print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
