@@ -45,7 +45,13 @@ def build_policy(
         return SaturatedPolicy(rbf, limit, "sin")
     from leoc.control.lqr import design_lqr
 
-    design = design_lqr(system, method=config.lqr_method, action_repeat=config.action_repeat)
+    # the LQR of the loop the controller runs in: its deployed period (the authors' PILCO plans
+    # at a longer period than it deploys at; their continuous design's gain is the same at both,
+    # but its region of attraction is the deployed loop's: held 3 steps on the pendulum it is
+    # not even stable)
+    design = design_lqr(
+        system, method=config.lqr_method, action_repeat=config.controller_action_repeat
+    )
     if config.relevance == "roa":
         return roa_hybrid(system, design, rbf, learn_width=config.learn_lambda, saturation="sin")
     return HybridPolicy(
