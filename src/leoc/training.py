@@ -15,10 +15,12 @@ Hold test: :meth:`leoc.systems.System.hold_step` (the system's band and minimum 
 episode must not terminate). ``reached_steps``: the first evaluation at which every episode
 holds; ``held_steps``: the first evaluation from which every later evaluation holds too.
 
-Model selection, the same for both frameworks: the controller returned, saved as the run's
-controller and evaluated by ``leoc reproduce`` is the *final* one (the policy at the end of
-the training budget), never the best-evaluated one, so no selection on evaluation episodes
-enters the reported numbers.
+Model selection: each trainer records the rule that chose the run's controller in its curve
+summary (``model_selection``): :data:`MODEL_SELECTION` (``"final"``, the policy at the end of
+the training budget) unless the trainer selects otherwise: DDPG/TD3/SAC by their config's
+``model_selection`` (leoc's default ``"best_held"``, :mod:`leoc.ddpg.callbacks`), PILCO by
+``select_best_from``. A rule other than ``"final"`` selects on the evaluation episodes, and the
+report says so from what the runs recorded.
 
 Run folder (every file written atomically)::
 
@@ -53,10 +55,6 @@ CURVE_PNG = "learning_curve.png"
 #: Columns of every learning-curve row (``curve.csv``).
 CURVE_COLUMNS = ("steps", "interaction_seconds", "mean_return", "std_return", "held_fraction")
 MODEL_SELECTION = "final"
-MODEL_SELECTION_TEXT = (
-    "the final controller of each run (the policy at the end of its training budget), for "
-    "PILCO and DDPG alike; no selection on evaluation episodes"
-)
 
 
 class Evaluation(NamedTuple):
