@@ -21,6 +21,7 @@ it), a baseline does not, a rerun trains nothing and leaves the controller as it
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import json
@@ -35,6 +36,7 @@ import leoc.control
 from leoc.cli import main
 from leoc.experiments.controllers import load_trained_controller
 from leoc.names import PAPER_SYSTEM_NAMES, RELEVANCE_NAMES, VARIANT_NAMES
+from leoc.systems import StepRules
 
 LEARNERS = ("pilco", "ddpg", "td3", "sac")
 KINDS = ("baseline", "hybrid", "hybrid_roa")
@@ -133,8 +135,6 @@ def _linear_response(run: Path, learner: str, variant: str, period: int) -> np.n
     variant's LQR design, squashed as the learner squashes its linear part: PILCO's is
     u_max sin(G / u_max) under every variant (for its moment matching), DDPG's, TD3's and SAC's
     is G clipped to the action box under every variant (the authors' DDPG had no squash)."""
-    import dataclasses
-
     from leoc.evaluation.rollout import response_test
     from leoc.experiments.controllers import trained_plant
     from leoc.experiments.variants import get_variant
@@ -164,6 +164,8 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
     assert code == 0, err
     response = json.loads(out)
     assert response["system"] == system and response["variant"] == variant
+    recorded_rules = json.loads((run / "config.json").read_text()).get("step_rules") or {}
+    assert response["step_rules"] == dataclasses.asdict(StepRules(**recorded_rules))
     deviation = np.asarray(response["deviation"])
     assert deviation.size > 1 and np.isfinite(deviation).all()
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -261,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
                     "controller": target.controller,
                     "test": args.test,
                     "variant": args.variant,
+                    "step_rules": dataclasses.asdict(system.rules),
                     "metrics_set": args.metrics,
                     "action_repeat": period,
                     "metrics": result.metrics._asdict(),
