@@ -333,3 +333,25 @@ def test_a_linear_run_folder_is_refused_with_the_command_that_works(tmp_path, ca
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "'leoc simulate pendulum --variant authors --action-repeat 2'" in err
     shutil.rmtree(run)
+
+
+def test_pilco_extends_a_run_given_more_iterations_and_refuses_fewer(tmp_path, capsys) -> None:
+    """PILCO's budget is a count of independent iterations: the same command with more
+    iterations continues the run (its config then records the new budget); fewer than it has
+    done is refused in one line, the run left alone."""
+    run = tmp_path / "run"
+    train = ["train", "pendulum", "--algo", "pilco", "--profile", "smoke", "--out", run]
+    assert _run([*train, "--iterations", "1", "--quiet"], capsys)[0] == 0
+    code, _, err = _run([*train, "--iterations", "2", "--quiet"], capsys)
+    assert code == 0, err
+    curve = json.loads((run / "curve.json").read_text())["curve"]
+    assert [row["iteration"] for row in curve] == [0, 1, 2]
+    assert json.loads((run / "config.json").read_text())["iterations"] == 2
+    before = _actions(run, "pendulum")
+    code, _, err = _run([*train, "--iterations", "1", "--quiet"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "holds a PILCO run of 2 iterations" in err and "--overwrite" in err
+    torch.testing.assert_close(_actions(run, "pendulum"), before, rtol=0.0, atol=0.0)
+    code, _, err = _run([*train, "--iterations", "1", "--overwrite", "--quiet"], capsys)
+    assert code == 0, err
+    assert [r["iteration"] for r in json.loads((run / "curve.json").read_text())["curve"]] == [0, 1]
