@@ -3,8 +3,10 @@ and the reproduce smoke profile giving the same numbers on both backends."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import re
 import signal
 import sys
 import threading
@@ -355,3 +357,98 @@ def test_trainer_progress_reads_ddpg_lines_and_not_pilco_lines() -> None:
     # PILCO's iterations do not cost alike: its line is no measure of the time done
     assert trainer_progress("[pilco] iter  2/4 predicted cost 7.1") is None
     assert trainer_progress("== pendulum/linear/seed0 (quick profile)") is None
+
+
+# -------------------------------------------------------------------------- the live line
+class FakeTerminal(io.StringIO):
+    """What the sweep writes to, seen as a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+LIVE_COLUMNS = 90
+BAR_LINE = re.compile(r"\d+/\d+ done \|[ #0-9]{10}\| ")
+
+
+def long_log_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    """Logs a line longer than any terminal's, then works a little."""
+    run_dir = default_run_dir(out_dir, spec)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "train.log").write_text(f"{spec}: " + "word " * 40 + "\n")
+    time.sleep(QUICK_RUN_S)
+    return {"spec": spec}
+
+
+def screen_segments(text: str) -> list[str]:
+    """Every line as drawn, carriage-return redraws apart."""
+    return [part for line in text.split("\n") for part in line.split("\r")]
+
+
+def test_a_terminal_gets_one_live_line_and_each_done_line_once(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", str(LIVE_COLUMNS))
+    terminal = FakeTerminal()
+    specs = ["a", "b", "c/with/a/long/key"]
+    result = sweep(
+        specs,
+        long_log_runner,
+        tmp_path,
+        jobs=2,
+        progress_interval_s=0.05,
+        stream=terminal,
+        expected_seconds=lambda spec: QUICK_RUN_S,
+    )
+    assert set(result.results) == set(specs)
+    text = terminal.getvalue()
+    assert text.endswith("\n")  # the bar's line ended
+    done = [part for part in screen_segments(text) if " done (" in part]
+    assert sorted(line.split()[1] for line in done) == sorted(specs)  # once each
+    assert {line.split()[0] for line in done} == {"[1/3]", "[2/3]", "[3/3]"}
+    bars = []
+    for part in screen_segments(text):
+        if part in done or not part.strip() or part.startswith("3 runs: 0 already done"):
+            continue
+        assert BAR_LINE.match(part), part  # no header or run lines of the plain format
+        assert len(part) < LIVE_COLUMNS, part  # cut to the terminal, never wrapped
+        bars.append(part)
+    assert any(" running, " in bar and "queued" in bar and "ETA" in bar for bar in bars)
+    assert any(" · " in bar and bar.endswith("…") for bar in bars)  # a long log line, cut
+    assert text.rstrip("\n").split("\n")[-1].split("\r")[-1].startswith("3/3 done |")
+    assert "finished in" in text.rstrip("\n").split("\n")[-1]
+
+
+def interrupt(_key: str) -> None:
+    raise KeyboardInterrupt
+
+
+def test_ctrl_c_ends_the_live_line_before_it_is_raised(tmp_path) -> None:
+    terminal = FakeTerminal()
+    try:
+        sweep(["a", "b"], counting_runner, tmp_path, jobs=1, stream=terminal, on_finished=interrupt)
+    except KeyboardInterrupt:
+        # read while the exception is handled, as the command's "interrupted" is printed: the
+        # traceback still holds the sweep's frame, so no garbage collection closed the bar
+        text = terminal.getvalue()
+    else:
+        pytest.fail("the sweep swallowed the KeyboardInterrupt")
+    # the caller's "interrupted" starts on a line of its own, below the bar as it stood
+    assert text.endswith("\n")
+    assert BAR_LINE.match(text.rstrip("\n").split("\n")[-1].split("\r")[-1])
+    assert "[1/2] a done" in text
+
+
+def test_without_a_terminal_the_lines_are_the_plain_ones(tmp_path, capsys) -> None:
+    sweep(["first", "a"], slow_runner, tmp_path, jobs=1, progress_interval_s=0.4)
+    lines = capsys.readouterr().out.splitlines()  # sys.stdout, not a terminal here
+    assert lines[0] == "2 runs: 0 already done, 2 to run on 1 local worker processes"
+    assert "[0s] 0 done, 1 running, 1 queued; ETA after the first run" in lines
+    assert any(line.startswith("[1/2] first done (") for line in lines)
+    assert any(line.startswith("  a (") and line.endswith("step 1 of 2") for line in lines)
+    assert not any("\r" in line or " · " in line for line in lines)
+    piped = io.StringIO()  # a stream given, not a terminal: the same plain lines there
+    sweep(["b"], counting_runner, tmp_path, jobs=1, stream=piped)
+    lines = piped.getvalue().splitlines()
+    assert lines[0] == "1 runs: 0 already done, 1 to run on 1 local worker processes"
+    assert "[0s] 0 done, 1 running, 0 queued; ETA after the first run" in lines
+    assert lines[-1].startswith("[1/1] b done (") and "\r" not in piped.getvalue()
+    assert capsys.readouterr().out == ""  # nothing went to stdout

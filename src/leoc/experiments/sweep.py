@@ -27,6 +27,7 @@ to the run's log and the sweep goes on with the other runs.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import shutil
@@ -39,7 +40,7 @@ import uuid
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import IO, Any, NamedTuple
 
 from leoc.experiments.eta import Finished, Queued, Running, estimate_remaining
 from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
@@ -56,6 +57,14 @@ LOG_LINE_CHARS = 400
 DEFAULT_TERMINAL_COLUMNS = 100
 """Width of the progress lines when the output is not a terminal."""
 WRAP_INDENT = "      "
+LIVE_REFRESH_S = 1.0
+"""Seconds between redraws of the live status line (a terminal's: it does not scroll)."""
+LIVE_BAR_CHARS = 10
+"""Width of the live line's bar."""
+LIVE_MIN_DETAIL_CHARS = 12
+"""Fewest characters of a run's log line worth showing on the live line (else none)."""
+LIVE_SEPARATOR = " · "
+"""Between the live line's counts and the latest run's log line."""
 TERMINATE_GRACE_S = 5.0
 """Seconds a local worker gets to exit after SIGTERM before it is killed."""
 SHARE_TOKEN_FILE = ".sweep-token"
@@ -484,6 +493,87 @@ class _RayBackend:
             self._ray.shutdown()
 
 
+# -------------------------------------------------------------------------------- live line
+def _isatty(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # no such method, or a closed stream
+        return False
+
+
+def _is_builtin_print(echo: Any) -> bool:
+    """Whether ``echo`` is Python's ``print``, by name: not ``echo is print``, since some
+    libraries replace ``builtins.print`` once imported (Ray's tqdm does), after the callers'
+    defaults took the original."""
+    return getattr(echo, "__module__", None) == "builtins" and (
+        getattr(echo, "__name__", None) == "print"
+    )
+
+
+def shorten(text: str, width: int) -> str:
+    """``text`` with runs of spaces collapsed, cut to ``width`` characters with an ellipsis."""
+    words = " ".join(text.split())
+    return words if len(words) <= width else words[: max(0, width - 1)] + "…"
+
+
+def _live_columns() -> int:
+    """The live line's width: the terminal's less one column (a line that fills the last
+    column wraps on some terminals, and a wrapped line is no longer redrawn in place)."""
+    return terminal_columns() - 1
+
+
+class _LiveStatus:
+    """The sweep's one live line on a terminal: a tqdm bar over the runs to do, its description
+    the counts, the ETA and the latest run's log line, redrawn in place; finished and failed
+    runs are written above it (:meth:`write`), so they stay in the scrollback.
+
+    ``N/TOTAL done |####      | R running, Q queued, elapsed E, ETA T · KEY (AGE): LOG LINE``
+    """
+
+    def __init__(self, total: int, stream: IO[str]) -> None:
+        from tqdm import tqdm
+
+        self.stream = stream
+        self._bar: Any = tqdm(
+            total=total,
+            file=stream,
+            bar_format=f"{{n_fmt}}/{{total_fmt}} done |{{bar:{LIVE_BAR_CHARS}}}| {{desc}}",
+            ncols=_live_columns(),
+            mininterval=0,  # the driver sets the pace (LIVE_REFRESH_S)
+            leave=True,
+        )
+
+    def write(self, line: str) -> None:
+        """A permanent line above the bar (tqdm clears the bar, writes, redraws it)."""
+        if self._bar is None:
+            print(line, file=self.stream, flush=True)
+        else:
+            self._bar.write(line, file=self.stream)
+
+    def show(self, done: int, status: str, detail: str = "") -> None:
+        """Redraw: ``done`` runs, ``status`` whole, then ``detail`` shortened to what the
+        terminal's width leaves (dropped if under ``LIVE_MIN_DETAIL_CHARS``)."""
+        if self._bar is None:
+            return
+        width = _live_columns()
+        fixed = len(f"{done}/{self._bar.total} done |") + LIVE_BAR_CHARS + len("| ")
+        room = width - fixed - len(status) - len(LIVE_SEPARATOR)
+        text = status
+        if detail and room >= LIVE_MIN_DETAIL_CHARS:
+            text += LIVE_SEPARATOR + shorten(detail, room)
+        self._bar.ncols = width  # tqdm cuts what is still too long (a narrow terminal)
+        self._bar.n = done
+        self._bar.set_description_str(text, refresh=False)
+        self._bar.refresh()
+
+    def close(self) -> None:
+        """Leave the bar drawn as it stands and end its line (idempotent): what follows, an
+        "interrupted" message included, starts on a line of its own."""
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
 # ------------------------------------------------------------------------------------ driver
 class _Driver:
     """Keeps the slots busy, records outcomes, retries dead workers, prints progress."""
@@ -519,6 +609,8 @@ class _Driver:
         self.durations: list[float] = []
         self.running: dict[Any, _Attempt] = {}
         self._shown: dict[tuple[str, int], str] = {}  # each attempt's log line last shown
+        self._changed_at: dict[tuple[str, int], float] = {}  # when that line last changed
+        self.live: _LiveStatus | None = None  # the live line on a terminal, else plain lines
 
     def _done_path(self, spec: Any) -> Path:
         return self.run_dir(self.out_dir, spec) / self.done_file
@@ -602,7 +694,36 @@ class _Driver:
         )
         return f"ETA {format_seconds(remaining)}"
 
+    def _latest(self, now: float, lines: dict[str, str]) -> str:
+        """``KEY (AGE): LOG LINE`` of the running run whose log line changed last (the first
+        key of those that changed together); empty when none runs."""
+        latest, latest_at = "", -math.inf
+        for attempt in sorted(self.running.values(), key=lambda a: a.key):
+            shown = (attempt.key, attempt.number)
+            if self._shown.get(shown) != lines[attempt.key]:
+                self._shown[shown], self._changed_at[shown] = lines[attempt.key], now
+            if self._changed_at[shown] > latest_at:
+                age = format_seconds(now - attempt.started)
+                latest = f"{attempt.key} ({age}): {lines[attempt.key]}"
+                latest_at = self._changed_at[shown]
+        return latest
+
+    def _live_progress(
+        self, live: _LiveStatus, started: float, pending: Sequence[_Attempt]
+    ) -> None:
+        now = time.monotonic()
+        lines = {attempt.key: self._log_line(attempt) for attempt in self.running.values()}
+        failed = f", {len(self.failed)} failed" if self.failed else ""
+        status = (
+            f"{len(self.running)} running, {len(pending)} queued{failed}, "
+            f"elapsed {format_seconds(now - started)}, {self._eta(now, pending, lines)}"
+        )
+        live.show(len(self.results), status, self._latest(now, lines))
+
     def _progress(self, started: float, pending: Sequence[_Attempt]) -> None:
+        if self.live is not None:
+            self._live_progress(self.live, started, pending)
+            return
         now = time.monotonic()
         lines = {attempt.key: self._log_line(attempt) for attempt in self.running.values()}
         width = terminal_columns()
@@ -625,6 +746,8 @@ class _Driver:
     def run(self, pending: deque[_Attempt], progress_interval_s: float) -> None:
         started = time.monotonic()
         total = len(pending)
+        if self.live is not None:  # a live line costs no scrollback: redraw it often
+            progress_interval_s = min(progress_interval_s, LIVE_REFRESH_S)
         next_progress = started  # the first report (and ETA) as soon as the first runs start
         while pending or self.running:
             while pending and len(self.running) < self.backend.slots():
@@ -638,9 +761,15 @@ class _Driver:
                 retry = self._record(self.running.pop(handle), outcome, total)
                 if retry is not None:
                     pending.appendleft(retry)
+                if self.live is not None:
+                    next_progress = time.monotonic()  # the count on the live line, at once
             if time.monotonic() >= next_progress and (pending or self.running):
                 self._progress(started, pending)
                 next_progress = time.monotonic() + progress_interval_s
+        if self.live is not None:
+            failed = f", {len(self.failed)} failed" if self.failed else ""
+            elapsed = format_seconds(time.monotonic() - started)
+            self.live.show(len(self.results), f"finished in {elapsed}{failed}")
 
 
 def sweep(
@@ -659,6 +788,7 @@ def sweep(
     max_retries: int = DEFAULT_MAX_RETRIES,
     progress_interval_s: float = PROGRESS_INTERVAL_S,
     echo: Callable[[str], None] = print,
+    stream: IO[str] | None = None,
     expected_seconds: Callable[[Any], float] | None = None,
     progress_of: Callable[[str], float | None] | None = None,
     on_finished: Callable[[str], None] | None = None,
@@ -707,7 +837,13 @@ def sweep(
         soon as the first runs start.
     echo : callable
         Receives every progress line (default ``print``); lines are wrapped to the terminal's
-        width.
+        width. With the default, the lines go to ``stream``, and if that is a terminal the
+        progress is one live status line instead (a tqdm bar over the runs to do: counts,
+        elapsed, ETA and the log line of the run that moved last, cut to the terminal's
+        width), with each finished or failed run's line written above it.
+    stream : file, optional
+        Where the default ``echo`` writes (default: ``sys.stdout`` at the time of the call);
+        ignored with another ``echo``.
     expected_seconds : callable ``spec -> float``, optional
         Expected wall time of a run on one worker (e.g. the profile's measured costs); the ETA
         is then shown from the first report and refined as runs progress
@@ -741,6 +877,11 @@ def sweep(
     if duplicates:
         raise ValueError(f"specs: expected unique run keys, found {duplicates} more than once")
     begun = time.monotonic()
+    terminal = None  # the stream of a live line: the default echo's, if a terminal
+    if _is_builtin_print(echo):
+        target = sys.stdout if stream is None else stream
+        terminal = target if _isatty(target) else None
+        echo = functools.partial(print, file=target, flush=True)
     pending: deque[_Attempt] = deque()
     skipped: list[str] = []
     for spec, key in zip(specs, keys, strict=True):
@@ -775,7 +916,16 @@ def sweep(
             f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run on "
             f"{engine.describe()}"
         )
-        driver.run(pending, progress_interval_s)
+        if terminal is not None:
+            driver.live = _LiveStatus(len(pending), terminal)
+            driver.echo = driver.live.write
+        try:
+            driver.run(pending, progress_interval_s)
+        finally:
+            if driver.live is not None:
+                # the bar's line ends before anything else is said (Ctrl-C's "interrupted"
+                # included) and before the workers are stopped, which may take seconds
+                driver.live.close()
     except KeyboardInterrupt:
         # the caller says it was interrupted (the leoc command prints one line with how to
         # resume); a second line here would repeat it
