@@ -527,7 +527,7 @@ class _LiveStatus:
     the counts, the ETA and the latest run's log line, redrawn in place; finished and failed
     runs are written above it (:meth:`write`), so they stay in the scrollback.
 
-    ``N/TOTAL done |####      | R running, Q queued, elapsed E, ETA T · KEY (AGE): LOG LINE``
+    ``N/TOTAL done |####      | [ELAPSED] R running, Q queued, ETA T · KEY (AGE): LOG LINE``
     """
 
     def __init__(self, total: int, stream: IO[str]) -> None:
@@ -715,8 +715,8 @@ class _Driver:
         lines = {attempt.key: self._log_line(attempt) for attempt in self.running.values()}
         failed = f", {len(self.failed)} failed" if self.failed else ""
         status = (
-            f"{len(self.running)} running, {len(pending)} queued{failed}, "
-            f"elapsed {format_seconds(now - started)}, {self._eta(now, pending, lines)}"
+            f"[{format_seconds(now - started)}] {len(self.running)} running, "
+            f"{len(pending)} queued{failed}, {self._eta(now, pending, lines)}"
         )
         live.show(len(self.results), status, self._latest(now, lines))
 
