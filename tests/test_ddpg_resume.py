@@ -91,6 +91,13 @@ def test_a_complete_run_is_reused_and_another_budget_refused(tmp_path, capsys) -
     with pytest.raises(ValueError, match=r"total_steps: 300 there, 200 here.*--overwrite"):
         train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **other)
     assert (run / "model.zip").read_bytes() == model_bytes
-    replaced = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, overwrite=True, **other)
+    # replacing it, and stopped before the end: nothing of the old run is left to pass for it
+    with pytest.raises(KeyboardInterrupt):
+        train_ddpg(
+            "pendulum", algo="ddpg", seed=1, run_dir=run, overwrite=True, callbacks=[StopAt(150)],
+            **other,
+        )  # fmt: skip
+    assert not (run / "model.zip").exists() and not (run / "curve.json").exists()
+    replaced = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **other)
     assert replaced.curve[-1]["steps"] == 200
     assert json.loads((run / "config.json").read_text())["total_steps"] == 200

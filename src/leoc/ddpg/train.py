@@ -49,7 +49,9 @@ from leoc.ddpg.sac import LeocSAC, build_sac_model
 from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
 from leoc.training import (
     CONFIG_FILE,
+    CURVE_CSV,
     CURVE_JSON,
+    CURVE_PNG,
     TrainResult,
     curve_summary,
     evaluation_starts,
@@ -70,6 +72,8 @@ __all__ = [
 
 DEFAULT_RUN_ROOT = Path("runs") / "ddpg"
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
+#: What a run writes beside its models (:func:`leoc.training.write_curve`).
+RUN_OUTPUTS = (CURVE_JSON, CURVE_CSV, CURVE_PNG)
 ALGO_CLASSES = {"ddpg": LeocDDPG, "td3": LeocTD3, "sac": LeocSAC}
 DDPGResult = TrainResult  # the one trainer result (leoc.training)
 
@@ -228,19 +232,20 @@ def train_ddpg(
             if progress:
                 print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
             return done
-    else:
-        run_path.mkdir(parents=True, exist_ok=True)
-        checkpoint_path.unlink(missing_ok=True)
-        write_text_atomic(
-            run_path / CONFIG_FILE,
-            json.dumps({**config_dict, "versions": _versions()}, indent=2),
-        )
-
     # the edge: the config's name, resolved once, stepping under the config's rules
     system_obj = make_system(system).with_rules(StepRules(**config.step_rules))
     if resumed is None:
         env = make_env(system_obj)
-        model = build_model(config, seed, env)
+        model = build_model(config, seed, env)  # may refuse the config: nothing written yet
+        run_path.mkdir(parents=True, exist_ok=True)
+        # a fresh run (new, or replacing another with --overwrite) keeps nothing of an earlier
+        # one: an old controller beside the new config would read as this run, complete
+        for stale in (CHECKPOINT_FILE, *MODEL_FILES.values(), *RUN_OUTPUTS):
+            (run_path / stale).unlink(missing_ok=True)
+        write_text_atomic(
+            run_path / CONFIG_FILE,
+            json.dumps({**config_dict, "versions": _versions()}, indent=2),
+        )
     else:
         model = resumed["model"]
         env = model.get_env()

@@ -322,7 +322,6 @@ def train_pilco(
     if config.num_threads is not None:
         torch.set_num_threads(config.num_threads)
     run_path = Path(run_dir) if run_dir is not None else _default_run_dir(config)
-    run_path.mkdir(parents=True, exist_ok=True)
     plant = make_system(system).with_rules(StepRules(**config.step_rules))
     plant.episode_steps = config.episode_steps
     rng = np.random.default_rng(seed)
@@ -332,6 +331,7 @@ def train_pilco(
     model = None
     if resumed is None:
         state, policy = _first_state(plant, config, rng, generator, starts)
+        run_path.mkdir(parents=True, exist_ok=True)  # the config was accepted: a run begins
         write_text_atomic(run_path / CONFIG_FILE, json.dumps(config.to_dict(), indent=2))
         save_checkpoint(run_path, config, state, policy, None, generator)
     else:
