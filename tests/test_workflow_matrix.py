@@ -34,7 +34,7 @@ import torch
 from leoc.cli import main
 from leoc.experiments.controllers import load_trained_controller
 from leoc.experiments.variants import VARIANTS
-from leoc.names import PAPER_SYSTEM_NAMES, RELEVANCE_NAMES, VARIANT_NAMES
+from leoc.names import CONTROLLERS, PAPER_SYSTEM_NAMES, RELEVANCE_NAMES, VARIANT_NAMES
 from leoc.systems import StepRules
 
 LEARNERS = ("pilco", "ddpg", "td3", "sac")
@@ -225,19 +225,7 @@ def test_relevance_without_hybrid_is_refused(capsys, tmp_path) -> None:
 
 
 # ----------------------------------------------------------------------------- reproduce path
-REPRODUCE_CONTROLLERS = (
-    "linear",
-    "linear_pilco",
-    "ddpg_baseline",
-    "ddpg_hybrid",
-    "ddpg_hybrid_roa",
-    "sac_baseline",
-    "sac_hybrid",
-    "sac_hybrid_roa",
-    "pilco_baseline",
-    "pilco_hybrid",
-    "pilco_hybrid_roa",
-)
+REPRODUCE_CONTROLLERS = CONTROLLERS  # every controller reproduce knows
 
 
 def _check_reproduce(system: str, variant: str, tmp_path: Path, capsys) -> None:

@@ -114,7 +114,7 @@ class ProgressLine:
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.stream = stream
-        self.live = _isatty(stream or sys.stderr) if live is None else live
+        self.live = is_terminal(stream or sys.stderr) if live is None else live
         self.interval_s, self.clock = interval_s, clock
         self._bar: Any = None
         self._last_line = ""
@@ -152,8 +152,9 @@ class ProgressLine:
             self._bar = None
 
 
-def _isatty(stream: Any) -> bool:
+def is_terminal(stream: Any) -> bool:
+    """Whether ``stream`` is a terminal (False for one without ``isatty`` or closed)."""
     try:
         return bool(stream.isatty())
-    except (AttributeError, ValueError):
+    except (AttributeError, ValueError):  # no such method, or a closed stream
         return False

@@ -32,7 +32,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from leoc.ddpg.config import MODEL_SELECTIONS
 from leoc.ddpg.physical import PhysicalPolicy, physical_policy
-from leoc.progress import evaluation_text, steps_line
+from leoc.progress import evaluation_text, is_terminal, steps_line
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
 __all__ = [
@@ -173,7 +173,7 @@ class LearningCurveCallback(BaseCallback):
         self._started = time.monotonic()
         self._next_line = self._started + PROGRESS_LINE_INTERVAL_S
         self._steps_at_start = int(self.num_timesteps)
-        if self.progress is True and not _is_terminal(sys.stderr):
+        if self.progress is True and not is_terminal(sys.stderr):
             self._lines = True  # a log file or a pipe: plain lines, not a bar's redraws
         elif self.progress is True:
             from tqdm.auto import tqdm
@@ -282,13 +282,6 @@ class LearningCurveCallback(BaseCallback):
             self._selected_key = key
             self.selected_steps = steps
             self._selected_actor = copy.deepcopy(self.model.actor.state_dict())
-
-
-def _is_terminal(stream: Any) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
 
 
 class HeldOutEvaluationCallback(BaseCallback):

@@ -44,6 +44,8 @@ from typing import IO, Any, NamedTuple
 
 from leoc.experiments.eta import Finished, Queued, Running, estimate_remaining
 from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
+from leoc.progress import format_duration as format_seconds
+from leoc.progress import is_terminal
 
 BACKENDS = ("local", "ray")
 DONE_FILE = "evaluation.json"
@@ -150,16 +152,6 @@ def last_log_line(path: Path, default: str = "starting") -> str:
         return default
     lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
     return lines[-1][:LOG_LINE_CHARS] if lines else default
-
-
-def format_seconds(seconds: float) -> str:
-    """``75`` -> ``1m15s``; ``3700`` -> ``1h01m``."""
-    seconds = max(0, int(round(seconds)))
-    if seconds < 60:
-        return f"{seconds}s"
-    if seconds < 3600:
-        return f"{seconds // 60}m{seconds % 60:02d}s"
-    return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
 
 
 def terminal_columns() -> int:
@@ -494,11 +486,6 @@ class _RayBackend:
 
 
 # -------------------------------------------------------------------------------- live line
-def _isatty(stream: Any) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):  # no such method, or a closed stream
-        return False
 
 
 def _is_builtin_print(echo: Any) -> bool:
@@ -880,7 +867,7 @@ def sweep(
     terminal = None  # the stream of a live line: the default echo's, if a terminal
     if _is_builtin_print(echo):
         target = sys.stdout if stream is None else stream
-        terminal = target if _isatty(target) else None
+        terminal = target if is_terminal(target) else None
         echo = functools.partial(print, file=target, flush=True)
     pending: deque[_Attempt] = deque()
     skipped: list[str] = []
