@@ -16,7 +16,7 @@ episode must not terminate). ``reached_steps``: the first evaluation at which ev
 holds; ``held_steps``: the first evaluation from which every later evaluation holds too.
 
 Model selection: each trainer records the rule that chose the run's controller in its curve
-summary (``model_selection``): :data:`MODEL_SELECTION` (``"final"``, the policy at the end of
+summary (``model_selection``): ``MODEL_SELECTION`` (``"final"``, the policy at the end of
 the training budget) unless the trainer selects otherwise: DDPG/TD3/SAC by their config's
 ``model_selection`` (leoc's default ``"best_held"``, :mod:`leoc.ddpg.callbacks`), PILCO by
 ``select_best_from``. A rule other than ``"final"`` selects on the evaluation episodes, and the

@@ -103,7 +103,7 @@ class LearningCurveCallback(BaseCallback):
         is not one); ``"lines"``: a plain line (for a log file) every
         ``PROGRESS_LINE_INTERVAL_S`` seconds and after each evaluation, never the same line
         twice in a row: ``[ddpg] step K/N (P%), R steps/s, ETA T, last evaluation: return X,
-        held H%`` (:func:`leoc.progress.steps_line`; the algorithm's name in the brackets:
+        held H%`` (``leoc.progress.steps_line``; the algorithm's name in the brackets:
         ``label``).
     total_steps : int
         Length of the progress bar.
@@ -199,7 +199,7 @@ class LearningCurveCallback(BaseCallback):
 
     def progress_line(self) -> str:
         """``[LABEL] step K/N (P%), R steps/s, ETA T, last evaluation: return X, held H%``
-        (:func:`leoc.progress.steps_line`: the rate of this invocation's steps so far)."""
+        (``leoc.progress.steps_line``: the rate of this invocation's steps so far)."""
         last = self._last
         return steps_line(
             self.label,

@@ -304,7 +304,7 @@ def measured_run_seconds(folder: str | Path) -> dict[str, float]:
 
 def measured_learner_seconds(folder: str | Path) -> dict[str, float]:
     """The median wall time [s] of each learner's runs (``linear``, ``ddpg``, ``sac``,
-    ``pilco``: :func:`leoc.names.controller_framework`) over every system, controller and seed
+    ``pilco``: ``leoc.names.controller_framework``) over every system, controller and seed
     of a finished ``leoc reproduce`` folder, rounded to ``COST_DECIMALS``: the expected cost of
     a run of a kind no profile has measured (a user's system)."""
     from leoc.names import controller_framework

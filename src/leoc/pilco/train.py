@@ -135,7 +135,7 @@ def _progress_line(log: list[dict[str, Any]], total: int) -> str:
 
 
 def _show_progress(log: list[dict[str, Any]], total: int) -> ProgressLine:
-    """The run's progress (:mod:`leoc.progress`), showing where it starts (or resumes)."""
+    """The run's progress (``leoc.progress``), showing where it starts (or resumes)."""
     shown = ProgressLine(total, "iter", "pilco", initial=log[-1]["iteration"])
     _update_progress(shown, log, total)
     return shown
@@ -303,7 +303,7 @@ def train_pilco(
     resume : bool
         Continue from ``run_dir/checkpoint.pt`` if present (same configuration required).
     progress : bool
-        Show the progress (:mod:`leoc.progress`): a live bar on a terminal, one line per
+        Show the progress (``leoc.progress``): a live bar on a terminal, one line per
         iteration elsewhere, each with an ETA from the mean time per iteration so far.
     **overrides
         Any :class:`PilcoConfig` field (``horizon=...``, ``num_basis=...``, ``gp_<field>=...``).

@@ -106,7 +106,7 @@ __all__ = [
 ]
 
 #: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
-#: the certified set (named in :mod:`leoc.names`, where the command line reads them).
+#: the certified set (named in ``leoc.names``, where the command line reads them).
 RELEVANCE_KINDS = RELEVANCE_NAMES
 RELEVANCE_PARAMETRISATIONS = ("log_lambda", "precision")
 r"""How the paper's relevance keeps its weights: ``log_lambda`` (:math:`\lambda = e^{\ell}`,
