@@ -482,7 +482,8 @@ def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
     strict=False,
     reason="PILCO's seed outcomes depend on the machine's floating point (issue 41): 3 of 3 on "
     "a 2-core AMD EPYC with AVX2 kernels, 1 of 3 with AVX-512, 0 of 3 on a 2-core Intel Xeon "
-    "with AVX2 kernels forced (2026-11-27, no PILCO computation changed since the AMD run); "
+    "with AVX2 kernels forced (2026-11-27; the code of the AMD run gives the same first "
+    "iterations bit for bit there); "
     "the rate is issue 41's to fix, this test reports it",
 )
 def test_pilco_hybrid_learns_the_pendulum_swing_up_on_most_seeds(tmp_path, monkeypatch) -> None:
