@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 
 import torch
 
+from leoc.experiments.layout import EVALUATION_FILE
+from leoc.names import controller_framework
 from leoc.training import read_config
 
 if TYPE_CHECKING:
@@ -20,9 +22,6 @@ if TYPE_CHECKING:
 PILCO_MARKER = "controller.pt"
 DDPG_MARKER = "model.zip"
 REPRODUCE_TRAIN_DIR = "train"
-REPRODUCE_EVALUATION = "evaluation.json"
-#: Controllers of ``leoc reproduce`` that are designed, not trained (leoc.names.CONTROLLERS).
-LINEAR_RUNS = ("linear", "linear_pilco")
 
 
 def trainer_dir(run_dir: str | Path) -> Path:
@@ -35,7 +34,7 @@ def trainer_dir(run_dir: str | Path) -> Path:
             return candidate
     recorded = _reproduce_record(path)
     spec = recorded.get("spec") if isinstance(recorded.get("spec"), dict) else {}
-    if spec.get("controller") in LINEAR_RUNS:
+    if controller_framework(str(spec.get("controller"))) == "linear":  # designed, not trained
         command = f"leoc simulate {spec.get('system')} --variant {recorded.get('variant')}"
         if recorded.get("action_repeat", 1) != 1:
             command += f" --action-repeat {recorded.get('action_repeat')}"
@@ -55,7 +54,7 @@ def _reproduce_record(path: Path) -> dict:
     import json
 
     try:
-        record = json.loads((path / REPRODUCE_EVALUATION).read_text())
+        record = json.loads((path / EVALUATION_FILE).read_text())
     except (OSError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}
