@@ -185,6 +185,103 @@ def se_sum_constants(log_ls: Tensor, log_signal: Tensor) -> SESumConstants:
     )
 
 
+class _SEForms(NamedTuple):
+    """The quadratic forms of :func:`se_sum_moments` at one input distribution."""
+
+    nu: Tensor  # (M, D) nu_i = z_i - mu
+    nu_forms: Tensor  # (P + E + 2P, M, D) nu_i^T X for X = G_ab (P), F_a (E), A_ab / 2, A_ba / 2
+    quad_f: Tensor  # (E, M) nu_i^T F_a nu_i
+    half_first: Tensor  # (P, M) nu_i^T A_ab nu_i / 2
+    half_second: Tensor  # (P, M) nu_j^T A_ba nu_j / 2
+    log_det_out: Tensor  # (E,) log|B_a|
+    log_det_pair: Tensor  # (P,) log|B_ab|
+
+
+def _se_forms(support: Tensor, mean: Tensor, cov: Tensor, const: SESumConstants) -> _SEForms:
+    r"""Factorise every B of the step and take every quadratic form of :func:`se_sum_moments`.
+
+    Every B (E outputs, P pairs) shares one batched Cholesky factorisation, every form matrix
+    comes from one gather of the :math:`B^{-1}` (:func:`se_sum_constants`), and every product
+    :math:`\nu_i^\top X` with them is one batched matmul.
+
+    Shapes: ``support`` (M, D), ``mean`` (D,), ``cov`` (D, D).
+    """
+    num_outputs, dim = const.log_scale.shape[0], cov.shape[0]
+    num_pairs = const.pair_log_scale.shape[0]
+    nu = support - mean  # (M, D)
+    b_mat = torch.addcmul(torch.eye(dim, dtype=cov.dtype), const.b_scale, cov)  # (E + P, D, D)
+    chol = cholesky_jitter(b_mat, "I + s S s")
+    log_det = log_det_cholesky(chol)  # (E + P,)
+    b_inv = torch.cholesky_inverse(chol)  # (E + P, D, D), well conditioned (eigenvalues <= 1)
+    forms = torch.addcmul(const.form_offset, const.form_scale, b_inv[const.form_source])
+    # nu_i^T X for every form X of the step (G_ab, F_a, A_ab / 2, A_ba / 2) in one matmul.
+    nu_forms = nu @ forms  # (P + E + 2P, M, D)
+    quad = (nu_forms[num_pairs:] * nu).sum(-1)  # (E + 2P, M)
+    quad_f, half_first, half_second = quad.split([num_outputs, num_pairs, num_pairs])
+    log_det_out, log_det_pair = log_det.split([num_outputs, num_pairs])
+    return _SEForms(nu, nu_forms, quad_f, half_first, half_second, log_det_out, log_det_pair)
+
+
+class _SEFirstMoments(NamedTuple):
+    """Mean (E,) and io (D, E) of :func:`se_sum_moments`."""
+
+    mean: Tensor
+    io: Tensor
+
+
+def _se_first_moments(beta: Tensor, const: SESumConstants, forms: _SEForms) -> _SEFirstMoments:
+    """``E[y_a] = beta_a^T q_a`` and ``io_a = F_a sum_i beta_ai q_ai nu_i`` (F_a is symmetric:
+    F_a nu_i is row i of nu F_a). Shapes: ``beta`` (E, M)."""
+    num_outputs, num_pairs = beta.shape[0], const.pair_log_scale.shape[0]
+    log_norm = const.log_scale - 0.5 * forms.log_det_out  # (E,) log(alpha^2 |B_a|^-1/2)
+    weighted = beta * torch.exp(log_norm[:, None] - 0.5 * forms.quad_f)  # (E, M)
+    out_mean = weighted.sum(-1)  # (E,)
+    f_rows = forms.nu_forms[num_pairs : num_pairs + num_outputs]  # (E, M, D)
+    io = (weighted[:, None, :] @ f_rows)[:, 0, :].T  # (D, E)
+    return _SEFirstMoments(out_mean, io)
+
+
+def _se_covariance(
+    beta: Tensor,
+    weights: Tensor | None,
+    const: SESumConstants,
+    forms: _SEForms,
+    out_mean: Tensor,
+    gp_variance: bool,
+) -> Tensor:
+    r"""Covariance (E, E) of :func:`se_sum_moments`: :math:`E[y_a y_b]` (the sum over i, j of
+    ``weights`` times :math:`Q_{ab}`) minus the outer product of ``out_mean`` (E,), plus
+    :math:`\alpha_a^2` on the diagonal with ``gp_variance``.
+
+    Only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`), and one gather
+    spreads them over the symmetric (E, E) result. :math:`\log Q` is the bilinear form
+    :math:`(G_{ab}^\top \nu_i)^\top \nu_j` plus the row offsets :math:`c_{ab} + \tfrac12
+    \nu_i^\top A_{ab} \nu_i` and the column offsets :math:`\tfrac12 \nu_j^\top A_{ba} \nu_j`:
+    no (M, M, D) tensor, everything summed in log space before the one ``exp`` (no overflow:
+    :math:`Q_{ab,ij} \le \alpha_a^2 \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear`
+    contracts it with the weights in cache-sized row blocks, never storing Q.
+
+    Shapes: ``beta`` (E, M), ``weights`` (P, M, M) (default ``pair_weights(beta)``).
+    """
+    num_outputs, num_pairs = beta.shape[0], const.pair_log_scale.shape[0]
+    constant = const.pair_log_scale - 0.5 * forms.log_det_pair  # (P,) c_ab
+    weights = pair_weights(beta) if weights is None else weights
+    values = weighted_exp_bilinear(
+        forms.nu_forms[:num_pairs],
+        forms.nu.expand(num_pairs, -1, -1),
+        weights,
+        constant[:, None] + forms.half_first,
+        forms.half_second,
+    )  # (P,)
+    _, _, pair_of = pair_indices(num_outputs)
+    second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
+    # Exactly symmetric already (a gather of pair values minus an outer product).
+    out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
+    if gp_variance:
+        out_cov = out_cov + torch.diag(torch.exp(const.log_scale))
+    return out_cov
+
+
 def se_sum_moments(
     support: Tensor,
     beta: Tensor,
@@ -231,60 +328,18 @@ def se_sum_moments(
         c_{ab} = 2 \log\alpha_a + 2 \log\alpha_b - \tfrac12 \log|B_{ab}|,
 
     with :math:`C_a = \Lambda_a^{-1} P^{-1/2}`, :math:`G_{ab} = C_a T C_b` and
-    :math:`A_{ab} = C_a T C_a - \Lambda_a^{-1}` (all diagonal scalings of T). Numerics:
-
-    - every B of the step (E outputs, P pairs) shares one batched Cholesky factorisation, every
-      form matrix comes from one gather of the :math:`B^{-1}` (:func:`se_sum_constants`), and
-      every product :math:`\nu_i^\top X` with them is one batched matmul;
-    - :math:`\log Q` is the bilinear form :math:`(G_{ab}^\top \nu_i)^\top \nu_j` plus the row
-      offsets :math:`c_{ab} + \tfrac12 \nu_i^\top A_{ab} \nu_i` and the column offsets
-      :math:`\tfrac12 \nu_j^\top A_{ba} \nu_j`: no (M, M, D) tensor, everything summed
-      in log space before the one ``exp`` (no overflow: :math:`Q_{ab,ij} \le \alpha_a^2
-      \alpha_b^2`), and :func:`~leoc.linalg.weighted_exp_bilinear` contracts it with the
-      weights in cache-sized row blocks, never storing Q;
-    - only the pairs ``a <= b`` are computed (:math:`Q_{ba} = Q_{ab}^\top`), and one gather
-      spreads them over the symmetric (E, E) result.
+    :math:`A_{ab} = C_a T C_a - \Lambda_a^{-1}` (all diagonal scalings of T). The helpers
+    :func:`_se_forms` (the quadratic forms), :func:`_se_first_moments` (mean and io) and
+    :func:`_se_covariance` say how each part is computed.
 
     Shapes: ``support`` (M, D), ``beta`` (E, M), ``log_ls`` (E, D), ``log_signal`` (E,),
     ``mean`` (D,), ``cov`` (D, D), ``weights`` (P, M, M) -> mean (E,), cov (E, E), io (D, E).
     """
-    num_outputs, dim = log_ls.shape
-    num_pairs = num_outputs * (num_outputs + 1) // 2
     const = se_sum_constants(log_ls, log_signal) if constants is None else constants
-    nu = support - mean  # (M, D)
-    b_mat = torch.addcmul(torch.eye(dim, dtype=cov.dtype), const.b_scale, cov)  # (E + P, D, D)
-    chol = cholesky_jitter(b_mat, "I + s S s")
-    log_det = log_det_cholesky(chol)  # (E + P,)
-    b_inv = torch.cholesky_inverse(chol)  # (E + P, D, D), well conditioned (eigenvalues <= 1)
-    forms = torch.addcmul(const.form_offset, const.form_scale, b_inv[const.form_source])
-    # nu_i^T X for every form X of the step (G_ab, F_a, A_ab / 2, A_ba / 2) in one matmul.
-    nu_forms = nu @ forms  # (P + E + 2P, M, D)
-    quad = (nu_forms[num_pairs:] * nu).sum(-1)  # (E + 2P, M)
-    quad_f, half_first, half_second = quad.split([num_outputs, num_pairs, num_pairs])
-    # Mean and io (F_a is symmetric: F_a nu_i is row i of nu F_a).
-    log_det_out, log_det_pair = log_det.split([num_outputs, num_pairs])
-    log_norm = const.log_scale - 0.5 * log_det_out  # (E,) log(alpha^2 |B_a|^-1/2)
-    weighted = beta * torch.exp(log_norm[:, None] - 0.5 * quad_f)  # (E, M)
-    out_mean = weighted.sum(-1)  # (E,)
-    f_rows = nu_forms[num_pairs : num_pairs + num_outputs]  # (E, M, D)
-    io = (weighted[:, None, :] @ f_rows)[:, 0, :].T  # (D, E)
-    # Second moments.
-    constant = const.pair_log_scale - 0.5 * log_det_pair  # (P,) c_ab
-    weights = pair_weights(beta) if weights is None else weights
-    values = weighted_exp_bilinear(
-        nu_forms[:num_pairs],
-        nu.expand(num_pairs, -1, -1),
-        weights,
-        constant[:, None] + half_first,
-        half_second,
-    )  # (P,)
-    _, _, pair_of = pair_indices(num_outputs)
-    second_moment = values.reshape(1, 1) if num_outputs == 1 else values[pair_of]  # (E, E)
-    # Exactly symmetric already (a gather of pair values minus an outer product).
-    out_cov = second_moment - out_mean[:, None] * out_mean[None, :]
-    if gp_variance:
-        out_cov = out_cov + torch.diag(torch.exp(const.log_scale))
-    return MomentMatch(out_mean, out_cov, io)
+    forms = _se_forms(support, mean, cov, const)
+    first = _se_first_moments(beta, const, forms)
+    out_cov = _se_covariance(beta, weights, const, forms, first.mean, gp_variance)
+    return MomentMatch(first.mean, out_cov, first.io)
 
 
 def gp_moments(
