@@ -275,6 +275,59 @@ def _optimise_hyper(objective, hyper: GPHyper, iterations: int) -> GPHyper:
     return GPHyper(*(p.detach() for p in params))
 
 
+class _TrainingData(NamedTuple):
+    """The GP's data as float64 tensors: ``inputs`` (N, D), ``targets`` (N, E)."""
+
+    inputs: Tensor
+    targets: Tensor
+
+
+def _training_data(inputs: Tensor | np.ndarray, targets: Tensor | np.ndarray) -> _TrainingData:
+    """``inputs`` and ``targets`` as float64 tensors, checked to be (N, D) and (N, E)."""
+    x = torch.as_tensor(inputs, dtype=DTYPE)
+    y = torch.as_tensor(targets, dtype=DTYPE)
+    if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0]:
+        raise ValueError(
+            f"inputs, targets: expected (N, D) and (N, E), found {tuple(x.shape)}, {tuple(y.shape)}"
+        )
+    return _TrainingData(x, y)
+
+
+class _NoiseModel(NamedTuple):
+    """How the noise enters the fit: ``floor_var`` (E,), the variance below which sigma^2 never
+    falls (squared target units), and ``fixed_log_noise`` (E,), the log sigma used in place of
+    the fitted one (None: fitted)."""
+
+    floor_var: Tensor
+    fixed_log_noise: Tensor | None
+
+
+def _noise_model(targets: Tensor, settings: GPSettings) -> _NoiseModel:
+    """The noise floor of ``settings`` relative to each target's spread, or a fixed noise.
+
+    Shapes: ``targets`` (N, E).
+    """
+    floor_var = (settings.noise_floor * targets.std(0).clamp(min=MIN_INPUT_STD)) ** 2
+    if settings.fixed_noise_var is None:
+        return _NoiseModel(floor_var, None)
+    # A fixed noise: no floor, and log sigma a constant that the objective of fit_gp uses in
+    # place of the optimised one (whose gradient is then zero, so L-BFGS never moves it).
+    log_noise = 0.5 * math.log(settings.fixed_noise_var)
+    fixed_log_noise = torch.full((targets.shape[1],), log_noise, dtype=DTYPE)
+    return _NoiseModel(torch.zeros_like(floor_var), fixed_log_noise)
+
+
+def _inducing_inputs(
+    inputs: Tensor, settings: GPSettings, rng: np.random.Generator | None
+) -> Tensor | None:
+    """FITC's inducing inputs (M, D) beyond ``settings.max_full_points`` data (chosen by
+    :func:`select_inducing` with ``rng``, default seed 0); None for the exact GP."""
+    if inputs.shape[0] <= settings.max_full_points:
+        return None
+    rng = rng if rng is not None else np.random.default_rng(0)
+    return torch.as_tensor(select_inducing(inputs.numpy(), settings.num_inducing, rng), dtype=DTYPE)
+
+
 def fit_gp(
     inputs: Tensor | np.ndarray,
     targets: Tensor | np.ndarray,
@@ -301,28 +354,10 @@ def fit_gp(
     GPPosterior
     """
     settings = settings or GPSettings()
-    x = torch.as_tensor(inputs, dtype=DTYPE)
-    y = torch.as_tensor(targets, dtype=DTYPE)
-    if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0]:
-        raise ValueError(
-            f"inputs, targets: expected (N, D) and (N, E), found {tuple(x.shape)}, {tuple(y.shape)}"
-        )
-    floor_var = (settings.noise_floor * y.std(0).clamp(min=MIN_INPUT_STD)) ** 2
-    fixed_log_noise = None
-    if settings.fixed_noise_var is not None:
-        # A fixed noise: no floor, and log sigma a constant that the objective below uses in
-        # place of the optimised one (whose gradient is then zero, so L-BFGS never moves it).
-        floor_var = torch.zeros_like(floor_var)
-        log_noise = 0.5 * math.log(settings.fixed_noise_var)
-        fixed_log_noise = torch.full((y.shape[1],), log_noise, dtype=DTYPE)
+    x, y = _training_data(inputs, targets)
+    floor_var, fixed_log_noise = _noise_model(y, settings)
     log_input_std = torch.log(x.std(0).clamp(min=MIN_INPUT_STD))
-    sparse = x.shape[0] > settings.max_full_points
-    inducing = None
-    if sparse:
-        rng = rng if rng is not None else np.random.default_rng(0)
-        inducing = torch.as_tensor(
-            select_inducing(x.numpy(), settings.num_inducing, rng), dtype=DTYPE
-        )
+    inducing = _inducing_inputs(x, settings, rng)
 
     def objective(hyper: GPHyper) -> Tensor:
         hyper = _with_noise(hyper, fixed_log_noise)
