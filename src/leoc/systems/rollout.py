@@ -21,6 +21,7 @@ Shapes: ``B`` starts, ``T`` simulator steps, ``S`` state, ``O`` observation, ``A
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -151,6 +152,97 @@ def _check_inputs(
     return state, offsets
 
 
+class _Decision(NamedTuple):
+    """What a decision of :func:`simulate` holds until the next one: the controller's ``action``
+    ``(B, A)`` and the relevance ``r(x)`` ``(B,)`` it was taken at (zeros for a non-hybrid)."""
+
+    action: Tensor
+    relevance: Tensor
+
+
+def _decide(
+    system: System,
+    controller: Controller,
+    relevance_of: Callable[[Tensor], Tensor] | None,
+    obs: Tensor,
+    held: _Decision,
+) -> _Decision:
+    """The controller's decision at the observations ``obs`` ``(B, O)``; the relevance of a
+    hybrid (``relevance_of``), else the one ``held`` so far."""
+    batch = obs.shape[0]
+    action = torch.as_tensor(controller(obs), dtype=DTYPE).reshape(batch, system.action_dim)
+    if relevance_of is None:
+        return _Decision(action, held.relevance)
+    return _Decision(action, torch.as_tensor(relevance_of(obs), dtype=DTYPE).reshape(batch))
+
+
+@dataclasses.dataclass
+class _Episodes:
+    """The ``B`` episodes of :func:`simulate` as they run: the current ``state`` ``(B, S)``,
+    which starts are still ``alive`` ``(B,)``, the ``lengths`` ``(B,)`` of those that ended
+    (``steps`` for the others), and one tensor per step of each record of a
+    :class:`BatchTrajectory` (states and observations from the start)."""
+
+    state: Tensor
+    alive: Tensor
+    lengths: Tensor
+    states: list[Tensor]
+    observations: list[Tensor]
+    actions: list[Tensor] = dataclasses.field(default_factory=list)
+    rewards: list[Tensor] = dataclasses.field(default_factory=list)
+    relevance: list[Tensor] = dataclasses.field(default_factory=list)
+
+    @classmethod
+    def start(cls, system: System, state: Tensor, steps: int) -> _Episodes:
+        """Episodes of ``steps`` steps from ``state`` ``(B, S)``, every one alive."""
+        batch = state.shape[0]
+        alive = torch.ones(batch, dtype=torch.bool)
+        lengths = torch.full((batch,), steps, dtype=torch.long)
+        return cls(state, alive, lengths, [state], [system.observe(state)])
+
+    def advance(
+        self, system: System, action: Tensor, relevance: Tensor, index: int, steps: int
+    ) -> None:
+        """Simulator step ``index`` (of ``steps``) with ``action`` ``(B, A)``: a start that
+        leaves the allowed region ends there (its termination reward), an ended one is frozen
+        (zero action and reward, its state repeated)."""
+        stepped = system.step_fn(self.state, action)
+        leaving = self.alive & system.out_of_bounds(stepped)
+        reward = system.step_reward(self.state, action, stepped, leaving, steps - index - 1)
+        self.rewards.append(torch.where(self.alive, reward, torch.zeros_like(reward)))
+        self.actions.append(torch.where(self.alive[:, None], action, torch.zeros_like(action)))
+        self.relevance.append(relevance)
+        self.state = torch.where(self.alive[:, None], stepped, self.state)
+        self.lengths = torch.where(leaving, torch.as_tensor(index + 1), self.lengths)
+        self.alive = self.alive & ~leaving
+        self.states.append(self.state)
+        self.observations.append(system.observe(self.state))
+
+    def pad(self, steps: int) -> None:
+        """Repeat the frozen tail up to ``steps`` steps when every start ended early."""
+        pad = steps - len(self.actions)
+        if pad > 0:
+            self.states += [self.state] * pad
+            self.observations += [self.observations[-1]] * pad
+            self.actions += [torch.zeros_like(self.actions[-1])] * pad
+            self.rewards += [torch.zeros_like(self.rewards[-1])] * pad
+            self.relevance += [self.relevance[-1]] * pad
+
+    def result(self, action_repeat: int, with_relevance: bool) -> BatchTrajectory:
+        """The records stacked along time (axis 1) as numpy arrays; the relevance only
+        ``with_relevance`` (a hybrid controller)."""
+        return BatchTrajectory(
+            torch.stack(self.states, dim=1).numpy(),
+            torch.stack(self.observations, dim=1).numpy(),
+            torch.stack(self.actions, dim=1).numpy(),
+            torch.stack(self.rewards, dim=1).numpy(),
+            torch.stack(self.relevance, dim=1).numpy() if with_relevance else None,
+            (~self.alive).numpy(),
+            self.lengths.numpy(),
+            action_repeat,
+        )
+
+
 def simulate(
     system: System,
     controller: Controller,
@@ -182,53 +274,22 @@ def simulate(
     state, offsets = _check_inputs(system, starts, steps, action_offsets)
     repeat = control_period(controller) if action_repeat is None else check_repeat(action_repeat)
     relevance_of = relevance_function(controller)
+    episodes = _Episodes.start(system, state, steps)
     batch = state.shape[0]
-    alive = torch.ones(batch, dtype=torch.bool)
-    lengths = torch.full((batch,), steps, dtype=torch.long)
-    states, observations, actions, rewards, relevance = [state], [system.observe(state)], [], [], []
-    held = torch.zeros(batch, system.action_dim, dtype=DTYPE)
-    held_relevance = torch.zeros(batch, dtype=DTYPE)
+    decision = _Decision(
+        torch.zeros(batch, system.action_dim, dtype=DTYPE), torch.zeros(batch, dtype=DTYPE)
+    )
     with torch.no_grad():
         for index in range(steps):
             if index % repeat == 0:
-                obs = observations[-1]
-                held = torch.as_tensor(controller(obs), dtype=DTYPE).reshape(
-                    batch, system.action_dim
-                )
-                if relevance_of is not None:
-                    held_relevance = torch.as_tensor(relevance_of(obs), dtype=DTYPE).reshape(batch)
-            action = system.clip_action(held + offsets[index])
-            stepped = system.step_fn(state, action)
-            leaving = alive & system.out_of_bounds(stepped)
-            reward = system.step_reward(state, action, stepped, leaving, steps - index - 1)
-            rewards.append(torch.where(alive, reward, torch.zeros_like(reward)))
-            actions.append(torch.where(alive[:, None], action, torch.zeros_like(action)))
-            relevance.append(held_relevance)
-            state = torch.where(alive[:, None], stepped, state)
-            lengths = torch.where(leaving, torch.as_tensor(index + 1), lengths)
-            alive = alive & ~leaving
-            states.append(state)
-            observations.append(system.observe(state))
-            if not bool(alive.any()):
+                obs = episodes.observations[-1]
+                decision = _decide(system, controller, relevance_of, obs, decision)
+            action = system.clip_action(decision.action + offsets[index])
+            episodes.advance(system, action, decision.relevance, index, steps)
+            if not bool(episodes.alive.any()):
                 break
-    taken = len(actions)
-    if taken < steps:  # every start ended early: pad the frozen tail
-        pad = steps - taken
-        states += [state] * pad
-        observations += [observations[-1]] * pad
-        actions += [torch.zeros_like(actions[-1])] * pad
-        rewards += [torch.zeros_like(rewards[-1])] * pad
-        relevance += [relevance[-1]] * pad
-    return BatchTrajectory(
-        torch.stack(states, dim=1).numpy(),
-        torch.stack(observations, dim=1).numpy(),
-        torch.stack(actions, dim=1).numpy(),
-        torch.stack(rewards, dim=1).numpy(),
-        torch.stack(relevance, dim=1).numpy() if relevance_of is not None else None,
-        (~alive).numpy(),
-        lengths.numpy(),
-        repeat,
-    )
+    episodes.pad(steps)
+    return episodes.result(repeat, with_relevance=relevance_of is not None)
 
 
 def rollout(
