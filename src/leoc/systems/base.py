@@ -603,7 +603,12 @@ class System:
             observation = self.observation
         except ValueError as error:
             raise ValueError(f"{label}: obs_layout: {error}") from error
-        size, actions = self.state_dim, self.action_dim
+        self._validate_scalars(label)
+        self._validate_vectors(label)
+        self._validate_functions(label, observation.obs_dim)
+
+    def _validate_scalars(self, label: str) -> None:
+        """``dt``, the action limit, the bands, ``hold_min_steps`` and ``main_index``."""
         _check_positive(label, "dt", self.dt)
         _check_positive(label, "action_limit", self.action_limit)
         _check_positive(label, "hold_band", self.hold_band)
@@ -613,10 +618,15 @@ class System:
                 f"{label}: hold_min_steps: expected 1 .. episode_steps = {self.episode_steps}, "
                 f"found {self.hold_min_steps!r}"
             )
-        if not 0 <= self.main_index < size:
+        if not 0 <= self.main_index < self.state_dim:
             raise ValueError(
-                f"{label}: main_index: expected 0 .. {size - 1}, found {self.main_index}"
+                f"{label}: main_index: expected 0 .. {self.state_dim - 1}, found {self.main_index}"
             )
+
+    def _validate_vectors(self, label: str) -> None:
+        """Shapes, finiteness and signs of the per-state and per-action vectors; ``u_eq``
+        within the action limit."""
+        size, actions = self.state_dim, self.action_dim
         vectors = {
             "operating_state": (self.operating_state, size),
             "u_eq": (self.u_eq, actions),
@@ -642,7 +652,6 @@ class System:
                 f"{label}: u_eq: expected |u_eq| <= action_limit = {self.action_limit}, "
                 f"found {self.u_eq.tolist()}"
             )
-        self._validate_functions(label, observation.obs_dim)
 
     def _validate_functions(self, label: str, obs_dim: int) -> None:
         """Shapes, finiteness and the equilibrium of ``step_fn``, ``reward_fn``, the cost."""
