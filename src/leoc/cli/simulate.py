@@ -26,7 +26,15 @@ def add_parser(commands: Any) -> None:
         "'leoc simulate RUN_DIR' simulates the controller of a run folder on the system it "
         "was trained for.",
     )
-    simulate.add_argument(
+    _add_controller_arguments(simulate)
+    _add_test_arguments(simulate)
+    _add_output_arguments(simulate)
+    simulate.set_defaults(run=run)
+
+
+def _add_controller_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``leoc simulate`` runs: ``SYSTEM|RUN_DIR``, ``--controller``, ``--action-repeat``."""
+    parser.add_argument(
         "target",
         nargs="?",
         type=system_or_run_dir,
@@ -34,13 +42,13 @@ def add_parser(commands: Any) -> None:
         help=f"{SYSTEM_HELP}; or a run folder (its system is read from it). Optional with "
         "--controller RUN_DIR",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--controller",
         default=LINEAR,
         help="'linear' (the LQR) or a run folder written by 'leoc train' or printed by "
         "'leoc reproduce' (default: linear); a trained controller runs at its trained period",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--action-repeat",
         type=positive_int,
         default=1,
@@ -48,23 +56,27 @@ def add_parser(commands: Any) -> None:
         "for it; PILCO's period is 2 on the pendulum, 3 on cartpole and 3 on mountaincar); "
         "default 1",
     )
-    simulate.add_argument(
+
+
+def _add_test_arguments(parser: argparse.ArgumentParser) -> None:
+    """How the response is measured: band, test, length, LQR design, variant, metric set."""
+    parser.add_argument(
         "--band",
         type=positive_float,
         help="absolute settling band (deg or m); default 2%% of the peak error",
     )
-    simulate.add_argument("--test", choices=("impulse", "step"), default="impulse")
-    simulate.add_argument(
+    parser.add_argument("--test", choices=("impulse", "step"), default="impulse")
+    parser.add_argument(
         "--steps",
         type=positive_int,
         help="episode length (default: the variant's, 200; the authors' cart-pole record: 400)",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--method",
         choices=METHODS,
         help="LQR design of the linear controller (default: the variant's; leoc: discrete)",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--variant",
         choices=VARIANT_NAMES,
         help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
@@ -72,15 +84,19 @@ def add_parser(commands: Any) -> None:
         "variant whose step rules it was trained under (another is refused: it would simulate "
         "a different plant)",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--metrics",
         choices=METRIC_SET_NAMES,
         default="leoc",
         help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
         "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
     )
-    simulate.add_argument("--plot", type=Path, help="write a PNG of the response here")
-    simulate.add_argument(
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``leoc simulate`` writes besides the printed metrics: figure, animation, JSON."""
+    parser.add_argument("--plot", type=Path, help="write a PNG of the response here")
+    parser.add_argument(
         "--video",
         type=Path,
         metavar="FILE",
@@ -88,10 +104,9 @@ def add_parser(commands: Any) -> None:
         "from the system's swing-up start, then the impulse response, with r(x) shown for a "
         "hybrid controller",
     )
-    simulate.add_argument(
+    parser.add_argument(
         "--json", action="store_true", help="print the metrics and e(t) as JSON instead"
     )
-    simulate.set_defaults(run=run)
 
 
 class Target(NamedTuple):
