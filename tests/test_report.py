@@ -7,16 +7,16 @@ import pytest
 
 from leoc.evaluation.metrics import response_metrics
 from leoc.experiments.report import (
+    RESPONSE_CHECK,
+    ROA_CHECK,
+    ROBUSTNESS_CHECK,
+    SWING_UP_CHECK,
     code_line,
     code_versions,
     improvement_rows,
     improvement_table,
-    response_flags,
     response_summary,
-    roa_flags,
-    robustness_flags,
     seed_statistics,
-    swing_up_flags,
     swing_up_summary,
     swing_up_table,
 )
@@ -61,16 +61,16 @@ def _evaluations(hybrid_scale: float, seeds: int = 3) -> dict:
 
 
 def test_a_hybrid_is_flagged_only_beyond_one_percent_of_its_linear_reference():
-    close = response_flags(response_summary(_evaluations(1.005)))
+    close = RESPONSE_CHECK.flags(response_summary(_evaluations(1.005)))
     assert close == []
-    far = response_flags(response_summary(_evaluations(1.02)))
+    far = RESPONSE_CHECK.flags(response_summary(_evaluations(1.02)))
     assert len(far) == 2  # impulse and step
     assert "DDPG hybrid" in far[0] and "peak deviation" in far[0] and "linear (LQR at dt)" in far[0]
 
 
 def test_controllers_that_do_not_swing_up_are_flagged_by_name():
     rows = swing_up_summary(_evaluations(1.0))
-    flags = swing_up_flags(rows)
+    flags = SWING_UP_CHECK.flags(rows)
     assert len(flags) == 1 and "DDPG baseline" in flags[0] and "67%" in flags[0]  # 4 of 6 held
     # 2 of 3 runs hold in every episode: Clopper-Pearson [B(0.025; 2, 2), B(0.975; 3, 1)]
     # = [0.0943, 0.975^(1/3)]
@@ -82,7 +82,7 @@ def test_controllers_that_do_not_swing_up_are_flagged_by_name():
 def test_a_flag_never_rounds_a_miss_to_100_percent():
     """A hybrid that lost 1 of 2000 certified starts was flagged as holding "only 100%"."""
     row = {"system": "pendulum", "controller": "pilco_hybrid_roa", "certified_set_held": 0.9995}
-    (flag,) = roa_flags([row, {**row, "certified_set_held": 1.0}])
+    (flag,) = ROA_CHECK.flags([row, {**row, "certified_set_held": 1.0}])
     assert "holds only 99.95% of the starts" in flag
     assert [percent(x) for x in (1.0, 0.0, 0.98, 0.0215, 4e-5, 1 - 1e-7, 1e-9)] == [
         "100%",
@@ -106,7 +106,7 @@ def test_robustness_flags_compare_stabilised_fractions():
         }
         for c, f in (("linear", 1.0), ("ddpg_hybrid", 0.6), ("ddpg_baseline", 0.0))
     ]
-    flags = robustness_flags(rows)
+    flags = ROBUSTNESS_CHECK.flags(rows)
     assert len(flags) == 1 and "x2 (60% vs 100%)" in flags[0] and "DDPG hybrid" in flags[0]
 
 
@@ -234,7 +234,7 @@ def test_a_hybrid_that_never_settles_is_flagged_with_a_dash_not_nan():
     for run in hybrid:
         metrics = response_metrics(wobble, dt=0.05)._asdict()
         run["responses"]["impulse"] = {"metrics": metrics, "deviation": wobble.tolist()}
-    (flag,) = [f for f in response_flags(response_summary(evaluations)) if "(impulse)" in f]
+    (flag,) = [f for f in RESPONSE_CHECK.flags(response_summary(evaluations)) if "(impulse)" in f]
     assert "settling time - vs " in flag and "nan" not in flag
 
 
@@ -244,7 +244,6 @@ def test_the_end_of_run_summary_is_one_line_per_check_and_sums_the_invocations(t
     invocation."""
     import json
 
-    from leoc.experiments.report import response_check, swing_up_check
     from leoc.experiments.summary import summary_lines
 
     (tmp_path / "meta.json").write_text(
@@ -263,8 +262,8 @@ def test_the_end_of_run_summary_is_one_line_per_check_and_sums_the_invocations(t
     ]
     responses = response_summary(evaluations)
     checks = {
-        "responses": response_check(responses).to_json(),
-        "swing_up": swing_up_check(swing_up_summary(evaluations)).to_json(),
+        "responses": RESPONSE_CHECK.summary(responses).to_json(),
+        "swing_up": SWING_UP_CHECK.summary(swing_up_summary(evaluations)).to_json(),
     }
     (tmp_path / "results.json").write_text(json.dumps({"responses": responses, "checks": checks}))
     assert summary_lines(tmp_path) == [
@@ -289,7 +288,6 @@ def _sizes_in_order(line: str) -> list[float]:
 
 
 def test_the_summary_says_what_worked_and_what_failed_biggest_first():
-    from leoc.experiments.report import response_check, roa_check, robustness_check, swing_up_check
     from leoc.experiments.summary import summary_markdown
 
     evaluations = _evaluations(1.02)  # the DDPG hybrid 2% off its LQR's peak deviation
@@ -300,10 +298,10 @@ def test_the_summary_says_what_worked_and_what_failed_biggest_first():
     evaluations["pendulum"]["pilco_hybrid"] = [_run("pilco_hybrid", 0, 1.0, -200.0, True)]
     swing_up = swing_up_summary(evaluations)
     checks = {
-        "responses": response_check(response_summary(evaluations)).to_json(),
-        "swing_up": swing_up_check(swing_up).to_json(),
-        "robustness": robustness_check([]).to_json(),
-        "roa": roa_check([]).to_json(),
+        "responses": RESPONSE_CHECK.summary(response_summary(evaluations)).to_json(),
+        "swing_up": SWING_UP_CHECK.summary(swing_up).to_json(),
+        "robustness": ROBUSTNESS_CHECK.summary([]).to_json(),
+        "roa": ROA_CHECK.summary([]).to_json(),
     }
     lines = summary_markdown(checks, ["pendulum/sac_hybrid"])
     assert len(lines) <= 15 and lines[0] == "## Summary"
@@ -326,7 +324,7 @@ def test_the_summary_says_what_worked_and_what_failed_biggest_first():
     assert "1 of 4 learned controllers; biggest: pendulum DDPG baseline 67% held." in swing
     assert lines[-2] == "- **runs without results** (failed or not run yet): 1."
     # the section keeps its full list in the order of its table
-    flags = response_flags(response_summary(evaluations))
+    flags = RESPONSE_CHECK.flags(response_summary(evaluations))
     assert [flag.split("**")[1] for flag in flags] == [
         "pendulum DDPG hybrid",
         "pendulum DDPG hybrid (ROA relevance)",
@@ -336,10 +334,9 @@ def test_the_summary_says_what_worked_and_what_failed_biggest_first():
 
 
 def test_a_summary_of_every_check_passing_says_so_in_few_lines():
-    from leoc.experiments.report import response_check
     from leoc.experiments.summary import summary_markdown
 
-    lines = summary_markdown({"responses": response_check([]).to_json()}, [])
+    lines = summary_markdown({"responses": RESPONSE_CHECK.summary([]).to_json()}, [])
     assert lines == ["## Summary", "", "**What failed:** nothing; every check passed.", ""]
 
 
@@ -402,3 +399,22 @@ def test_the_model_selection_sentence_comes_from_what_the_runs_recorded():
         "Model selection, as each run recorded it: PILCO (1 run): `final`, the final "
         "controller (at the end of its training budget)."
     )
+
+
+def test_markdown_tables_have_a_separator_per_column_and_refuse_ragged_rows():
+    from leoc.experiments.markdown import markdown_table
+
+    assert markdown_table(["a", "b"], [["1", ""]]) == ["| a | b |", "|---|---|", "| 1 |  |"]
+    assert markdown_table(["a", "b"], [], align=["left", "right"])[1] == "|:---|---:|"
+    with pytest.raises(ValueError, match="expected 2 cells in row 0, found 1"):
+        markdown_table(["a", "b"], [["1"]])
+    with pytest.raises(ValueError, match="align"):
+        markdown_table(["a", "b"], [], align="middle")
+
+
+def test_every_section_renders_and_each_check_flags_its_own_table():
+    from leoc.experiments.report import SECTIONS
+
+    keys = [section.check.key for section in SECTIONS if section.check is not None]
+    assert keys == ["responses", "robustness", "swing_up", "roa"]
+    assert all(callable(section.render) for section in SECTIONS)

@@ -36,6 +36,7 @@ from leoc.experiments.ablation import (
     read_records,
     run_outcome,
 )
+from leoc.experiments.markdown import markdown_table
 from leoc.experiments.profiles import CONTROLLER_LABELS
 from leoc.experiments.stats import CONFIDENCE, wilson_interval
 from leoc.io import read_json_object, write_csv_atomic, write_json_atomic, write_text_atomic
@@ -189,12 +190,6 @@ def format_rate(cell: CellRate) -> str:
     return f"{cell.successes}/{cell.seeds} [{cell.low:.2f}, {cell.high:.2f}]"
 
 
-def _table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return lines
-
-
 def _at(rates: Sequence[CellRate]) -> dict[tuple[str, str, str, int], CellRate]:
     return {(c.system, c.controller, c.setting, c.budget): c for c in rates}
 
@@ -240,7 +235,7 @@ def headline_tables(rates: Sequence[CellRate]) -> list[str]:
             row += [format_rate(c) if c else "-" for c in found]
             row += [f"{c.reached}/{c.seeds}" if c else "-" for c in found]
             rows.append(row)
-        lines += [*_table(header, rows), ""]
+        lines += [*markdown_table(header, rows), ""]
     return lines
 
 
@@ -320,7 +315,7 @@ def reselection_tables(rows: Sequence[Mapping[str, Any]]) -> list[str]:
                 ),
             ]
         )
-        lines += [*_table(header, table), ""]
+        lines += [*markdown_table(header, table), ""]
     return lines
 
 
@@ -366,7 +361,7 @@ def budget_tables(rates: Sequence[CellRate], every: int = DEFAULT_TABLE_EVERY) -
                         *(f"{c.successes}/{c.seeds}" if c else "-" for c in found),
                     ]
                 )
-        lines += [*_table(["controller", "setting", *map(str, columns)], rows), ""]
+        lines += [*markdown_table(["controller", "setting", *map(str, columns)], rows), ""]
     return lines
 
 
@@ -386,7 +381,7 @@ def runs_table(records: Sequence[Mapping[str, Any]]) -> list[str]:
             ]
         )
     header = ["system", "controller", "setting", "seeds", "budget", "median wall s"]
-    return _table(header, rows)
+    return markdown_table(header, rows)
 
 
 def provenance_text(records: Sequence[Mapping[str, Any]], command: str | None = None) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from leoc.experiments.markdown import markdown_table
 from leoc.experiments.stats import percent
 
 __all__ = ["claims_rows", "hybrid_claims_section", "roa_estimate_lines", "roa_method_text"]
@@ -95,28 +96,55 @@ def _basis(by_construction: Sequence[bool]) -> str:
     return f"{BY_CONSTRUCTION} in {sum(by_construction)}/{len(by_construction)} seeds"
 
 
+CONSTRUCTION_HEADERS = (
+    "system",
+    "hybrid",
+    "flat top (V <= rho_in)",
+    "paper impulse (size 1)",
+    "nominal robustness starts (max V / rho_in)",
+)
+IMPULSE_HEADERS = (
+    "system",
+    "hybrid",
+    "LQR failure size",
+    "sizes",
+    "hybrid held",
+    "LQR held",
+    "by construction",
+)
+SHELL_HEADERS = (
+    "system",
+    "hybrid",
+    "shell (V / rho)",
+    "hybrid held",
+    "LQR held",
+    "left the flat top",
+)
+BASIN_HEADERS = (
+    "system",
+    "hybrid",
+    "LQR's proved set held (left flat top)",
+    "LQR's empirical basin held (left flat top)",
+    "box held by the hybrid only",
+    "volume outside the LQR's basin",
+)
+
+
+def _construction_cells(row: dict[str, Any]) -> list[str]:
+    claims = row["claims"]
+    first = claims[0]
+    paper = [c["impulse_sweep"]["hybrid"][0]["by_construction"] for c in claims]
+    if first["flat_top"] is None:
+        flat, robust = "none (r < 1 off a)", EVIDENCE
+    else:
+        flat = f"{first['flat_top'] / first['rho']:.2g} rho"
+        ratio = first["operating_region_max_v"] / first["flat_top"]
+        robust = f"{BY_CONSTRUCTION} ({ratio:.2g})" if ratio <= 1.0 else f"{EVIDENCE} ({ratio:.2g})"
+    return [row["system"], row["controller"], flat, _basis(paper), robust]
+
+
 def _construction_lines(rows: list[dict[str, Any]]) -> list[str]:
-    lines = [
-        "| system | hybrid | flat top (V <= rho_in) | paper impulse (size 1) | nominal robustness "
-        "starts (max V / rho_in) |",
-        "|---|---|---|---|---|",
-    ]
-    for row in rows:
-        claims = row["claims"]
-        first = claims[0]
-        paper = [c["impulse_sweep"]["hybrid"][0]["by_construction"] for c in claims]
-        if first["flat_top"] is None:
-            flat, robust = "none (r < 1 off a)", EVIDENCE
-        else:
-            flat = f"{first['flat_top'] / first['rho']:.2g} rho"
-            ratio = first["operating_region_max_v"] / first["flat_top"]
-            robust = (
-                f"{BY_CONSTRUCTION} ({ratio:.2g})" if ratio <= 1.0 else f"{EVIDENCE} ({ratio:.2g})"
-            )
-        lines.append(
-            f"| {row['system']} | {row['controller']} | {flat} | {_basis(paper)} | {robust} |"
-        )
-    return lines
+    return markdown_table(CONSTRUCTION_HEADERS, [_construction_cells(row) for row in rows])
 
 
 def _sweep_share(claims: Sequence[Mapping[str, Any]], label: str, index: int, key: str) -> float:
@@ -124,71 +152,65 @@ def _sweep_share(claims: Sequence[Mapping[str, Any]], label: str, index: int, ke
     return float(np.mean([c["impulse_sweep"][label][index][key] for c in claims]))
 
 
-def _impulse_lines(rows: list[dict[str, Any]]) -> list[str]:
-    lines = [
-        "| system | hybrid | LQR failure size | sizes | hybrid held | LQR held | by construction |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for row in rows:
-        claims = row["claims"]
-        sizes = [p["size"] for p in claims[0]["impulse_sweep"]["hybrid"]]
-        count = len(sizes)
+def _impulse_cells(row: dict[str, Any]) -> list[str]:
+    claims = row["claims"]
+    sizes = [p["size"] for p in claims[0]["impulse_sweep"]["hybrid"]]
 
-        failure = _mean([c["lqr_failure_size"] for c in claims])
-        lines.append(
-            f"| {row['system']} | {row['controller']} | "
-            f"{'never' if failure is None else f'{failure:.3g}'} | "
-            + ", ".join(f"{s:.3g}" for s in sizes)
-            + " | "
-            + ", ".join(_share(_sweep_share(claims, "hybrid", i, "held")) for i in range(count))
-            + " | "
-            + ", ".join(_share(_sweep_share(claims, "lqr", i, "held")) for i in range(count))
-            + " | "
-            + ", ".join(
-                _share(_sweep_share(claims, "hybrid", i, "by_construction")) for i in range(count)
-            )
-            + " |"
-        )
-    return lines
+    def shares(label: str, key: str) -> str:
+        return ", ".join(_share(_sweep_share(claims, label, i, key)) for i in range(len(sizes)))
+
+    failure = _mean([c["lqr_failure_size"] for c in claims])
+    return [
+        row["system"],
+        row["controller"],
+        "never" if failure is None else f"{failure:.3g}",
+        ", ".join(f"{s:.3g}" for s in sizes),
+        shares("hybrid", "held"),
+        shares("lqr", "held"),
+        shares("hybrid", "by_construction"),
+    ]
+
+
+def _impulse_lines(rows: list[dict[str, Any]]) -> list[str]:
+    return markdown_table(IMPULSE_HEADERS, [_impulse_cells(row) for row in rows])
 
 
 def _shell_lines(rows: list[dict[str, Any]]) -> list[str]:
-    lines = [
-        "| system | hybrid | shell (V / rho) | hybrid held | LQR held | left the flat top |",
-        "|---|---|---|---|---|---|",
-    ]
+    table = []
     for row in rows:
         claims = row["claims"]
         rho = claims[0]["rho"]
         for index, shell in enumerate(claims[0]["shells"]):
             entries = [c["shells"][index] for c in claims if index < len(c["shells"])]
-            lines.append(
-                f"| {row['system']} | {row['controller']} | "
-                f"[{shell['low'] / rho:.2g}, {shell['high'] / rho:.2g}) | "
-                f"{_share(_mean([e['held'] for e in entries]))} | "
-                f"{_share(_mean([e['lqr_held'] for e in entries]))} | "
-                f"{_share(_mean([e['left_flat_top'] for e in entries]))} |"
+            table.append(
+                [
+                    row["system"],
+                    row["controller"],
+                    f"[{shell['low'] / rho:.2g}, {shell['high'] / rho:.2g})",
+                    _share(_mean([e["held"] for e in entries])),
+                    _share(_mean([e["lqr_held"] for e in entries])),
+                    _share(_mean([e["left_flat_top"] for e in entries])),
+                ]
             )
-    return lines
+    return markdown_table(SHELL_HEADERS, table)
+
+
+def _basin_cells(row: dict[str, Any]) -> list[str]:
+    basins = [c["basin"] for c in row["claims"]]
+    mean = {key: _mean([b[key] for b in basins]) for key in basins[0] if key != "box"}
+    volume = mean["outside_volume"]
+    return [
+        row["system"],
+        row["controller"],
+        f"{_share(mean['proved_set_held'])} ({_share(mean['proved_set_left_flat_top'])})",
+        f"{_share(mean['lqr_basin_held'])} ({_share(mean['lqr_basin_left_flat_top'])})",
+        _share(mean["outside_share"]),
+        "–" if volume is None else f"{volume:.3g}",
+    ]
 
 
 def _basin_lines(rows: list[dict[str, Any]]) -> list[str]:
-    lines = [
-        "| system | hybrid | LQR's proved set held (left flat top) | LQR's empirical basin held "
-        "(left flat top) | box held by the hybrid only | volume outside the LQR's basin |",
-        "|---|---|---|---|---|---|",
-    ]
-    for row in rows:
-        basins = [c["basin"] for c in row["claims"]]
-        mean = {key: _mean([b[key] for b in basins]) for key in basins[0] if key != "box"}
-        volume = mean["outside_volume"]
-        lines.append(
-            f"| {row['system']} | {row['controller']} | {_share(mean['proved_set_held'])} "
-            f"({_share(mean['proved_set_left_flat_top'])}) | {_share(mean['lqr_basin_held'])} "
-            f"({_share(mean['lqr_basin_left_flat_top'])}) | {_share(mean['outside_share'])} | "
-            f"{'–' if volume is None else f'{volume:.3g}'} |"
-        )
-    return lines
+    return markdown_table(BASIN_HEADERS, [_basin_cells(row) for row in rows])
 
 
 def hybrid_claims_section(evaluations: Evaluations) -> list[str]:
