@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -15,11 +16,14 @@ from leoc.experiments.appendix_d import (
     UNSETTLED,
     AppendixRow,
     appendix_d_verdict_lines,
+    appendix_d_verdicts,
+    authors_metrics_from_trace,
     metric_verdict,
     row_verdict,
 )
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS, PaperMetrics
 
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 # the paper's pendulum Linear row: -2.95e-13 ± 0, 0.45 ± 0, 26 ± 0
 LINEAR = PAPER_IMPULSE_METRICS["pendulum"]["linear"]
 
@@ -93,3 +97,49 @@ def test_the_papers_own_numbers_reproduce_every_row(system) -> None:
         verdicts = row_verdict(AppendixRow(system, controller, paper, {"v": summary}), "v")
         # rows whose seeds disagree beyond the scale cannot reproduce even themselves
         assert set(verdicts.values()) <= {SPREAD}, (system, controller, verdicts)
+
+
+def _authors_by_hand(e_degrees: list[float]) -> tuple[float, float, int]:
+    """The authors' steady-state error, overshoot and settling time of a pendulum trace, by
+    hand: arcsin(sin e) sample by sample, the last sample, the largest distance from it, one
+    past the last sample at least pi/180 (in degrees, as the authors' band is) away from it."""
+    mapped = [math.degrees(math.asin(math.sin(math.radians(value)))) for value in e_degrees]
+    final = mapped[-1]
+    overshoot = max(abs(value - final) for value in mapped)
+    outside = [index for index, value in enumerate(mapped) if abs(value - final) >= math.pi / 180]
+    return final, overshoot, outside[-1] + 1 if outside else len(mapped)
+
+
+def test_the_authors_metrics_from_a_trace_match_a_recomputation_by_hand() -> None:
+    # a response past 90 degrees (arcsin(sin e) folds it back), then settling to 0.001
+    trace = [0.0, 30.0, 120.0, 170.0, 60.0, 5.0, 0.5] + [0.001] * 14
+    impulse = {"deviation": trace, "metrics": {"terminated": False}}
+    measured = authors_metrics_from_trace("pendulum", impulse)
+    final, overshoot, settle = _authors_by_hand(trace)
+    assert measured.steady_state_error == pytest.approx(final, abs=1e-12)
+    assert measured.overshoot == pytest.approx(overshoot, abs=1e-12)
+    assert measured.settling_time == settle == 7
+    assert measured.overshoot == pytest.approx(60.0 - 0.001, abs=1e-9)  # 120 folds to 60
+
+
+def test_traces_of_the_committed_runs_give_their_recorded_authors_metrics() -> None:
+    import json
+
+    runs = sorted((RESULTS / "paper" / "runs").glob("*/*/seed*/evaluation.json"))
+    assert runs
+    for path in runs:
+        impulse = json.loads(path.read_text())["responses"]["impulse"]
+        measured = authors_metrics_from_trace(path.parts[-4], impulse)
+        recorded = impulse["metrics_authors"]
+        assert measured.steady_state_error == pytest.approx(recorded["steady_state_error"]), path
+        assert measured.overshoot == pytest.approx(recorded["overshoot"]), path
+        assert measured.settling_time == recorded["settling_time"], path
+
+
+def test_the_verdicts_of_the_committed_folders() -> None:
+    lines = appendix_d_verdicts([RESULTS / "paper-authors", RESULTS / "paper"])
+    assert "- leoc, authors' variant: 6 of 15 rows measured reproduce" in "\n".join(lines)
+    assert any(line.startswith("- leoc default: 0 of 15 rows measured") for line in lines)
+    assert not any("measured from the stored traces" in line for line in lines)
+    with pytest.raises(ValueError, match="one folder per variant"):
+        appendix_d_verdicts([RESULTS / "paper", RESULTS / "paper"])

@@ -11,11 +11,20 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.evaluation.metrics import MetricsSummary, ResponseMetrics, summarise_metrics
+import numpy as np
+
+from leoc.evaluation.metrics import (
+    MetricsSummary,
+    ResponseMetrics,
+    authors_response_metrics,
+    summarise_metrics,
+)
 from leoc.experiments.layout import META_FILE, Evaluations, load_evaluations
+from leoc.experiments.markdown import markdown_table
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS, PaperMetrics
 
 __all__ = [
@@ -23,6 +32,8 @@ __all__ = [
     "appendix_d_rows",
     "appendix_d_table",
     "appendix_d_verdict_lines",
+    "appendix_d_verdicts",
+    "authors_metrics_from_trace",
     "companion_evaluations",
     "metric_verdict",
     "row_verdict",
@@ -80,18 +91,65 @@ def companion_evaluations(out_dir: Path, meta: dict[str, Any]) -> tuple[str, Eva
     return other_meta.get("variant", "leoc"), load_evaluations(other, other_meta)
 
 
-def _authors_summary(runs: list[dict[str, Any]] | None) -> MetricsSummary | None:
+def authors_metrics_from_trace(system: str, impulse: Mapping[str, Any]) -> ResponseMetrics:
+    """The authors' impulse metrics measured from a run's stored leoc trace.
+
+    For runs evaluated before leoc recorded the authors' metrics (``metrics_authors``): the
+    stored deviation e (``deviation``, leoc's wrapped deviation of the main coordinate) is
+    mapped to the authors' arcsin(sin e) in degrees for an angle (as is for a position), then
+    measured by :func:`leoc.evaluation.metrics.authors_response_metrics` over the stored record.
+
+    Parameters
+    ----------
+    system
+        The system's name (:func:`leoc.systems.make_system`).
+    impulse
+        A run's ``responses["impulse"]`` entry of its ``evaluation.json``: ``deviation`` (T
+        samples) and ``metrics`` (leoc's, whose ``terminated`` is kept).
+
+    Returns
+    -------
+    ResponseMetrics
+        The authors' metrics; equal to ``metrics_authors`` where a run recorded them over a
+        record of the same length.
+    """
+    from leoc.systems import make_system  # torch: not needed to import this module
+
+    e = np.asarray(impulse["deviation"], dtype=float)
+    if make_system(system).main_in_degrees:
+        e = np.degrees(np.arcsin(np.sin(np.radians(e))))
+    terminated = bool(impulse["metrics"].get("terminated", False))
+    return authors_response_metrics(e, terminated=terminated)
+
+
+def _authors_metrics(
+    system: str, impulse: Mapping[str, Any], from_traces: bool
+) -> ResponseMetrics | None:
+    """A run's recorded authors' metrics; else measured from its trace, or None."""
+    if impulse.get("metrics_authors") is not None:
+        return ResponseMetrics(**impulse["metrics_authors"])
+    return authors_metrics_from_trace(system, impulse) if from_traces else None
+
+
+def _authors_summary(
+    system: str, runs: list[dict[str, Any]] | None, from_traces: bool = False
+) -> MetricsSummary | None:
     if not runs:
         return None
-    entries = [run["responses"]["impulse"].get("metrics_authors") for run in runs]
-    if any(entry is None for entry in entries):
+    entries = [_authors_metrics(system, run["responses"]["impulse"], from_traces) for run in runs]
+    measured = [entry for entry in entries if entry is not None]
+    if len(measured) < len(entries):
         return None  # runs evaluated before leoc measured the authors' metrics
-    return summarise_metrics([ResponseMetrics(**entry) for entry in entries])
+    return summarise_metrics(measured)
 
 
-def appendix_d_rows(by_variant: dict[str, Evaluations]) -> list[AppendixRow]:
+def appendix_d_rows(
+    by_variant: dict[str, Evaluations], from_traces: bool = False
+) -> list[AppendixRow]:
     """Rows of appendix D (the paper's order) with each variant's authors' impulse metrics
-    (mean and std over seeds) where that variant ran the controller."""
+    (mean and std over seeds) where that variant ran the controller; ``from_traces``: runs
+    that did not record them are measured from their stored traces
+    (:func:`authors_metrics_from_trace`), else the row says they were not measured."""
     rows = []
     for system, papers in PAPER_IMPULSE_METRICS.items():
         for controller in APPENDIX_CONTROLLERS:
@@ -99,7 +157,9 @@ def appendix_d_rows(by_variant: dict[str, Evaluations]) -> list[AppendixRow]:
                 name: evaluations.get(system, {}).get(controller)
                 for name, evaluations in by_variant.items()
             }
-            measured = {name: _authors_summary(found) for name, found in runs.items()}
+            measured = {
+                name: _authors_summary(system, found, from_traces) for name, found in runs.items()
+            }
             ran = {name: bool(found) for name, found in runs.items()}
             rows.append(AppendixRow(system, controller, papers[controller], measured, ran))
     return rows
@@ -132,14 +192,14 @@ def appendix_d_table(rows: list[AppendixRow]) -> list[str]:
     headers = ["system", "controller"]
     for _, label in METRIC_HEADERS:
         headers += [f"{label}: paper"] + [f"{label}: {VARIANT_HEADERS[v]}" for v in variants]
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    table = []
     for row in rows:
         cells = [row.system, row.controller]
         for metric, _ in METRIC_HEADERS:
             cells.append(_paper_cell(getattr(row.paper, metric)))
             cells += [_measured_cell(row.measured[v], metric, row.missing(v)) for v in variants]
-        lines.append("| " + " | ".join(cells) + " |")
-    return lines
+        table.append(cells)
+    return markdown_table(headers, table)
 
 
 # ------------------------------------------------------------------------------------ verdicts
@@ -204,46 +264,108 @@ def row_verdict(row: AppendixRow, variant: str) -> dict[str, str] | None:
     return {metric: word for metric, word in verdicts.items() if word != AGREES}
 
 
+VERDICT_LABELS = {
+    "steady_state_error": "steady-state error",
+    "overshoot": "overshoot",
+    "settling_time": "settling time",
+}
+
+
+def _verdict_cell(row: AppendixRow, variant: str, missed: dict[str, str] | None) -> str:
+    """A row's verdict for one variant: why it has none, reproduces, or what does not."""
+    if missed is None:
+        return row.missing(variant)
+    if not missed:
+        return "**reproduces**"
+    return "no: " + "; ".join(f"{VERDICT_LABELS[m]} {word}" for m, word in missed.items())
+
+
+def _count_line(variant: str, judged: list[tuple[AppendixRow, dict[str, str] | None]]) -> str:
+    """How many of the rows a variant measured reproduce (named), and how many it lacks."""
+    ran = [(row, missed) for row, missed in judged if missed is not None]
+    good = [f"{row.system} {row.controller}" for row, missed in ran if not missed]
+    return (
+        f"- {VARIANT_HEADERS[variant]}: {len(good)} of {len(ran)} rows measured reproduce"
+        + (f" ({', '.join(good)})" if good else "")
+        + "".join(
+            f"; {count} {word}"
+            for word in ("not run", "not measured")
+            if (count := sum(row.missing(variant) == word for row, m in judged if m is None))
+        )
+        + "."
+    )
+
+
 def appendix_d_verdict_lines(rows: list[AppendixRow]) -> list[str]:
     """Markdown: per row of appendix D and variant, whether it reproduces the paper's row (its
     three metrics within :func:`metric_verdict`'s tolerance), then the count per variant."""
     variants = [name for name in VARIANT_ORDER if rows and name in rows[0].measured]
-    labels = {"steady_state_error": "steady-state error", "overshoot": "overshoot"}
-    labels["settling_time"] = "settling time"
-    lines = [
-        "| system | controller | " + " | ".join(VARIANT_HEADERS[v] for v in variants) + " |",
-        "|" + "---|" * (2 + len(variants)),
-    ]
     verdicts = {v: [row_verdict(row, v) for row in rows] for v in variants}
-    for index, row in enumerate(rows):
-        cells = []
-        for variant in variants:
-            missed = verdicts[variant][index]
-            if missed is None:
-                cells.append(row.missing(variant))
-            elif not missed:
-                cells.append("**reproduces**")
-            else:
-                cells.append(
-                    "no: " + "; ".join(f"{labels[m]} {word}" for m, word in missed.items())
-                )
-        lines.append(f"| {row.system} | {row.controller} | " + " | ".join(cells) + " |")
-    lines.append("")
-    for variant in variants:
-        judged = list(zip(rows, verdicts[variant], strict=True))
-        ran = [(row, missed) for row, missed in judged if missed is not None]
-        good = [f"{row.system} {row.controller}" for row, missed in ran if not missed]
-        lines.append(
-            f"- {VARIANT_HEADERS[variant]}: {len(good)} of {len(ran)} rows measured reproduce"
-            + (f" ({', '.join(good)})" if good else "")
-            + "".join(
-                f"; {count} {word}"
-                for word in ("not run", "not measured")
-                if (count := sum(row.missing(variant) == word for row, m in judged if m is None))
+    table = [
+        [row.system, row.controller] + [_verdict_cell(row, v, verdicts[v][index]) for v in variants]
+        for index, row in enumerate(rows)
+    ]
+    headers = ["system", "controller", *(VARIANT_HEADERS[v] for v in variants)]
+    counts = [_count_line(v, list(zip(rows, verdicts[v], strict=True))) for v in variants]
+    return [*markdown_table(headers, table), "", *counts]
+
+
+def _traced_runs(variant: str, evaluations: Evaluations) -> list[str]:
+    """``variant system controller (N-step records)`` of each appendix-D controller whose runs
+    lack the authors' metrics (measured from their traces)."""
+    found = []
+    for system, by_controller in evaluations.items():
+        for controller in APPENDIX_CONTROLLERS:
+            impulses = [run["responses"]["impulse"] for run in by_controller.get(controller, [])]
+            lengths = sorted(
+                {len(i["deviation"]) for i in impulses if i.get("metrics_authors") is None}
             )
-            + "."
-        )
-    return lines
+            if lengths:
+                steps = "/".join(map(str, lengths))
+                found.append(f"{VARIANT_HEADERS[variant]}: {system} {controller} ({steps}-step)")
+    return found
+
+
+def appendix_d_verdicts(folders: Sequence[str | Path]) -> list[str]:
+    """Appendix D row by row from reproduce (or published) folders, one per variant.
+
+    Like the report's appendix-D section, but every run counts: runs evaluated before leoc
+    recorded the authors' metrics are measured from their stored impulse traces
+    (:func:`authors_metrics_from_trace`) instead of being *not measured*.
+
+    Parameters
+    ----------
+    folders
+        Reproduce folders, each of another variant (``meta.json``'s ``variant``), e.g.
+        ``results/paper-authors`` and ``results/paper``.
+
+    Returns
+    -------
+    list[str]
+        Markdown lines: the table of :func:`appendix_d_table` (the paper and each variant's
+        mean ± std per metric), the verdicts of :func:`appendix_d_verdict_lines`, then one
+        line per controller measured from traces, with its record length.
+
+    Raises
+    ------
+    FileNotFoundError
+        A folder has no ``meta.json``.
+    ValueError
+        Two folders hold the same variant.
+    """
+    by_variant: dict[str, Evaluations] = {}
+    for folder in map(Path, folders):
+        if not (folder / META_FILE).is_file():
+            raise FileNotFoundError(f"folders: no {META_FILE} in {str(folder)!r}")
+        meta = json.loads((folder / META_FILE).read_text())
+        variant = meta.get("variant", "leoc")
+        if variant in by_variant:
+            raise ValueError(f"folders: expected one folder per variant, found {variant!r} twice")
+        by_variant[variant] = load_evaluations(folder, meta)
+    rows = appendix_d_rows(by_variant, from_traces=True)
+    traced = [line for v, e in by_variant.items() for line in _traced_runs(v, e)]
+    notes = [f"- measured from the stored traces: {line}" for line in traced]
+    return [*appendix_d_table(rows), "", *appendix_d_verdict_lines(rows), *notes]
 
 
 def appendix_d_section(out_dir: Path, meta: dict[str, Any], evaluations: Evaluations) -> list[str]:
@@ -279,7 +401,8 @@ def appendix_d_section(out_dir: Path, meta: dict[str, Any], evaluations: Evaluat
         "settling time must be reached in every run; a metric the paper does not print agrees; "
         "a difference beyond the tolerance *differs* however much the seeds disagree. *Not "
         "measured*: runs evaluated before leoc recorded the authors' metrics "
-        "(`scripts/appendix_d_verdicts.py` measures them from the stored traces).",
+        "(`leoc.experiments.appendix_d.appendix_d_verdicts` measures them from the stored "
+        "traces).",
         "",
     ]
     return lines + appendix_d_table(rows) + verdict + appendix_d_verdict_lines(rows) + [""]
