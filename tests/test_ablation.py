@@ -464,6 +464,34 @@ def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> N
         run_ablation(moved, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
 
 
+def test_the_command_runs_the_records_run_ablation_makes_and_resumes(tmp_path, capsys) -> None:
+    """``leoc ablation`` on one cell gives the record :func:`run_ablation` gives called
+    directly (same plan), pins the command line, publishes, and a rerun trains nothing."""
+    from leoc.cli import main
+
+    spec = AblationSpec("pendulum", "ddpg_baseline", "leoc", 0)
+    plan = dataclasses.replace(PLAN, budgets={"pendulum": 200})  # no update: quick
+    run_ablation(tmp_path / "direct", [spec], plan, jobs=1, echo=lambda _: None)
+    argv = [
+        "ablation",
+        *("--out", str(tmp_path / "cli"), "--systems", "pendulum", "--settings", "leoc"),
+        *("--controllers", "ddpg_baseline", "--seeds", "0", "--jobs", "1"),
+        *("--budget", "200", "--eval-interval", "pendulum=100", "--overrides", json.dumps(TINY)),
+    ]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "1 runs: 0 already done, 1 to run" in out and "## Success at the paper's budget" in out
+    (direct,), (command,) = read_records(tmp_path / "direct"), read_records(tmp_path / "cli")
+    for record in (direct, command):
+        del record["wall_seconds"]
+    assert command == direct
+    plan_file = json.loads((tmp_path / "cli" / "plan.json").read_text())
+    assert plan_file["plan"] == json.loads((tmp_path / "direct" / "plan.json").read_text())["plan"]
+    assert (tmp_path / "cli" / TABLE_FILES[0]).exists()
+    assert main(argv) == 0
+    assert "1 runs: 1 already done, 0 to run" in capsys.readouterr().out
+
+
 def test_a_short_run_is_the_prefix_of_a_long_one_and_selection_matches_the_trainer(
     tmp_path,
 ) -> None:

@@ -135,7 +135,7 @@ def test_simulate_with_a_missing_run_folder_is_a_clear_error(tmp_path, capsys) -
     assert "run folder" in capsys.readouterr().err
 
 
-COMMAND_NAMES = ["lqr", "simulate", "roa", "train", "reproduce", "plot", "publish"]
+COMMAND_NAMES = ["lqr", "simulate", "roa", "train", "reproduce", "ablation", "plot", "publish"]
 
 
 def test_help_of_every_command_has_a_description(capsys) -> None:
@@ -193,6 +193,13 @@ def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
     from leoc.experiments.variants import VARIANT_NAMES
 
     assert names.VARIANT_NAMES == VARIANT_NAMES
+    from leoc.experiments import ablation, sweep
+
+    assert names.ABLATION_ALL_SETTINGS == ablation.ALL_SETTINGS
+    assert names.ABLATION_SETTINGS == ablation.SETTINGS
+    assert names.ABLATION_CONTROLLERS + names.ABLATION_SAC_CONTROLLERS == ablation.GRID_CONTROLLERS
+    assert names.ABLATION_SYSTEM_NAMES == ablation.ABLATION_SYSTEMS
+    assert names.BACKEND_NAMES == sweep.BACKENDS
     assert names.METRIC_SET_NAMES == tuple(METRIC_SETS)
     for name, (env_id, entry_point) in names.BUILTIN_ENV_IDS.items():
         assert gym.registry[env_id].max_episode_steps == make_system(name).episode_steps
@@ -477,3 +484,66 @@ def test_roa_certifies_a_pilco_run_at_its_period_with_its_squash(tmp_path, capsy
     assert main(["roa", "--controller", str(run), str(other), *cheap]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "--controller:" in line and "action_repeat" in line and "one LQR" in line
+
+
+def test_ablation_parser_defaults_are_the_issues_grid() -> None:
+    """``leoc ablation`` with no option: the issue-20 grid (3 DDPG controllers on the
+    cart-pole, mountain car and pendulum, 7 settings, per-setting seeds) in runs/ddpg-ablation,
+    with the paper's budgets and 5 held-out episodes, on local workers."""
+    from leoc.cli import build_parser
+
+    args = build_parser().parse_args(["ablation"])
+    assert args.systems == ["cartpole", "mountaincar", "pendulum"]
+    assert args.controllers == ["ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa"]
+    assert args.settings == [
+        "leoc",
+        "authors",
+        "exploration",
+        "initial_collect",
+        "critic",
+        "exit_penalty",
+        "model_selection",
+    ]
+    assert args.seeds is None and args.budget is None and args.eval_interval is None
+    assert (args.test_episodes, args.overrides, args.out) == (5, "{}", "runs/ddpg-ablation")
+    assert (args.backend, args.jobs, args.address) == ("local", None, None)
+    assert not (args.publish_only or args.dry_run) and args.publish is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["--budget", "0"], "--budget: expected INT or SYSTEM=INT, INT >= 1, found '0'"),
+        (["--budget", "cartpole=x"], "--budget: expected INT or SYSTEM=INT"),
+        (
+            ["--systems", "pendulum", "--eval-interval", "cartpole=100"],
+            "--eval-interval: 'cartpole' is not among --systems ['pendulum']",
+        ),
+        (["--overrides", "[1]"], "--overrides: expected a JSON object, found '[1]'"),
+        (["--overrides", "{"], "--overrides: expected a JSON object ("),
+        (["--overrides", '{"total_steps": 5}'], "--overrides: ['total_steps'] are set by"),
+        (["--budget", "pendulum=250", "--systems", "pendulum"], "--budget: "),
+    ],
+)
+def test_ablation_errors_are_one_line_naming_the_option(tmp_path, capsys, argv, expected):
+    out = tmp_path / "study"
+    status = main(["ablation", "--dry-run", "--out", str(out), *argv])
+    error = capsys.readouterr().err
+    assert status == 2 and error.count("\n") == 1, error
+    assert error.startswith(f"leoc ablation: error: {expected}"), error
+    assert not out.exists()
+
+
+def test_ablation_bad_choices_are_parser_errors(capsys) -> None:
+    for argv, option in (
+        (["--settings", "nope"], "--settings"),
+        (["--controllers", "pilco_hybrid"], "--controllers"),
+        (["--seeds", "-1"], "--seeds"),
+        (["--backend", "slurm"], "--backend"),
+        (["--test-episodes", "0"], "--test-episodes"),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            main(["ablation", *argv])
+        error = capsys.readouterr().err
+        assert stop.value.code == 2 and error.count("\n") == 1
+        assert f"argument {option}" in error

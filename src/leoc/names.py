@@ -74,6 +74,50 @@ RELEVANCE_NAMES = ("paper", "roa")
 r(x) = (1 + d)^-2, or the ROA relevance, exactly 1 on the LQR's certified region."""
 LQR_METHODS = ("discrete", "continuous", "authors")
 """LQR designs of ``leoc.control.design_lqr``."""
+BACKEND_NAMES = ("local", "ray")
+"""Where a sweep's runs run (``leoc.experiments.sweep.BACKENDS``): worker processes on this
+machine, or Ray tasks."""
+ABLATION_SYSTEM_NAMES = ("cartpole", "mountaincar", "pendulum")
+"""The DDPG ablation's systems (``leoc.experiments.ablation.ABLATION_SYSTEMS``): the two that
+failed, then the pendulum as the control."""
+ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
+"""The DDPG controllers of the ablation's default grid."""
+ABLATION_SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
+"""The SAC controllers the ablation also runs (not in the default grid)."""
+ABLATION_SETTINGS = (
+    "leoc",
+    "authors",
+    "exploration",
+    "initial_collect",
+    "critic",
+    "exit_penalty",
+    "model_selection",
+)
+"""The settings of the ablation's default grid (``leoc.experiments.ablation.SETTINGS``)."""
+ABLATION_ALL_SETTINGS = (
+    *ABLATION_SETTINGS,
+    "all_factors",
+    "all_but_exploration",
+    "all_but_initial_collect",
+    "all_but_critic",
+    "all_but_exit_penalty",
+    "all_but_model_selection",
+    "all_safe_exit",
+    "horizon_exit",
+    "all_horizon_exit",
+    "defaults",
+    "sac_sb3_critic",
+    "sac_alpha_0.1",
+    "sac_alpha_0.01",
+    "sac_initial_collect",
+    "sac_ddpg_optimiser",
+    "sac_huber",
+    "sac_critic",
+    "sac_ou",
+)
+"""Every setting the ablation runs (``leoc.experiments.ablation.ALL_SETTINGS``, same order)."""
+ABLATION_TEST_EPISODES = 5
+"""Held-out swing-up episodes of the ablation's success test, per evaluation."""
 
 
 def register_builtin_envs() -> None:

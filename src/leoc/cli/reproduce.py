@@ -8,6 +8,7 @@ from typing import Any
 from leoc.cli._args import positive_int, system_name
 from leoc.cli.train import DEFAULT_RUNS_DIR
 from leoc.names import (
+    BACKEND_NAMES,
     CONTROLLERS,
     DEFAULT_CONTROLLERS,
     PAPER_SYSTEM_NAMES,
@@ -46,23 +47,7 @@ def add_parser(commands: Any) -> None:
         help="implementation: leoc's defaults, or the authors' (nrjc/LEOC: their LQR scaled by "
         "u_max with a sin squash, their env rules, DDPG and PILCO settings); default leoc",
     )
-    reproduce.add_argument(
-        "--jobs",
-        type=positive_int,
-        help="runs at a time (default: the CPU count; on Ray, as many as the cluster's CPUs)",
-    )
-    reproduce.add_argument(
-        "--backend",
-        choices=("local", "ray"),
-        default="local",
-        help="local: worker processes on this machine (default); ray: one Ray task per run "
-        "(needs pip install 'leoc[ray]')",
-    )
-    reproduce.add_argument(
-        "--address",
-        help="Ray only: the cluster to join ('auto' inside a cluster started with 'ray start', "
-        "or HEAD_IP:6379); default: a private Ray instance on this machine",
-    )
+    add_sweep_arguments(reproduce)
     reproduce.add_argument(
         "--seeds", type=positive_int, help="number of seeds (default per profile)"
     )
@@ -84,6 +69,28 @@ def add_parser(commands: Any) -> None:
         "sac_hybrid / sac_hybrid_roa for SAC at the DDPG budgets)",
     )
     reproduce.set_defaults(run=run)
+
+
+def add_sweep_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--jobs``, ``--backend`` and ``--address`` (where a sweep's runs run) to
+    ``parser``; ``leoc ablation`` takes them too."""
+    parser.add_argument(
+        "--jobs",
+        type=positive_int,
+        help="runs at a time (default: the CPU count; on Ray, as many as the cluster's CPUs)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKEND_NAMES,
+        default="local",
+        help="local: worker processes on this machine (default); ray: one Ray task per run "
+        "(needs pip install 'leoc[ray]')",
+    )
+    parser.add_argument(
+        "--address",
+        help="Ray only: the cluster to join ('auto' inside a cluster started with 'ray start', "
+        "or HEAD_IP:6379); default: a private Ray instance on this machine",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

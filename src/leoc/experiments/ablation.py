@@ -120,6 +120,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from leoc import names
 from leoc.ddpg.callbacks import selection_key, selection_start
 from leoc.ddpg.config import (
     AUTHORS_DDPG,
@@ -131,6 +132,7 @@ from leoc.ddpg.config import (
     DDPGConfig,
     authors_ddpg_overrides,
 )
+from leoc.experiments.layout import LOG_FILE
 from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
 from leoc.experiments.variants import AUTHORS
 from leoc.io import read_json_object, write_json_atomic
@@ -138,15 +140,7 @@ from leoc.names import controller_framework
 from leoc.systems.base import DEFAULT_RULES
 
 #: The settings of the grid, in table order (see the module docstring).
-SETTINGS = (
-    "leoc",
-    "authors",
-    "exploration",
-    "initial_collect",
-    "critic",
-    "exit_penalty",
-    "model_selection",
-)
+SETTINGS = names.ABLATION_SETTINGS
 #: The single-factor settings: one authors' choice each, on leoc's defaults.
 FACTORS = ("exploration", "initial_collect", "critic", "exit_penalty", "model_selection")
 #: The combined setting that keeps the exit rule's safe half only (the module docstring).
@@ -298,27 +292,25 @@ SETTING_LABELS = {
     **{name: label for name, (label, _) in SAC_TUNING_SETTINGS.items()},
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
-ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
+ABLATION_CONTROLLERS = names.ABLATION_CONTROLLERS
 #: The SAC controllers the harness also runs (not in the default grid).
-SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
+SAC_CONTROLLERS = names.ABLATION_SAC_CONTROLLERS
 #: Every controller the harness runs, in table order.
 GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS
 #: The settings that apply to SAC: the others switch DDPG/TD3 fields SAC does not have.
 SAC_SETTINGS = ("leoc", "exit_penalty", DEFAULTS_SETTING, *SAC_TUNING_SETTINGS)
 #: The systems of the grid: the two that fail, then the pendulum as the control.
-ABLATION_SYSTEMS = ("cartpole", "mountaincar", "pendulum")
+ABLATION_SYSTEMS = names.ABLATION_SYSTEM_NAMES
 #: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
 FULL_SEEDS = 5
 #: Seeds per single-factor setting when none are given (add more where a cell is undecided).
 SINGLE_FACTOR_SEEDS = 3
 #: Held-out swing-up episodes of the success test.
-TEST_EPISODES = 5
+TEST_EPISODES = names.ABLATION_TEST_EPISODES
 #: Seed offset of the held-out starts (evaluation: 10000, exploration noise: 20000).
 TEST_SEED_OFFSET = 30_000
 #: Name of a run's result, written last (its presence marks the run done).
 RESULT_FILE = "result.json"
-#: Name of a run's log (progress lines).
-LOG_FILE = "train.log"
 #: The plan pinned by the first invocation on a folder.
 PLAN_FILE = "plan.json"
 #: Subfolder of a run folder holding :func:`~leoc.ddpg.train_ddpg`'s files.
@@ -756,6 +748,19 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
             **plan.config_overrides(spec),
         )
         print(f"trained in {time.perf_counter() - started:.1f} s", flush=True)
+    record = _record(spec, plan, config, _evaluations(result.curve, held_out.rows))
+    return {
+        **record,
+        "selected_steps": result.summary.get("selected_steps"),
+        "wall_seconds": time.perf_counter() - started,
+        "versions": versions(),
+    }
+
+
+def _record(
+    spec: AblationSpec, plan: AblationPlan, config: DDPGConfig, evaluations: list[dict]
+) -> dict[str, Any]:
+    """The part of a run's record (:func:`run_cell`) that its spec, plan and evaluations fix."""
     return {
         **spec._asdict(),
         "key": spec.key,
@@ -765,10 +770,7 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
         "model_selection": config.model_selection,
         "test_episodes": plan.test_episodes,
         "config": config.as_dict(),
-        "evaluations": _evaluations(result.curve, held_out.rows),
-        "selected_steps": result.summary.get("selected_steps"),
-        "wall_seconds": time.perf_counter() - started,
-        "versions": versions(),
+        "evaluations": evaluations,
     }
 
 
@@ -940,7 +942,7 @@ def run_ablation(
         Budgets, intervals, held-out episodes, overrides (default: :class:`AblationPlan`'s).
         The folder's first invocation pins it per system; a later one must agree.
     backend, jobs, address
-        As :func:`leoc.experiments.sweep.sweep`.
+        As :class:`leoc.experiments.sweep.Sweep`.
     echo : callable
         Receives the progress lines.
     command : str
@@ -960,11 +962,7 @@ def run_ablation(
     plan = plan or AblationPlan()
     out = Path(out_dir)
     check_backend(backend, address)  # before anything is written
-    systems = sorted({spec.system for spec in specs})
-    stored = read_json_object(out / PLAN_FILE, echo, "ablation plan") or {}
-    pinned = merge_plan(stored.get("plan", {}), plan, systems)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / PLAN_FILE, {"plan": pinned, "command": command}, indent=2)
+    _pin_plan(out, plan, specs, command, echo)
     return sweep(
         list(specs),
         AblationRunner(plan),
@@ -978,6 +976,22 @@ def run_ablation(
         expected_seconds=expected_seconds(plan),
         progress_of=trainer_progress,
     )
+
+
+def _pin_plan(
+    out: Path,
+    plan: AblationPlan,
+    specs: Sequence[AblationSpec],
+    command: str,
+    echo: Callable[[str], None],
+) -> None:
+    """Write the folder's :data:`PLAN_FILE`: its pinned plan extended by ``plan`` for the
+    systems of ``specs`` (:func:`merge_plan`, which raises if they disagree), and ``command``."""
+    systems = sorted({spec.system for spec in specs})
+    stored = read_json_object(out / PLAN_FILE, echo, "ablation plan") or {}
+    pinned = merge_plan(stored.get("plan", {}), plan, systems)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / PLAN_FILE, {"plan": pinned, "command": command}, indent=2)
 
 
 def read_records(out_dir: str | Path, echo: Callable[[str], None] = print) -> list[dict]:

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 from leoc.names import controller_framework
-from leoc.systems import system_names
 
 EVALUATION_FILE = "evaluation.json"
 LOG_FILE = "train.log"
@@ -59,6 +58,8 @@ def load_evaluations(out_dir: Path, meta: dict[str, Any] | None = None) -> Evalu
         if meta is not None and not _selected(spec, meta):
             continue
         grouped[spec["system"]][spec["controller"]].append(data)
+    from leoc.systems import system_names  # torch: not needed to import this module
+
     return {system: dict(grouped[system]) for system in system_names() if system in grouped}
 
 

@@ -27,6 +27,7 @@ to the run's log and the sweep goes on with the other runs.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import math
 import os
@@ -43,13 +44,14 @@ from pathlib import Path
 from typing import IO, Any, NamedTuple
 
 from leoc.experiments.eta import Finished, Queued, Running, estimate_remaining
+from leoc.experiments.layout import LOG_FILE
 from leoc.io import read_json_object, write_bytes_atomic, write_json_atomic, write_text_atomic
+from leoc.names import BACKEND_NAMES
 from leoc.progress import format_duration as format_seconds
 from leoc.progress import is_terminal
 
-BACKENDS = ("local", "ray")
+BACKENDS = BACKEND_NAMES
 DONE_FILE = "evaluation.json"
-LOG_FILE = "train.log"
 PROGRESS_INTERVAL_S = 15.0
 DEFAULT_MAX_RETRIES = 2
 """Times a run is started again after its worker died (a runner's own error is not retried)."""
@@ -759,42 +761,20 @@ class _Driver:
             self.live.show(len(self.results), f"finished in {elapsed}{failed}")
 
 
-def sweep(
-    specs: Sequence[Any],
-    runner: Runner,
-    out_dir: str | Path,
-    *,
-    backend: str = "local",
-    jobs: int | None = None,
-    address: str | None = None,
-    cpus_per_run: float = 1.0,
-    shared_out_dir: bool | None = None,
-    run_dir: RunDir = default_run_dir,
-    done_file: str = DONE_FILE,
-    log_file: str | None = LOG_FILE,
-    max_retries: int = DEFAULT_MAX_RETRIES,
-    progress_interval_s: float = PROGRESS_INTERVAL_S,
-    echo: Callable[[str], None] = print,
-    stream: IO[str] | None = None,
-    expected_seconds: Callable[[Any], float] | None = None,
-    progress_of: Callable[[str], float | None] | None = None,
-    on_finished: Callable[[str], None] | None = None,
-    kind_of: Callable[[Any], str] | None = None,
-) -> SweepResult:
-    """Run every spec not finished yet, on this machine or on a Ray cluster.
+@dataclasses.dataclass(frozen=True)
+class Sweep:
+    """A sweep's runner, folder, backend and reporting: :func:`sweep` takes these fields as
+    keyword arguments, with the same defaults.
 
-    Parameters
+    Attributes
     ----------
-    specs : sequence
-        Run specifications: strings, or objects with a string ``key`` (e.g.
-        :class:`leoc.experiments.profiles.RunSpec`); keys are unique relative paths. A spec is
-        passed to the runner as is (it must pickle).
     runner : callable ``(spec, out_dir) -> mapping``
         Does one run. It may write into ``run_dir(out_dir, spec)`` (and should log progress to
         ``log_file`` there) and returns a JSON-ready mapping, which the driver writes to
         ``done_file``. It must pickle (a module-level function or class instance). On the Ray
         backend without a shared file system, ``out_dir`` is a scratch folder on the worker.
     out_dir : path
+        The sweep's folder (``out_dir/runs/KEY`` by default, see ``run_dir``).
     backend : {"local", "ray"}
     jobs : int, optional
         Runs at a time. Default: local, the CPU count divided by ``cpus_per_run``; Ray, as many
@@ -846,63 +826,120 @@ def sweep(
         The kind of a run: runs of one kind share their speed factor in the ETA (e.g. the
         learner; :func:`leoc.experiments.eta.kind_factors`). Default: one kind for all.
 
-    Returns
-    -------
-    SweepResult
 
     Raises
     ------
     BackendUnavailableError
-        ``backend="ray"`` without Ray installed (one line saying how to install it).
+        From :meth:`run`: ``backend="ray"`` without Ray installed (one line saying how to
+        install it).
     ValueError
-        An option out of range, or a run key that is not unique.
+        From :meth:`run`: an option out of range, or a run key that is not unique.
     """
-    _check_options(backend, address, jobs, cpus_per_run, max_retries)
-    out = Path(out_dir)
+
+    runner: Runner
+    out_dir: str | Path
+    backend: str = "local"
+    jobs: int | None = None
+    address: str | None = None
+    cpus_per_run: float = 1.0
+    shared_out_dir: bool | None = None
+    run_dir: RunDir = default_run_dir
+    done_file: str = DONE_FILE
+    log_file: str | None = LOG_FILE
+    max_retries: int = DEFAULT_MAX_RETRIES
+    progress_interval_s: float = PROGRESS_INTERVAL_S
+    echo: Callable[[str], None] = print
+    stream: IO[str] | None = None
+    expected_seconds: Callable[[Any], float] | None = None
+    progress_of: Callable[[str], float | None] | None = None
+    on_finished: Callable[[str], None] | None = None
+    kind_of: Callable[[Any], str] | None = None
+
+    def run(self, specs: Sequence[Any]) -> SweepResult:
+        """Run every spec of ``specs`` not finished yet (see :func:`sweep`)."""
+        _check_options(self.backend, self.address, self.jobs, self.cpus_per_run, self.max_retries)
+        out = Path(self.out_dir)
+        keys = _unique_keys(specs)
+        begun = time.monotonic()
+        echo, terminal = self._echo()
+        pending: deque[_Attempt] = deque()
+        skipped: list[str] = []
+        for spec, key in zip(specs, keys, strict=True):
+            if _finished(self.run_dir(out, spec) / self.done_file, echo):
+                skipped.append(key)
+            else:
+                pending.append(_Attempt(spec, key, 1, 0.0))
+        out.mkdir(parents=True, exist_ok=True)
+        if not pending:
+            echo(f"{len(keys)} runs: {len(skipped)} already done, 0 to run")
+            return SweepResult({}, tuple(skipped), {}, {}, time.monotonic() - begun)
+        engine = self._engine(out)
+        driver = _Driver(
+            engine,
+            out,
+            self.run_dir,
+            self.done_file,
+            self.log_file,
+            self.max_retries,
+            echo,
+            self.expected_seconds,
+            self.progress_of,
+            self.on_finished,
+            self.kind_of,
+        )
+        counts = f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run"
+        _drive(driver, engine, pending, self.progress_interval_s, terminal, counts)
+        return SweepResult(
+            driver.results, tuple(skipped), driver.failed, driver.retried, time.monotonic() - begun
+        )
+
+    def _echo(self) -> tuple[Callable[[str], None], IO[str] | None]:
+        """The progress lines' writer, and the terminal of a live status line (or None): the
+        default ``echo`` writes to ``stream`` (``sys.stdout`` now), live if a terminal."""
+        if not _is_builtin_print(self.echo):
+            return self.echo, None
+        target = sys.stdout if self.stream is None else self.stream
+        terminal = target if is_terminal(target) else None
+        return functools.partial(print, file=target, flush=True), terminal
+
+    def _engine(self, out: Path) -> Any:
+        """The backend that runs the attempts."""
+        if self.backend == "local":
+            slots = self.jobs or max(1, int((os.cpu_count() or 1) // self.cpus_per_run))
+            return _LocalBackend(self.runner, out, slots)
+        return _RayBackend(
+            self.runner,
+            out,
+            self.run_dir,
+            self.jobs,
+            self.cpus_per_run,
+            self.address,
+            self.shared_out_dir,
+        )
+
+
+def _unique_keys(specs: Sequence[Any]) -> list[str]:
+    """The specs' run keys; raises ValueError naming any that is not unique."""
     keys = [run_key(spec) for spec in specs]
     duplicates = sorted({key for key in keys if keys.count(key) > 1})
     if duplicates:
         raise ValueError(f"specs: expected unique run keys, found {duplicates} more than once")
-    begun = time.monotonic()
-    terminal = None  # the stream of a live line: the default echo's, if a terminal
-    if _is_builtin_print(echo):
-        target = sys.stdout if stream is None else stream
-        terminal = target if is_terminal(target) else None
-        echo = functools.partial(print, file=target, flush=True)
-    pending: deque[_Attempt] = deque()
-    skipped: list[str] = []
-    for spec, key in zip(specs, keys, strict=True):
-        if _finished(run_dir(out, spec) / done_file, echo):
-            skipped.append(key)
-        else:
-            pending.append(_Attempt(spec, key, 1, 0.0))
-    out.mkdir(parents=True, exist_ok=True)
-    if not pending:
-        echo(f"{len(keys)} runs: {len(skipped)} already done, 0 to run")
-        return SweepResult({}, tuple(skipped), {}, {}, time.monotonic() - begun)
-    if backend == "local":
-        slots = jobs or max(1, int((os.cpu_count() or 1) // cpus_per_run))
-        engine: Any = _LocalBackend(runner, out, slots)
-    else:
-        engine = _RayBackend(runner, out, run_dir, jobs, cpus_per_run, address, shared_out_dir)
-    driver = _Driver(
-        engine,
-        out,
-        run_dir,
-        done_file,
-        log_file,
-        max_retries,
-        echo,
-        expected_seconds,
-        progress_of,
-        on_finished,
-        kind_of,
-    )
+    return keys
+
+
+def _drive(
+    driver: _Driver,
+    engine: Any,
+    pending: deque[_Attempt],
+    progress_interval_s: float,
+    terminal: IO[str] | None,
+    counts: str,
+) -> None:
+    """Say ``counts`` and where the runs run, run the pending attempts to the end (live on
+    ``terminal`` if given); on Ctrl-C stop the workers and re-raise; close the backend either
+    way."""
     try:
-        echo(
-            f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run on "
-            f"{engine.describe()}"
-        )
+        driver.echo(f"{counts} on {engine.describe()}")
         if terminal is not None:
             driver.live = _LiveStatus(len(pending), terminal)
             driver.echo = driver.live.write
@@ -920,6 +957,35 @@ def sweep(
         raise
     finally:
         engine.close()
-    return SweepResult(
-        driver.results, tuple(skipped), driver.failed, driver.retried, time.monotonic() - begun
-    )
+
+
+def sweep(specs: Sequence[Any], runner: Runner, out_dir: str | Path, **options: Any) -> SweepResult:
+    """Run every spec not finished yet, on this machine or on a Ray cluster:
+    ``Sweep(runner, out_dir, **options).run(specs)``.
+
+    Parameters
+    ----------
+    specs : sequence
+        Run specifications: strings, or objects with a string ``key`` (e.g.
+        :class:`leoc.experiments.profiles.RunSpec`); keys are unique relative paths. A spec is
+        passed to the runner as is (it must pickle).
+    runner : callable ``(spec, out_dir) -> mapping``
+        Does one run (:class:`Sweep`).
+    out_dir : path
+    **options
+        The keyword options of :class:`Sweep` (backend, jobs, address, cpus_per_run,
+        shared_out_dir, run_dir, done_file, log_file, max_retries, progress_interval_s, echo,
+        stream, expected_seconds, progress_of, on_finished, kind_of), same defaults.
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    BackendUnavailableError
+        ``backend="ray"`` without Ray installed (one line saying how to install it).
+    ValueError
+        An option out of range, or a run key that is not unique.
+    """
+    return Sweep(runner, out_dir, **options).run(specs)
