@@ -263,29 +263,19 @@ def _roa_controllers(system, design, lqr: CertifiedLQR, runs: dict) -> dict:
     return controllers
 
 
-def run(args: argparse.Namespace) -> int:
-    import time
+class _Certified(NamedTuple):
+    """The LQR ``leoc roa`` certifies: its ``design`` (:class:`~leoc.control.LQRDesign`) and
+    the ``certificate`` of its closed loop (:func:`~leoc.policies.hybrid.lqr_certificate`)."""
 
-    import numpy as np
-    import torch
+    design: Any
+    certificate: Any
 
-    from leoc.control import (
-        basin_starts,
-        box_fraction,
-        certified_set_check,
-        default_basin_box,
-        design_lqr,
-        empirical_basin,
-        plot_basins,
-        slice_grid,
-    )
+
+def _certify(args: argparse.Namespace, system, lqr: CertifiedLQR, runs: dict) -> _Certified:
+    """Design the LQR ``lqr``, check that it is every run's linear part, and certify it."""
+    from leoc.control import design_lqr
     from leoc.policies.hybrid import lqr_certificate
 
-    torch.set_num_threads(1)
-    started = time.perf_counter()
-    system = roa_plant(args)
-    runs = {spec: load_controller(spec, args.system) for spec in args.controller or []}
-    lqr = certified_lqr_choice(args, runs)
     design = design_lqr(system, method=lqr.method, action_repeat=lqr.action_repeat)  # type: ignore[arg-type]
     for spec, controller in runs.items():
         _check_linear_part(spec, controller, design, lqr)
@@ -294,51 +284,120 @@ def run(args: argparse.Namespace) -> int:
     certificate = lqr_certificate(
         system, design, lqr.saturation, samples=args.samples, seed=args.seed
     )
+    return _Certified(design, certificate)
+
+
+class _BoxCover(NamedTuple):
+    """The basin box and the share of it the certified set covers (sampled)."""
+
+    box: Any  # (S,) half-widths per state, in the state's units
+    fraction: float
+    stderr: float
+
+
+def _box_cover(args: argparse.Namespace, system, certificate) -> _BoxCover:
+    """``--box`` (default :func:`~leoc.evaluation.basins.default_basin_box`) and the share of it
+    inside the certified set (:func:`~leoc.evaluation.basins.box_fraction`, seeded)."""
+    import numpy as np
+
+    from leoc.control import box_fraction, default_basin_box
+
     box = default_basin_box(system) if args.box is None else np.asarray(args.box, dtype=float)
     fraction, error = box_fraction(certificate, box, seed=args.seed)
+    return _BoxCover(box, fraction, error)
+
+
+def _measure_basins(
+    args: argparse.Namespace, system, certified: _Certified, lqr: CertifiedLQR, runs: dict, box
+) -> dict:
+    """Per controller label: the controller, the share of ``--starts`` seeded starts in ``box``
+    and of as many in the certified set that it holds, and an ROA hybrid's flat top."""
+    from leoc.control import basin_starts, certified_set_check, empirical_basin
+
     starts = basin_starts(system, box, args.starts, seed=args.seed)
     basins = {}
-    for label, controller in _roa_controllers(system, design, lqr, runs).items():
+    for label, controller in _roa_controllers(system, certified.design, lqr, runs).items():
         basin = empirical_basin(system, controller, starts, box=box)
-        inside = certified_set_check(system, controller, certificate, args.starts, args.seed)
+        inside = certified_set_check(
+            system, controller, certified.certificate, args.starts, args.seed
+        )
         basins[label] = {
             "controller": controller,
             "box_held": basin.fraction,
             "certified_set_held": inside.fraction,
-            **_flat_top(controller, design),
+            **_flat_top(controller, certified.design),
         }
-    report = {
+    return basins
+
+
+def _roa_report(
+    args: argparse.Namespace,
+    system,
+    lqr: CertifiedLQR,
+    runs: dict,
+    certified: _Certified,
+    cover: _BoxCover,
+    basins: dict,
+) -> dict:
+    """The results of ``leoc roa`` as printed by ``--json`` (the controllers left out)."""
+    return {
         "system": args.system,
         "plant": dataclasses.asdict(system.rules.plant()),
-        "action_repeat": design.action_repeat,
+        "action_repeat": certified.design.action_repeat,
         "lqr": {**lqr._asdict(), "from_runs": bool(runs)},
-        "certificate": certificate.summary(),
-        "box": box.tolist(),
-        "box_fraction": fraction,
-        "box_fraction_stderr": error,
+        "certificate": certified.certificate.summary(),
+        "box": cover.box.tolist(),
+        "box_fraction": cover.fraction,
+        "box_fraction_stderr": cover.stderr,
         "basin_starts": args.starts,
         "basins": {
             label: {key: value for key, value in entry.items() if key != "controller"}
             for label, entry in basins.items()
         },
     }
+
+
+def _plot_slices(args: argparse.Namespace, system, certificate, basins: dict, box) -> str:
+    """Write the basins of every controller on the system's 2-D slice (:data:`ROA_SLICES`,
+    ``--slice-points`` per axis) to ``--plot``; the path written."""
+    import numpy as np
+
+    from leoc.control import empirical_basin, plot_basins, slice_grid
+
+    dims = ROA_SLICES.get(args.system, (0, 1))
+    # The slice box covers the certified ellipse too, so the plot shows its boundary.
+    plot_box = np.maximum(box, ROA_PLOT_MARGIN * certificate.extent)
+    grid = slice_grid(system, dims, plot_box, args.slice_points)
+    slices = {
+        label: empirical_basin(system, entry["controller"], grid, box=plot_box)
+        for label, entry in basins.items()
+    }
+    return str(
+        plot_basins(system, certificate, slices, dims, args.slice_points, args.plot, box=box)
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    import torch
+
+    torch.set_num_threads(1)
+    started = time.perf_counter()
+    system = roa_plant(args)
+    runs = {spec: load_controller(spec, args.system) for spec in args.controller or []}
+    lqr = certified_lqr_choice(args, runs)
+    certified = _certify(args, system, lqr, runs)
+    cover = _box_cover(args, system, certified.certificate)
+    basins = _measure_basins(args, system, certified, lqr, runs, cover.box)
+    report = _roa_report(args, system, lqr, runs, certified, cover, basins)
     if args.plot:
-        dims = ROA_SLICES.get(args.system, (0, 1))
-        # The slice box covers the certified ellipse too, so the plot shows its boundary.
-        plot_box = np.maximum(box, ROA_PLOT_MARGIN * certificate.extent)
-        grid = slice_grid(system, dims, plot_box, args.slice_points)
-        slices = {
-            label: empirical_basin(system, entry["controller"], grid, box=plot_box)
-            for label, entry in basins.items()
-        }
-        report["plot"] = str(
-            plot_basins(system, certificate, slices, dims, args.slice_points, args.plot, box=box)
-        )
+        report["plot"] = _plot_slices(args, system, certified.certificate, basins, cover.box)
     report["seconds"] = time.perf_counter() - started
     if args.json:
         print(json.dumps(report, indent=1))
         return 0
-    _print_roa(system, certificate, report)
+    _print_roa(system, certified.certificate, report)
     return 0
 
 
