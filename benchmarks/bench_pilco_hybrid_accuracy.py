@@ -6,7 +6,14 @@ treats the relevance r as the constant r(E[o]) and (c) the authors' mixture heur
 ``HybridController.compute_action``), against 10^6 Monte Carlo samples. Policies:
 LQR of the system + random RBF (the initialisation PILCO starts from), Lambda = I, sin squash.
 
-Run: ``python scripts/pilco_hybrid_accuracy.py``
+Prints, per system, a table of each method's absolute error in the action's mean and standard
+deviation (average and maximum over 10 random Gaussian states, in units of u_max). Measured on
+the pendulum (commit b0b0c4f): the mixture's mean error 0.21 u_max on average (0.47 max), its
+std error 0.27 (0.52), against 0.003 (0.012) for order-5 quadrature.
+
+Usage::
+
+    python benchmarks/bench_pilco_hybrid_accuracy.py
 """
 
 from __future__ import annotations

@@ -14,8 +14,15 @@ trained on. Switches:
 Each run is resumable (``train_pilco``'s checkpoint) and single-threaded (two torch processes
 with default threads on 2 cores ran more than ten times slower than two with one thread each).
 
-Run: ``python scripts/authors_pilco_switch.py quadrature fixed_lambda --seeds 0 1 --jobs 2``
-(about 8 minutes per run on one core).
+Prints one JSON line per run as it finishes, then a table: switch, seed, learnt log lambda,
+last evaluation return and held fraction, impulse steady-state error, overshoot and settling
+time. Run folders are kept under ``--out`` (rerunning resumes).
+
+Usage::
+
+    python benchmarks/bench_authors_pilco_switch.py quadrature fixed_lambda --seeds 0 1 --jobs 2
+
+(about 8 minutes per run on one core; ``docs/results.md`` gives the figures of that command).
 """
 
 from __future__ import annotations
@@ -84,8 +91,27 @@ def main() -> None:
     args = parser.parse_args()
     jobs = [(args.system, s, seed, args.out) for s in args.switches for seed in args.seeds]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        rows = []
         for row in pool.map(run_one, *zip(*jobs, strict=True)):
             print(json.dumps(row), flush=True)
+            rows.append(row)
+    print_table(rows)
+
+
+def print_table(rows: list[dict]) -> None:
+    """One line per run: the switch, seed, learnt Lambda, last evaluation and impulse."""
+    print(
+        f"{'switch':<13} {'seed':>4} {'log lambda':<28} {'last return':>11} {'held':>5} "
+        f"{'ss error':>9} {'overshoot':>9} {'settling':>8}"
+    )
+    for row in rows:
+        impulse = row["impulse"]
+        print(
+            f"{row['switch']:<13} {row['seed']:>4} {str(row['log_lambda']):<28} "
+            f"{row['last_eval_return']:>11} {row['held']!s:>5} "
+            f"{impulse['steady_state_error']!s:>9.9} {impulse['overshoot']!s:>9.9} "
+            f"{impulse['settling_time']!s:>8}"
+        )
 
 
 if __name__ == "__main__":
