@@ -450,24 +450,49 @@ def prove_level(
     fine = RESOLUTION.get(size, DEFAULT_RESOLUTION) if resolution is None else float(resolution)
     if not 0.0 < fine < 1.0:
         raise ValueError(f"resolution: expected a number in (0, 1), found {resolution!r}")
+    deadline = started + max_seconds
+    outcome = _prove(system, P, controller, repeat, target, fine, max_boxes, deadline)
+    search = outcome.search
+    return LevelProof(
+        outcome.rho,
+        target,
+        outcome.inner_level,
+        outcome.excluded,
+        search.boxes,
+        search.unproved,
+        search.limited_by,
+        fine,
+        time.perf_counter() - started,
+        outcome.reason,
+    )
 
-    def finish(rho: float, inner: float, eps: float, search: _Search, reason: str) -> LevelProof:
-        return LevelProof(
-            rho,
-            target,
-            inner,
-            eps,
-            search.boxes,
-            search.unproved,
-            search.limited_by,
-            fine,
-            time.perf_counter() - started,
-            reason,
-        )
 
-    empty = _Search(math.inf, 0, 0, "target")
+class _Outcome(NamedTuple):
+    rho: float
+    inner_level: float
+    excluded: float
+    search: _Search
+    reason: str
+
+
+_NO_SEARCH = _Search(math.inf, 0, 0, "target")
+"""No box searched (the proof stopped before the annulus)."""
+
+
+def _prove(
+    system: System,
+    P: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    target: float,
+    fine: float,
+    max_boxes: int,
+    deadline: float,
+) -> _Outcome:
+    """:func:`prove_level` past its checks: the inner ball by the rigorous linearisation, then
+    the annulus of boxes out to ``target``."""
     if not target > 0.0:
-        return finish(0.0, 0.0, 0.0, empty, "no target level (the sampled estimate is 0)")
+        return _Outcome(0.0, 0.0, 0.0, _NO_SEARCH, "no target level (the sampled estimate is 0)")
     frame = _frame(system, P)
     shrink = (1.0 - frame.error) ** 2
     cover = math.sqrt(target) / (1.0 - frame.error)
@@ -476,14 +501,14 @@ def prove_level(
             half_width, epsilon = _inner_level(system, controller, repeat, frame, cover)
             inner_level, excluded = min(target, shrink * half_width**2), epsilon**2
             if half_width <= 0.0:
-                failed = empty._replace(limited_by="decrease")
-                return finish(0.0, 0.0, 0.0, failed, NO_BALL)
-            deadline = started + max_seconds
+                failed = _NO_SEARCH._replace(limited_by="decrease")
+                return _Outcome(0.0, 0.0, 0.0, failed, NO_BALL)
             search = _annulus(
                 system, controller, repeat, frame, half_width, cover, fine, max_boxes, deadline
             )
         except UnsupportedOperation as error:
-            return finish(0.0, 0.0, 0.0, empty._replace(limited_by="unsupported"), str(error))
+            unsupported = _NO_SEARCH._replace(limited_by="unsupported")
+            return _Outcome(0.0, 0.0, 0.0, unsupported, str(error))
     level = min(search.level, cover**2)
     # The inner ball is proved on its own; neither claim goes past the target.
     rho = min(target, max(shrink * level * (1.0 - LEVEL_MARGIN), inner_level))
@@ -491,4 +516,4 @@ def prove_level(
         f"decrease proved on {excluded:.3g} < V <= {rho:.6g} ({search.boxes} boxes); "
         f"limited by {search.limited_by}"
     )
-    return finish(rho, inner_level, excluded, search, reason)
+    return _Outcome(rho, inner_level, excluded, search, reason)

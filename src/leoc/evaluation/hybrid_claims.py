@@ -16,11 +16,17 @@ import torch
 
 from leoc.evaluation.basins import (
     SHELL_STARTS,
+    BasinComparison,
     basin_comparison,
     shell_levels,
     shell_robustness,
 )
-from leoc.evaluation.impulse_sweep import impulse_sweep, lqr_failure_size, sweep_sizes
+from leoc.evaluation.impulse_sweep import (
+    ImpulsePoint,
+    impulse_sweep,
+    lqr_failure_size,
+    sweep_sizes,
+)
 from leoc.systems.base import System
 from leoc.systems.rollout import Controller, relevance_function
 
@@ -95,7 +101,6 @@ def hybrid_claims(
     """
     if relevance_function(controller) is None or not certificate.certified:
         return None
-    rng = np.random.default_rng(seed)
     rho = float(certificate.rho)
     flat_top = flat_top_level(controller)
     failure = lqr_failure_size(system, lqr)
@@ -104,11 +109,7 @@ def hybrid_claims(
     shells = shell_robustness(
         system, controller, lqr, certificate.P, levels, count=shell_starts, seed=seed
     )
-    half = np.asarray(box, dtype=float)
-    starts_box = system.operating_state + rng.uniform(-half, half, (starts, half.size))
-    basin = basin_comparison(
-        system, controller, lqr, certificate.sample(rng, starts), starts_box, half
-    )
+    basin = _basin(system, controller, lqr, certificate, box, starts, seed)
     corners = operating_region_corners(system)
     return {
         "operating_region_max_v": float(certificate.value(corners).max()),
@@ -117,9 +118,31 @@ def hybrid_claims(
         "flat_top": flat_top,
         "lqr_failure_size": failure,
         "impulse_sweep": {
-            label: [{**point._asdict(), "by_construction": point.by_construction} for point in pts]
-            for label, pts in sweep.items()
+            label: [_sweep_point(point) for point in pts] for label, pts in sweep.items()
         },
         "shells": [shell._asdict() for shell in shells],
         "basin": basin._asdict(),
     }
+
+
+def _basin(
+    system: System,
+    controller: Controller,
+    lqr: Controller,
+    certificate: Any,
+    box: Any,
+    starts: int,
+    seed: int,
+) -> BasinComparison:
+    """:func:`~leoc.evaluation.basins.basin_comparison` on ``starts`` seeded starts in the box,
+    then as many in the proved set (one generator, in this order)."""
+    rng = np.random.default_rng(seed)
+    half = np.asarray(box, dtype=float)
+    starts_box = system.operating_state + rng.uniform(-half, half, (starts, half.size))
+    return basin_comparison(
+        system, controller, lqr, certificate.sample(rng, starts), starts_box, half
+    )
+
+
+def _sweep_point(point: ImpulsePoint) -> dict[str, Any]:
+    return {**point._asdict(), "by_construction": point.by_construction}

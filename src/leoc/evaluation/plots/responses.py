@@ -480,6 +480,22 @@ def draw_responses(
             axis.set_title(f"{system_name}: {test} response")
             axis.set_xlabel("time [s]")
             axis.set_ylabel(f"deviation of {system.main_label}")
+    _response_legend(figure, responses, handles, labels, markers, counts)
+    return figure
+
+
+def _response_legend(
+    figure: Any,
+    responses: Mapping[str, Mapping[str, Mapping[str, Sequence[Any]]]],
+    handles: dict[str, Any],
+    labels: Mapping[str, str],
+    markers: set[str],
+    counts: set[int],
+) -> None:
+    """The legend of :func:`draw_responses` below its panels: the controllers in the order of
+    ``labels``, the markers drawn, and the caption."""
+    plt = pyplot()
+    systems = list(responses)
     order = list(labels.values())
     handles = dict(
         sorted(
@@ -503,7 +519,6 @@ def draw_responses(
     keys = {key for by_test in responses.values() for t in by_test.values() for key in t}
     caption = response_caption(counts, markers, angles, len(keys), hold_bands)
     legend_below(figure, handles, caption)
-    return figure
 
 
 def plot_responses(
