@@ -197,8 +197,9 @@ def _relevance():
 
 
 def _roa_slices():
-    from leoc.control import certify_lqr, design_lqr, empirical_basin, slice_grid
-    from leoc.control.roa import draw_basin_slices
+    from leoc.control import certify_lqr, design_lqr
+    from leoc.evaluation.basins import empirical_basin, slice_grid
+    from leoc.evaluation.plots.basins import draw_basin_slices
 
     system = make_system("mountaincar")
     design = design_lqr(system)

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import torch
 
-from leoc.control import certify_lqr, default_basin_box, design_lqr
-from leoc.evaluation.basins import basin_comparison, shell_levels, shell_starts
+from leoc.control import certify_lqr, design_lqr
+from leoc.evaluation.basins import basin_comparison, default_basin_box, shell_levels, shell_starts
 from leoc.evaluation.hybrid_claims import flat_top_level, hybrid_claims, operating_region_corners
 from leoc.evaluation.impulse_sweep import (
     ImpulsePoint,

@@ -1,5 +1,5 @@
-"""Tests of leoc.control.roa: the Lyapunov-level certificate of the LQR's region of attraction
-and empirical basins.
+"""Tests of leoc.control.roa (the Lyapunov-level certificate of the LQR's region of attraction)
+and of the empirical basins beside it (leoc.evaluation.basins).
 
 The certificate is checked against independent evidence: every certified sample simulated
 forward with the batched rollout converges; the sampled set has the ellipsoid's closed-form
@@ -15,19 +15,15 @@ import numpy as np
 import pytest
 import torch
 
-from leoc.control import (
+from leoc.control import certify_level, certify_lqr, design_lqr, lqr_closed_loop, state_deviation
+from leoc.evaluation.basins import (
     basin_starts,
     box_fraction,
     certified_set_check,
-    certify_level,
-    certify_lqr,
-    design_lqr,
     empirical_basin,
-    lqr_closed_loop,
-    plot_basins,
     slice_grid,
-    state_deviation,
 )
+from leoc.evaluation.plots.basins import plot_basins
 from leoc.systems import SYSTEM_NAMES, make_system
 from leoc.systems.rollout import simulate
 

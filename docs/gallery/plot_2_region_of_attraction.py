@@ -15,8 +15,9 @@ The sample count here is ten times smaller than the default, to keep the build s
 
 import numpy as np
 
-from leoc.control import certify_lqr, design_lqr, empirical_basin, slice_grid
-from leoc.control.roa import draw_basin_slices
+from leoc.control import certify_lqr, design_lqr
+from leoc.evaluation.basins import empirical_basin, slice_grid
+from leoc.evaluation.plots.basins import draw_basin_slices
 from leoc.policies import LinearController
 from leoc.systems import make_system
 

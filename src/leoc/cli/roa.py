@@ -300,7 +300,7 @@ def _box_cover(args: argparse.Namespace, system, certificate) -> _BoxCover:
     inside the certified set (:func:`~leoc.evaluation.basins.box_fraction`, seeded)."""
     import numpy as np
 
-    from leoc.control import box_fraction, default_basin_box
+    from leoc.evaluation.basins import box_fraction, default_basin_box
 
     box = default_basin_box(system) if args.box is None else np.asarray(args.box, dtype=float)
     fraction, error = box_fraction(certificate, box, seed=args.seed)
@@ -312,7 +312,7 @@ def _measure_basins(
 ) -> dict:
     """Per controller label: the controller, the share of ``--starts`` seeded starts in ``box``
     and of as many in the certified set that it holds, and an ROA hybrid's flat top."""
-    from leoc.control import basin_starts, certified_set_check, empirical_basin
+    from leoc.evaluation.basins import basin_starts, certified_set_check, empirical_basin
 
     starts = basin_starts(system, box, args.starts, seed=args.seed)
     basins = {}
@@ -362,7 +362,8 @@ def _plot_slices(args: argparse.Namespace, system, certificate, basins: dict, bo
     ``--slice-points`` per axis) to ``--plot``; the path written."""
     import numpy as np
 
-    from leoc.control import empirical_basin, plot_basins, slice_grid
+    from leoc.evaluation.basins import empirical_basin, slice_grid
+    from leoc.evaluation.plots.basins import plot_basins
 
     dims = ROA_SLICES.get(args.system, (0, 1))
     # The slice box covers the certified ellipse too, so the plot shows its boundary.

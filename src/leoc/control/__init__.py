@@ -1,5 +1,5 @@
-"""Linearisation, LQR design, stability margins and region of attraction about the operating
-point."""
+"""Linearisation, LQR design, stability margins and the certified region of attraction about
+the operating point (empirical basins: :mod:`leoc.evaluation.basins`)."""
 
 from leoc.control.lqr import (
     DESIGN_METHODS,
@@ -14,43 +14,27 @@ from leoc.control.lqr import (
     stable_gain_interval,
 )
 from leoc.control.roa import (
-    Basin,
     LevelProof,
     LyapunovCertificate,
-    basin_starts,
-    box_fraction,
-    certified_set_check,
     certify_level,
     certify_lqr,
-    default_basin_box,
-    empirical_basin,
     lqr_closed_loop,
     lyapunov_value,
-    plot_basins,
-    slice_grid,
     state_deviation,
 )
 
 __all__ = [
     "DESIGN_METHODS",
-    "Basin",
     "LevelProof",
     "LyapunovCertificate",
     "LQRDesign",
     "Linearisation",
     "StabilityMargins",
-    "basin_starts",
-    "box_fraction",
-    "certified_set_check",
     "certify_level",
     "certify_lqr",
     "check_stabilisable",
-    "default_basin_box",
-    "empirical_basin",
     "lqr_closed_loop",
     "lyapunov_value",
-    "plot_basins",
-    "slice_grid",
     "state_deviation",
     "design_lqr",
     "linearise",

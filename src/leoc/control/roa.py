@@ -1,6 +1,6 @@
-r"""Region of attraction: a Lyapunov-level certificate of the LQR, empirical basins of any policy.
+r"""Region of attraction: a Lyapunov-level certificate of the LQR.
 
-Letters: B batch (samples or starts), S state dimension, O observation dimension,
+Letters: B batch (samples), S state dimension, O observation dimension,
 A action dimension, T simulator steps.
 
 **Certificate.** For an LQR design (:func:`leoc.control.design_lqr`) at control period
@@ -52,12 +52,9 @@ sampling, the linearisation is checked (Lyapunov's indirect method, Khalil Thm 4
 :math:`a`) is not negative definite, :math:`V` increases arbitrarily close to :math:`a` and no
 :math:`\rho > 0` exists: the certificate is :math:`\rho = 0`.
 
-**Empirical basin.** Any controller (the LQR, a trained run's controller, any torch module
-mapping observations to actions) is simulated from a seeded sample or a grid of starts in a
-stated box around :math:`a`, all starts in one batched :func:`leoc.systems.rollout.simulate`
-at the controller's own control period; a start belongs to the basin when the episode
-converges and holds (``System.hold_step``: not terminated, inside the hold band for at least
-``hold_min_steps`` final steps).
+**Empirical basins** of any controller (where it actually converges and holds), the
+certified set's share of a box and the basin figures are evaluations of a controller:
+:mod:`leoc.evaluation.basins` and ``leoc.evaluation.plots.basins``.
 
 References
 ----------
@@ -75,7 +72,6 @@ import math
 import pickle
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -86,23 +82,14 @@ from leoc.control.proof import MAX_BOXES, LevelProof, prove_level
 from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
 
 __all__ = [
-    "Basin",
     "LevelProof",
     "LinearClosedLoop",
     "LyapunovCertificate",
-    "basin_starts",
-    "box_fraction",
-    "certified_set_check",
     "certify_level",
     "certify_lqr",
-    "default_basin_box",
     "describe_certificate",
-    "empirical_basin",
     "lqr_closed_loop",
     "lyapunov_value",
-    "draw_basin_slices",
-    "plot_basins",
-    "slice_grid",
     "state_deviation",
 ]
 
@@ -119,12 +106,6 @@ MIN_RELATIVE_LEVEL = 1e-12
 SEARCH_BOX_FACTOR = 100.0
 """Default search box: ``SEARCH_BOX_FACTOR * System.operating_region``; the initial level is the
 largest whose ellipsoid fits in it (and inside the angle chart)."""
-BASIN_BOX_FACTOR = 3.0
-"""Default basin box: ``BASIN_BOX_FACTOR * System.operating_region`` half-widths around a."""
-DEFAULT_BASIN_STARTS = 2_000
-DEFAULT_SLICE_POINTS = 41
-"""Grid points per axis of a basin slice (plots)."""
-BOX_FRACTION_SAMPLES = 200_000
 SYMMETRY_RTOL = 1e-9
 """Allowed asymmetry of P, relative to its largest entry."""
 LINEAR_DECREASE_TOL = 0.0
@@ -341,7 +322,7 @@ def _initial_level(
     box = (
         SEARCH_BOX_FACTOR * np.asarray(system.operating_region, dtype=float)
         if search_box is None
-        else _check_box(search_box, system, "search_box")
+        else check_box(search_box, system, "search_box")
     )
     level = float(np.min(box**2 / diagonal))
     for index in system.angle_indices:
@@ -353,7 +334,9 @@ def _initial_level(
     return level
 
 
-def _check_box(box: Any, system: System, name: str) -> np.ndarray:
+def check_box(box: Any, system: System, name: str) -> np.ndarray:
+    """``box`` as S positive finite half-widths (a float array), or a ValueError naming the
+    argument ``name``."""
     values = np.asarray(box, dtype=float).reshape(-1)
     if values.shape != (system.state_dim,) or not np.all(np.isfinite(values) & (values > 0)):
         raise ValueError(
@@ -377,8 +360,8 @@ def certify_level(
     prove: bool = True,
     max_boxes: int = MAX_BOXES,
 ) -> LyapunovCertificate:
-    r"""Largest level :math:`\rho` with :math:`V(F(x)) < V(x)` on :math:`0 < V \le \rho`:
-    sampled, then proved (module docstring).
+    r"""The :class:`LyapunovCertificate` of the largest level :math:`\rho` with
+    :math:`V(F(x)) < V(x)` on :math:`0 < V \le \rho`: sampled, then proved (module docstring).
 
     Parameters
     ----------
@@ -402,22 +385,41 @@ def certify_level(
     rho_max : float, optional
         Further cap on the initial level.
     linear_check : bool
-        Check the linearised decrease first (rho = 0 if it fails). Off only to test the
-        sampling on its own.
+        Check the linearised decrease first (rho = 0 if it fails); off only to test sampling.
     prove : bool
         Prove the level (:func:`leoc.control.proof.prove_level`, aiming at the sampled
         estimate); ``rho`` is then the proved level. Off: ``rho`` is the sampled estimate.
     max_boxes : int
         Box budget of the proof.
-
-    Returns
-    -------
-    LyapunovCertificate
     """
+    repeat = _check_options(controller, action_repeat, samples, seed, confidence, max_boxes)
+    matrix = _check_matrix(P, system.state_dim)
+    initial = _initial_level(system, matrix, search_box, rho_max)
+    linear = _linear_check(system, matrix, controller, repeat)
+    sampled = _Sampled(0.0, 0)
+    if linear[0] or not linear_check:
+        sampled = _sampled_level(system, matrix, controller, repeat, initial, samples, seed)
+    proof = None
+    if prove:  # aiming at the sampled estimate
+        proof = prove_level(system, matrix, controller, repeat, sampled.rho, max_boxes=max_boxes)
+    return _certificate(
+        system, matrix, repeat, samples, confidence, initial, linear, sampled, proof
+    )
+
+
+def _check_options(
+    controller: Controller,
+    action_repeat: Any,
+    samples: Any,
+    seed: Any,
+    confidence: Any,
+    max_boxes: Any,
+) -> int:
+    """The control period of :func:`certify_level` (its ``action_repeat``, default the
+    controller's or 1) once its options are checked; a ValueError names a wrong one."""
     repeat = check_repeat(
         getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
     )
-    matrix = _check_matrix(P, system.state_dim)
     for name, value in (("samples", samples), ("seed", seed)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
             raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
@@ -427,52 +429,73 @@ def certify_level(
         raise ValueError(f"confidence: expected a number in (0, 1), found {confidence!r}")
     if isinstance(max_boxes, bool) or not isinstance(max_boxes, (int, np.integer)) or max_boxes < 1:
         raise ValueError(f"max_boxes: expected a positive integer, found {max_boxes!r}")
+    return repeat
+
+
+class _Sampled(NamedTuple):
+    rho: float  # the sampled estimate (0: none)
+    rounds: int  # verification rounds drawn
+
+
+def _sampled_level(
+    system: System,
+    matrix: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    initial: float,
+    samples: int,
+    seed: int,
+) -> _Sampled:
+    """The sampled estimate (module docstring): from ``initial`` down, a fresh batch of
+    ``samples`` per round, until a round without a violation."""
     rng = np.random.default_rng(seed)
     P_t = torch.as_tensor(matrix, dtype=DTYPE)
     operating = torch.as_tensor(system.operating_state, dtype=DTYPE)
-    initial = _initial_level(system, matrix, search_box, rho_max)
-    linear_ok, linear_eig = _linear_check(system, matrix, controller, repeat)
-    delta = 1.0 - confidence
-
-    def result(sampled: float, rounds: int) -> LyapunovCertificate:
-        bound = math.log(1.0 / delta) / samples if sampled > 0.0 else float("nan")
-        proof = None
-        rho = sampled
-        if prove:
-            proof = prove_level(system, matrix, controller, repeat, sampled, max_boxes=max_boxes)
-            rho = proof.rho
-        return LyapunovCertificate(
-            rho,
-            matrix,
-            system.operating_state.copy(),
-            tuple(system.angle_indices),
-            repeat,
-            samples,
-            rounds,
-            confidence,
-            bound,
-            initial,
-            sampled == initial,
-            linear_ok,
-            linear_eig,
-            sampled,
-            proof,
-        )
-
-    if linear_check and not linear_ok:
-        return result(0.0, 0)
     rho = initial
     for rounds in range(1, MAX_ROUNDS + 1):
         deviation = _uniform_ellipsoid(matrix, rho, samples, rng)
         states = torch.as_tensor(deviation, dtype=DTYPE) + operating
         value, violates = _decrease(system, P_t, controller, repeat, states)
         if not bool(violates.any()):
-            return result(rho, rounds)
+            return _Sampled(rho, rounds)
         smallest = float(value[violates].min())
         rho = float(np.nextafter(smallest, 0.0))
         if rho <= MIN_RELATIVE_LEVEL * initial:
-            return result(0.0, rounds)
-    return result(0.0, MAX_ROUNDS)
+            return _Sampled(0.0, rounds)
+    return _Sampled(0.0, MAX_ROUNDS)
+
+
+def _certificate(
+    system: System,
+    matrix: np.ndarray,
+    repeat: int,
+    samples: int,
+    confidence: float,
+    initial: float,
+    linear: tuple[bool, float],
+    sampled: _Sampled,
+    proof: LevelProof | None,
+) -> LyapunovCertificate:
+    """The certificate of a search: ``rho`` the proved level (the sampled one without proof)."""
+    delta = 1.0 - confidence
+    bound = math.log(1.0 / delta) / samples if sampled.rho > 0.0 else float("nan")
+    return LyapunovCertificate(
+        sampled.rho if proof is None else proof.rho,
+        matrix,
+        system.operating_state.copy(),
+        tuple(system.angle_indices),
+        repeat,
+        samples,
+        sampled.rounds,
+        confidence,
+        bound,
+        initial,
+        sampled.rho == initial,
+        linear[0],
+        linear[1],
+        sampled.rho,
+        proof,
+    )
 
 
 def describe_certificate(system: System, certificate: LyapunovCertificate) -> list[str]:
@@ -609,277 +632,3 @@ def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) ->
     digest.update(repr(int(design.action_repeat)).encode())
     digest.update(repr(sorted(options.items())).encode())
     return digest.hexdigest()
-
-
-def box_fraction(
-    certificate: LyapunovCertificate,
-    box: Sequence[float],
-    samples: int = BOX_FRACTION_SAMPLES,
-    seed: int = 0,
-) -> tuple[float, float]:
-    """Fraction of the box ``a +/- box`` inside the certified set, by Monte Carlo.
-
-    Returns
-    -------
-    fraction, standard_error : float
-    """
-    half = np.asarray(box, dtype=float)
-    rng = np.random.default_rng(seed)
-    states = certificate.operating_state + rng.uniform(-half, half, size=(samples, half.size))
-    inside = certificate.contains(states)
-    fraction = float(inside.mean())
-    return fraction, math.sqrt(fraction * (1.0 - fraction) / samples)
-
-
-class Basin(NamedTuple):
-    """Empirical basin of one controller.
-
-    Attributes
-    ----------
-    starts : (B, S) array
-    held : (B,) bool array
-        The episode converged and held the operating point (``System.hold_step``).
-    terminated : (B,) bool array
-        The episode left the allowed region.
-    box : (S,) array or None
-        Half-widths of the box the starts were drawn in.
-    steps : int
-    action_repeat : int
-    """
-
-    starts: np.ndarray
-    held: np.ndarray
-    terminated: np.ndarray
-    box: np.ndarray | None
-    steps: int
-    action_repeat: int
-
-    @property
-    def count(self) -> int:
-        """Number of starts brought to the operating point and held."""
-        return int(self.held.sum())
-
-    @property
-    def fraction(self) -> float:
-        """Share of the starts held (NaN when there are none)."""
-        return float(self.held.mean()) if self.held.size else float("nan")
-
-
-def default_basin_box(system: System) -> np.ndarray:
-    """``BASIN_BOX_FACTOR * system.operating_region`` half-widths (S,)."""
-    return BASIN_BOX_FACTOR * np.asarray(system.operating_region, dtype=float)
-
-
-def basin_starts(
-    system: System,
-    box: Sequence[float] | None = None,
-    count: int = DEFAULT_BASIN_STARTS,
-    seed: int = 0,
-) -> np.ndarray:
-    """``count`` seeded starts (count, S) uniform in ``a +/- box`` (default
-    :func:`default_basin_box`)."""
-    half = default_basin_box(system) if box is None else _check_box(box, system, "box")
-    rng = np.random.default_rng(seed)
-    return system.operating_state + rng.uniform(-half, half, size=(count, system.state_dim))
-
-
-def slice_grid(
-    system: System,
-    dims: tuple[int, int],
-    box: Sequence[float] | None = None,
-    points: int = DEFAULT_SLICE_POINTS,
-) -> np.ndarray:
-    """Starts (points**2, S) on a grid of the 2-D slice ``dims`` of ``a +/- box``, the other
-    entries at the operating point; row-major with ``dims[0]`` the slow axis."""
-    half = default_basin_box(system) if box is None else _check_box(box, system, "box")
-    first, second = dims
-    axes = [np.linspace(-half[d], half[d], points) for d in dims]
-    mesh_a, mesh_b = np.meshgrid(*axes, indexing="ij")
-    starts = np.tile(system.operating_state, (points * points, 1))
-    starts[:, first] += mesh_a.reshape(-1)
-    starts[:, second] += mesh_b.reshape(-1)
-    return starts
-
-
-def empirical_basin(
-    system: System,
-    controller: Controller,
-    starts: Any,
-    steps: int | None = None,
-    box: Sequence[float] | None = None,
-) -> Basin:
-    """Which starts a controller brings to the operating point and holds there.
-
-    One batched :func:`~leoc.systems.rollout.simulate` over all ``starts`` (B, S) at the
-    controller's own control period, then ``System.hold_step`` per episode.
-
-    Parameters
-    ----------
-    system : System
-    controller : callable
-        Observation (B, O) float64 -> action (B, A): a torch module, a trained run's controller
-        or a plain function; its ``action_repeat`` (default 1) is honoured.
-    starts : (B, S) array
-        E.g. :func:`basin_starts`, :func:`slice_grid` or ``certificate.sample``.
-    steps : int, optional
-        Episode length (default ``system.episode_steps``).
-    box : (S,) array, optional
-        Recorded with the result (the box the starts came from).
-    """
-    from leoc.systems.rollout import simulate
-
-    batch = simulate(system, controller, starts, steps)
-    held = np.array(
-        [
-            system.hold_step(batch.states[index, 1:], terminated=bool(batch.terminated[index]))
-            is not None
-            for index in range(batch.states.shape[0])
-        ],
-        dtype=bool,
-    )
-    return Basin(
-        np.asarray(starts, dtype=float).reshape(-1, system.state_dim),
-        held,
-        batch.terminated.copy(),
-        None if box is None else np.asarray(box, dtype=float),
-        int(batch.actions.shape[1]),
-        int(batch.action_repeat),
-    )
-
-
-def certified_set_check(
-    system: System,
-    controller: Controller,
-    certificate: LyapunovCertificate,
-    count: int = DEFAULT_BASIN_STARTS,
-    seed: int = 0,
-    steps: int | None = None,
-) -> Basin:
-    """Empirical basin of ``controller`` over ``count`` starts uniform in the certified set:
-    its ``fraction`` is 1 when the controller's basin contains the set (on these starts)."""
-    rng = np.random.default_rng(seed)
-    return empirical_basin(system, controller, certificate.sample(rng, count), steps)
-
-
-def _ellipse_boundary(P: np.ndarray, rho: float, dims: tuple[int, int], points: int) -> np.ndarray:
-    """Boundary (points, 2) of the slice ``{z : z^T P z <= rho, z_k = 0 for k not in dims}``."""
-    sub = P[np.ix_(dims, dims)]
-    angles = np.linspace(0.0, 2.0 * math.pi, points)
-    circle = np.stack([np.cos(angles), np.sin(angles)])
-    return (math.sqrt(rho) * np.linalg.solve(np.linalg.cholesky(sub).T, circle)).T
-
-
-ELLIPSE_POINTS = 400
-
-
-BASIN_COLOURS = ("#d9d9d9", "#74c476")
-"""Slice cells whose start does not / does converge and hold."""
-BOX_COLOUR = "#1f77b4"
-CAPTION_CHARS_PER_INCH = 15
-
-
-def plot_basins(
-    system: System,
-    certificate: LyapunovCertificate,
-    basins: Mapping[str, Basin],
-    dims: tuple[int, int],
-    points: int,
-    path: str | Path,
-    box: np.ndarray | None = None,
-) -> Path:
-    """:func:`draw_basin_slices` saved as a PNG at ``path``; returns the path."""
-    from leoc.io import save_figure_atomic
-
-    figure = draw_basin_slices(system, certificate, basins, dims, points, box)
-    return save_figure_atomic(figure, Path(path))
-
-
-def draw_basin_slices(
-    system: System,
-    certificate: LyapunovCertificate,
-    basins: Mapping[str, Basin],
-    dims: tuple[int, int],
-    points: int,
-    box: np.ndarray | None = None,
-) -> Any:
-    """One panel per controller: the basin on a 2-D slice through the operating point
-    (:func:`slice_grid` with the same ``dims`` and ``points``), the certified set's slice over
-    it and, when given, the basin ``box``'s slice (the box the command's percentages refer
-    to). Axes in state units; each panel's title gives the share of *this slice* held.
-    Returns the matplotlib figure."""
-    import textwrap
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import ListedColormap
-    from matplotlib.patches import Patch, Rectangle
-
-    from leoc.systems.units import state_axis_label
-
-    count = len(basins)
-    fig, axes = plt.subplots(
-        1, count, figsize=(4.6 * max(count, 2), 4.4), squeeze=False, layout="constrained"
-    )
-    boundary = _ellipse_boundary(certificate.P, certificate.rho, dims, ELLIPSE_POINTS)
-    first, second = dims
-    centre = certificate.operating_state
-    for axis, (label, basin) in zip(axes[0], basins.items(), strict=True):
-        if basin.starts.shape[0] != points * points:
-            raise ValueError(
-                f"basins[{label!r}]: expected {points}x{points} slice starts, found "
-                f"{basin.starts.shape[0]}"
-            )
-        grid_a = basin.starts[:, first].reshape(points, points)
-        grid_b = basin.starts[:, second].reshape(points, points)
-        held = basin.held.reshape(points, points).astype(float)
-        axis.pcolormesh(
-            grid_a,
-            grid_b,
-            held,
-            cmap=ListedColormap(BASIN_COLOURS),
-            vmin=0.0,
-            vmax=1.0,
-            shading="nearest",
-        )
-        axis.plot(centre[first] + boundary[:, 0], centre[second] + boundary[:, 1], "k-", lw=1.5)
-        if box is not None:
-            axis.add_patch(
-                Rectangle(
-                    (centre[first] - box[first], centre[second] - box[second]),
-                    2 * box[first],
-                    2 * box[second],
-                    fill=False,
-                    edgecolor=BOX_COLOUR,
-                    linestyle="--",
-                    linewidth=1.2,
-                )
-            )
-        axis.set_title(f"{label}: {basin.fraction:.0%} of this slice held")
-        axis.set_xlabel(state_axis_label(system, first))
-        axis.set_ylabel(state_axis_label(system, second))
-    handles = [
-        Patch(color=BASIN_COLOURS[1], label="converges and holds"),
-        Patch(color=BASIN_COLOURS[0], label="does not"),
-        plt.Line2D([], [], color="k", label=f"{certificate.basis} set V <= {certificate.rho:.3g}"),
-    ]
-    if box is not None:
-        handles.append(plt.Line2D([], [], color=BOX_COLOUR, ls="--", label="basin box"))
-    others = [n for k, n in enumerate(system.state_names) if k not in dims]
-    caption = (
-        f"{system.name}: starts on the {system.state_names[first]}-"
-        f"{system.state_names[second]} plane through the operating point"
-        + (f" ({', '.join(others)} at the operating point)" if others else "")
-        + "; the command's percentages of the box count starts drawn in the whole basin box."
-    )
-    fig.legend(
-        handles=handles,
-        loc="outside lower center",
-        ncol=len(handles),
-        fontsize="small",
-        frameon=False,
-        title=textwrap.fill(caption, int(fig.get_figwidth() * CAPTION_CHARS_PER_INCH)),
-        title_fontsize="small",
-    )
-    return fig

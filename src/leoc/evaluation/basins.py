@@ -1,6 +1,14 @@
-r"""Starts that can tell a hybrid from its LQR: shells of V and basins relative to the LQR's.
+r"""Empirical basins of any controller, and starts that can tell a hybrid from its LQR.
 
 Letters: N starts, S state dimension.
+
+**Empirical basin.** Any controller (the LQR, a trained run's controller, any torch module
+mapping observations to actions) is simulated from a seeded sample or a grid of starts in a
+stated box around :math:`a`, all starts in one batched :func:`leoc.systems.rollout.simulate`
+at the controller's own control period; a start belongs to the basin when the episode
+converges and holds (``System.hold_step``: not terminated, inside the hold band for at least
+``hold_min_steps`` final steps). The certified set it is compared with is
+:mod:`leoc.control.roa`'s.
 
 **Shells.** With :math:`V(x) = z^\top P z` of the LQR design and its proved level
 :math:`\rho`, starts are drawn uniformly in the ellipsoidal shells
@@ -36,24 +44,190 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from leoc.control.roa import LyapunovCertificate, check_box
 from leoc.systems.base import System
-from leoc.systems.rollout import Controller, simulate
+from leoc.systems.rollout import BatchTrajectory, Controller, simulate
 
 __all__ = [
+    "Basin",
     "BasinComparison",
     "ShellResult",
     "SHELL_EDGES",
     "basin_comparison",
+    "basin_starts",
+    "box_fraction",
+    "certified_set_check",
+    "default_basin_box",
+    "empirical_basin",
     "shell_levels",
     "shell_robustness",
     "shell_starts",
+    "slice_grid",
 ]
+
+BASIN_BOX_FACTOR = 3.0
+"""Default basin box: ``BASIN_BOX_FACTOR * System.operating_region`` half-widths around a."""
+DEFAULT_BASIN_STARTS = 2_000
+DEFAULT_SLICE_POINTS = 41
+"""Grid points per axis of a basin slice (plots)."""
+BOX_FRACTION_SAMPLES = 200_000
 
 SHELL_EDGES = (1.0, 2.0, 3.0)
 """Outer shell edges in units of the proved rho (the first shell starts at the flat top)."""
 SHELL_STARTS = 200
 """Starts per shell."""
 FLAT_TOP = 1.0
+
+
+class Basin(NamedTuple):
+    """Empirical basin of one controller.
+
+    Attributes
+    ----------
+    starts : (N, S) array
+    held : (N,) bool array
+        The episode converged and held the operating point (``System.hold_step``).
+    terminated : (N,) bool array
+        The episode left the allowed region.
+    box : (S,) array or None
+        Half-widths of the box the starts were drawn in.
+    steps : int
+    action_repeat : int
+    """
+
+    starts: np.ndarray
+    held: np.ndarray
+    terminated: np.ndarray
+    box: np.ndarray | None
+    steps: int
+    action_repeat: int
+
+    @property
+    def count(self) -> int:
+        """Number of starts brought to the operating point and held."""
+        return int(self.held.sum())
+
+    @property
+    def fraction(self) -> float:
+        """Share of the starts held (NaN when there are none)."""
+        return float(self.held.mean()) if self.held.size else float("nan")
+
+
+def _held(system: System, batch: BatchTrajectory) -> np.ndarray:
+    """Which episodes (N,) of a batched rollout converge and hold (``System.hold_step``)."""
+    return np.array(
+        [
+            system.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i])) is not None
+            for i in range(batch.states.shape[0])
+        ],
+        dtype=bool,
+    )
+
+
+def default_basin_box(system: System) -> np.ndarray:
+    """``BASIN_BOX_FACTOR * system.operating_region`` half-widths (S,)."""
+    return BASIN_BOX_FACTOR * np.asarray(system.operating_region, dtype=float)
+
+
+def basin_starts(
+    system: System,
+    box: Sequence[float] | None = None,
+    count: int = DEFAULT_BASIN_STARTS,
+    seed: int = 0,
+) -> np.ndarray:
+    """``count`` seeded starts (count, S) uniform in ``a +/- box`` (default
+    :func:`default_basin_box`)."""
+    half = default_basin_box(system) if box is None else check_box(box, system, "box")
+    rng = np.random.default_rng(seed)
+    return system.operating_state + rng.uniform(-half, half, size=(count, system.state_dim))
+
+
+def slice_grid(
+    system: System,
+    dims: tuple[int, int],
+    box: Sequence[float] | None = None,
+    points: int = DEFAULT_SLICE_POINTS,
+) -> np.ndarray:
+    """Starts (points**2, S) on a grid of the 2-D slice ``dims`` of ``a +/- box``, the other
+    entries at the operating point; row-major with ``dims[0]`` the slow axis."""
+    half = default_basin_box(system) if box is None else check_box(box, system, "box")
+    first, second = dims
+    axes = [np.linspace(-half[d], half[d], points) for d in dims]
+    mesh_a, mesh_b = np.meshgrid(*axes, indexing="ij")
+    starts = np.tile(system.operating_state, (points * points, 1))
+    starts[:, first] += mesh_a.reshape(-1)
+    starts[:, second] += mesh_b.reshape(-1)
+    return starts
+
+
+def empirical_basin(
+    system: System,
+    controller: Controller,
+    starts: Any,
+    steps: int | None = None,
+    box: Sequence[float] | None = None,
+) -> Basin:
+    """Which starts a controller brings to the operating point and holds there.
+
+    One batched :func:`~leoc.systems.rollout.simulate` over all ``starts`` (N, S) at the
+    controller's own control period, then ``System.hold_step`` per episode.
+
+    Parameters
+    ----------
+    system : System
+    controller : callable
+        Observation (N, O) float64 -> action (N, A): a torch module, a trained run's controller
+        or a plain function; its ``action_repeat`` (default 1) is honoured.
+    starts : (N, S) array
+        E.g. :func:`basin_starts`, :func:`slice_grid` or ``certificate.sample``.
+    steps : int, optional
+        Episode length (default ``system.episode_steps``).
+    box : (S,) array, optional
+        Recorded with the result (the box the starts came from).
+    """
+    batch = simulate(system, controller, starts, steps)
+    return Basin(
+        np.asarray(starts, dtype=float).reshape(-1, system.state_dim),
+        _held(system, batch),
+        batch.terminated.copy(),
+        None if box is None else np.asarray(box, dtype=float),
+        int(batch.actions.shape[1]),
+        int(batch.action_repeat),
+    )
+
+
+def certified_set_check(
+    system: System,
+    controller: Controller,
+    certificate: LyapunovCertificate,
+    count: int = DEFAULT_BASIN_STARTS,
+    seed: int = 0,
+    steps: int | None = None,
+) -> Basin:
+    """Empirical basin of ``controller`` over ``count`` starts uniform in the certified set:
+    its ``fraction`` is 1 when the controller's basin contains the set (on these starts)."""
+    rng = np.random.default_rng(seed)
+    return empirical_basin(system, controller, certificate.sample(rng, count), steps)
+
+
+def box_fraction(
+    certificate: LyapunovCertificate,
+    box: Sequence[float],
+    samples: int = BOX_FRACTION_SAMPLES,
+    seed: int = 0,
+) -> tuple[float, float]:
+    """Fraction of the box ``a +/- box`` inside the certified set, by Monte Carlo.
+
+    Returns
+    -------
+    fraction, standard_error : float
+    """
+    half = np.asarray(box, dtype=float)
+    rng = np.random.default_rng(seed)
+    states = certificate.operating_state + rng.uniform(-half, half, size=(samples, half.size))
+    inside = certificate.contains(states)
+    fraction = float(inside.mean())
+    return fraction, math.sqrt(fraction * (1.0 - fraction) / samples)
 
 
 def shell_starts(
@@ -83,13 +257,7 @@ class _Outcome(NamedTuple):
 
 def _outcome(system: System, controller: Controller, starts: np.ndarray) -> _Outcome:
     batch = simulate(system, controller, starts)
-    held = np.array(
-        [
-            system.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i])) is not None
-            for i in range(starts.shape[0])
-        ],
-        dtype=bool,
-    )
+    held = _held(system, batch)
     left = None if batch.relevance is None else (batch.relevance < FLAT_TOP).any(axis=1)
     return _Outcome(held, left)
 

@@ -25,16 +25,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from leoc.evaluation.robustness import relevance_trace, robustness_sweep
-from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
 from leoc.experiments.eta import trainer_progress
-from leoc.experiments.layout import (
-    EVALUATION_FILE,
-    LOG_FILE,
-    META_FILE,
-    SWING_UP_EPISODES,
-    run_dir_of,
-)
+from leoc.experiments.evaluators import evaluate_controller
+from leoc.experiments.layout import EVALUATION_FILE, LOG_FILE, META_FILE, run_dir_of
 from leoc.experiments.profiles import (
     DEFAULT_CONTROLLERS,
     Profile,
@@ -46,8 +39,6 @@ from leoc.experiments.sweep import check_backend, sweep
 from leoc.experiments.variants import LEOC, Variant, get_variant
 from leoc.io import read_json_object, write_json_atomic
 from leoc.systems import SYSTEM_NAMES
-from leoc.systems.base import System
-from leoc.training import evaluate_episodes, evaluation_starts
 
 WORKER_THREADS = 1
 
@@ -183,106 +174,6 @@ def train_controller(
             **settings,
         )
     return result.policy, _curve(result.curve, result.summary)
-
-
-def certified_lqr(system: System, period: int, lqr_method: str = "discrete") -> tuple[Any, Any]:
-    """The LQR design (``lqr_method``) of ``system`` at ``period`` and its proved certificate."""
-    from leoc.control import certify_lqr, design_lqr
-
-    design = design_lqr(system, method=lqr_method, action_repeat=period)  # type: ignore[arg-type]
-    return design, certify_lqr(system, design)
-
-
-def hybrid_claims_of(
-    system: System, controller: torch.nn.Module, seed: int, lqr: tuple[Any, Any]
-) -> Any:
-    """:func:`leoc.evaluation.hybrid_claims.hybrid_claims` against the LQR ``lqr`` (design and
-    certificate, :func:`certified_lqr`) at the controller's period (None for non-hybrids)."""
-    from leoc.control.roa import default_basin_box
-    from leoc.evaluation.hybrid_claims import hybrid_claims
-    from leoc.policies import lqr_controller
-
-    design, certificate = lqr
-    return hybrid_claims(
-        system, controller, lqr_controller(design), certificate, default_basin_box(system), seed
-    )
-
-
-def region_of_attraction(
-    system: System,
-    controller: torch.nn.Module,
-    lqr_method: str = "discrete",
-    certificate: Any = None,
-) -> dict[str, Any]:
-    """The certificate of the LQR designed for the controller's period, and the controller's
-    empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
-    certified set (1.0 when the controller's basin contains it, on those starts)."""
-    from leoc.control.roa import (
-        basin_starts,
-        box_fraction,
-        certified_set_check,
-        default_basin_box,
-        empirical_basin,
-    )
-
-    if certificate is None:
-        certificate = certified_lqr(system, control_period(controller), lqr_method)[1]
-    box = default_basin_box(system)
-    basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
-    inside = certified_set_check(system, controller, certificate) if certificate.certified else None
-    return {
-        "certificate": certificate.summary(),
-        "box": box.tolist(),
-        "certified_box_fraction": box_fraction(certificate, box)[0]
-        if certificate.certified
-        else 0.0,
-        "basin_box_fraction": float(basin.held.mean()),
-        "certified_set_held": None if inside is None else float(inside.held.mean()),
-    }
-
-
-def evaluate_controller(
-    spec: RunSpec, controller: torch.nn.Module, variant: Variant = LEOC
-) -> dict[str, Any]:
-    """Responses, robustness, swing-up and relevance trace of one controller, at its period,
-    on the system stepping under ``variant``'s rules. Every response is measured with both
-    metric sets: ``metrics`` (leoc's) and ``metrics_authors`` (the authors', on their
-    arcsin(sin theta) deviation, ``deviation_authors``)."""
-    system = variant.system(spec.system)
-    responses = {}
-    for test in RESPONSE_TESTS:
-        steps = variant.steps_for(spec.system)
-        result = response_test(system, controller, test, steps)
-        authors = response_test(system, controller, test, steps, metric_set="authors")
-        responses[test] = {
-            "metrics": result.metrics._asdict(),
-            "deviation": result.deviation.tolist(),
-            "total_reward": result.trajectory.total_reward,
-            "metrics_authors": authors.metrics._asdict(),
-            "deviation_authors": authors.deviation.tolist(),
-        }
-    swing = evaluate_episodes(
-        system, controller, evaluation_starts(system, spec.seed, SWING_UP_EPISODES)
-    )
-    trace = relevance_trace(system, controller, spec.seed)
-    lqr = certified_lqr(system, control_period(controller), variant.lqr_method)
-    return {
-        "action_repeat": control_period(controller),
-        "roa": region_of_attraction(system, controller, variant.lqr_method, lqr[1]),
-        "hybrid_claims": hybrid_claims_of(system, controller, spec.seed, lqr),
-        "responses": responses,
-        "robustness": [
-            {**point._asdict(), "return_mean": point.return_mean}
-            for point in robustness_sweep(system, controller, seed=spec.seed)
-        ],
-        "swing_up": {
-            "returns": swing.returns,
-            "hold_steps": swing.hold_steps,
-            "mean_return": swing.mean_return,
-            "held_fraction": swing.held_fraction,
-        },
-        "relevance": None if trace is None else {k: v.tolist() for k, v in trace._asdict().items()},
-    }
 
 
 def execute_run(

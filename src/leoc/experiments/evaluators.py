@@ -1,0 +1,251 @@
+"""The evaluations of one controller, each a named evaluator, assembled by one ordered list.
+
+A run's ``evaluation.json`` (:func:`leoc.experiments.reproduce.execute_run`) starts with
+:func:`evaluate_controller`'s dict: ``{evaluator.name: evaluator(context)}`` for every
+evaluator of :data:`EVALUATORS`, in that order. An evaluator is a name (its key in the file)
+and a function of an :class:`EvaluationContext` (the system stepping under the variant's rules,
+the controller at its own control period, the run's seed, the variant, and the LQR designed
+for that period with its proved certificate, computed once and shared) returning a
+JSON-friendly value. A new evaluation is one new evaluator and one entry of the list.
+
+Every evaluation is seeded on its own (the run's seed, or fixed seeds), so the values do not
+depend on the order of the list.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import torch
+
+from leoc.evaluation.robustness import relevance_trace, robustness_sweep
+from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
+from leoc.experiments.layout import SWING_UP_EPISODES
+from leoc.experiments.profiles import RunSpec
+from leoc.experiments.variants import LEOC, Variant
+from leoc.systems.base import System
+from leoc.training import evaluate_episodes, evaluation_starts
+
+__all__ = [
+    "EVALUATORS",
+    "CertifiedLQR",
+    "EvaluationContext",
+    "Evaluator",
+    "certified_lqr",
+    "evaluate_action_repeat",
+    "evaluate_controller",
+    "evaluate_hybrid_claims",
+    "evaluate_relevance",
+    "evaluate_responses",
+    "evaluate_robustness",
+    "evaluate_roa",
+    "evaluate_swing_up",
+    "hybrid_claims_of",
+    "region_of_attraction",
+]
+
+
+class CertifiedLQR(NamedTuple):
+    """An LQR design and its certificate (a tuple: ``design, certificate = lqr``).
+
+    Attributes
+    ----------
+    design : LQRDesign
+        At the controller's control period.
+    certificate : LyapunovCertificate
+        Its proved certificate (:func:`leoc.control.certify_lqr`).
+    """
+
+    design: Any
+    certificate: Any
+
+
+def certified_lqr(system: System, period: int, lqr_method: str = "discrete") -> CertifiedLQR:
+    """The LQR design (``lqr_method``) of ``system`` at ``period`` and its proved certificate."""
+    from leoc.control import certify_lqr, design_lqr
+
+    design = design_lqr(system, method=lqr_method, action_repeat=period)  # type: ignore[arg-type]
+    return CertifiedLQR(design, certify_lqr(system, design))
+
+
+def hybrid_claims_of(
+    system: System, controller: torch.nn.Module, seed: int, lqr: tuple[Any, Any]
+) -> Any:
+    """:func:`leoc.evaluation.hybrid_claims.hybrid_claims` against the LQR ``lqr`` (design and
+    certificate, :func:`certified_lqr`) at the controller's period (None for non-hybrids)."""
+    from leoc.evaluation.basins import default_basin_box
+    from leoc.evaluation.hybrid_claims import hybrid_claims
+    from leoc.policies import lqr_controller
+
+    design, certificate = lqr
+    return hybrid_claims(
+        system, controller, lqr_controller(design), certificate, default_basin_box(system), seed
+    )
+
+
+def region_of_attraction(
+    system: System,
+    controller: torch.nn.Module,
+    lqr_method: str = "discrete",
+    certificate: Any = None,
+) -> dict[str, Any]:
+    """The certificate of the LQR designed for the controller's period, and the controller's
+    empirical basins: on seeded starts in the system's basin box, and on starts uniform in that
+    certified set (1.0 when the controller's basin contains it, on those starts)."""
+    from leoc.evaluation.basins import (
+        basin_starts,
+        box_fraction,
+        certified_set_check,
+        default_basin_box,
+        empirical_basin,
+    )
+
+    if certificate is None:
+        certificate = certified_lqr(system, control_period(controller), lqr_method)[1]
+    box = default_basin_box(system)
+    basin = empirical_basin(system, controller, basin_starts(system, box), box=box)
+    inside = certified_set_check(system, controller, certificate) if certificate.certified else None
+    return {
+        "certificate": certificate.summary(),
+        "box": box.tolist(),
+        "certified_box_fraction": box_fraction(certificate, box)[0]
+        if certificate.certified
+        else 0.0,
+        "basin_box_fraction": float(basin.held.mean()),
+        "certified_set_held": None if inside is None else float(inside.held.mean()),
+    }
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluationContext:
+    """What every evaluator of one run sees.
+
+    Attributes
+    ----------
+    system_name : str
+        The system's name (``RunSpec.system``).
+    system : System
+        The system stepping under the variant's rules.
+    controller : torch.nn.Module
+        The trained or designed controller, at its own control period.
+    seed : int
+        The run's seed.
+    variant : Variant
+    """
+
+    system_name: str
+    system: System
+    controller: torch.nn.Module
+    seed: int
+    variant: Variant
+
+    @functools.cached_property
+    def period(self) -> int:
+        """The controller's control period (simulator steps per decision)."""
+        return control_period(self.controller)
+
+    @functools.cached_property
+    def lqr(self) -> CertifiedLQR:
+        """The variant's LQR at :attr:`period` and its proved certificate (computed once)."""
+        return certified_lqr(self.system, self.period, self.variant.lqr_method)
+
+
+@dataclasses.dataclass(frozen=True)
+class Evaluator:
+    """One evaluation: ``name`` (its key in ``evaluation.json``) and ``evaluate``, a function
+    of the :class:`EvaluationContext` returning a JSON-friendly value."""
+
+    name: str
+    evaluate: Callable[[EvaluationContext], Any]
+
+    def __call__(self, context: EvaluationContext) -> Any:
+        """``evaluate(context)``."""
+        return self.evaluate(context)
+
+
+def evaluate_action_repeat(context: EvaluationContext) -> int:
+    """The controller's control period."""
+    return context.period
+
+
+def evaluate_roa(context: EvaluationContext) -> dict[str, Any]:
+    """:func:`region_of_attraction` with the shared certificate."""
+    return region_of_attraction(
+        context.system, context.controller, context.variant.lqr_method, context.lqr.certificate
+    )
+
+
+def evaluate_hybrid_claims(context: EvaluationContext) -> Any:
+    """:func:`hybrid_claims_of` against the shared LQR (None for non-hybrids)."""
+    return hybrid_claims_of(context.system, context.controller, context.seed, context.lqr)
+
+
+def evaluate_responses(context: EvaluationContext) -> dict[str, Any]:
+    """Every response test, measured with both metric sets: ``metrics`` (leoc's) and
+    ``metrics_authors`` (the authors', on their arcsin(sin theta) deviation,
+    ``deviation_authors``)."""
+    system, controller = context.system, context.controller
+    responses = {}
+    for test in RESPONSE_TESTS:
+        steps = context.variant.steps_for(context.system_name)
+        result = response_test(system, controller, test, steps)
+        authors = response_test(system, controller, test, steps, metric_set="authors")
+        responses[test] = {
+            "metrics": result.metrics._asdict(),
+            "deviation": result.deviation.tolist(),
+            "total_reward": result.trajectory.total_reward,
+            "metrics_authors": authors.metrics._asdict(),
+            "deviation_authors": authors.deviation.tolist(),
+        }
+    return responses
+
+
+def evaluate_robustness(context: EvaluationContext) -> list[dict[str, Any]]:
+    """The robustness sweep's points, each with its mean return."""
+    return [
+        {**point._asdict(), "return_mean": point.return_mean}
+        for point in robustness_sweep(context.system, context.controller, seed=context.seed)
+    ]
+
+
+def evaluate_swing_up(context: EvaluationContext) -> dict[str, Any]:
+    """Swing-up episodes from the run's seeded starts: returns, hold steps and their summary."""
+    starts = evaluation_starts(context.system, context.seed, SWING_UP_EPISODES)
+    swing = evaluate_episodes(context.system, context.controller, starts)
+    return {
+        "returns": swing.returns,
+        "hold_steps": swing.hold_steps,
+        "mean_return": swing.mean_return,
+        "held_fraction": swing.held_fraction,
+    }
+
+
+def evaluate_relevance(context: EvaluationContext) -> dict[str, list[Any]] | None:
+    """The relevance along a seeded swing-up (None for non-hybrids)."""
+    trace = relevance_trace(context.system, context.controller, context.seed)
+    return None if trace is None else {k: v.tolist() for k, v in trace._asdict().items()}
+
+
+#: The evaluations of :func:`evaluate_controller`, in the order of ``evaluation.json``'s keys.
+EVALUATORS: tuple[Evaluator, ...] = (
+    Evaluator("action_repeat", evaluate_action_repeat),
+    Evaluator("roa", evaluate_roa),
+    Evaluator("hybrid_claims", evaluate_hybrid_claims),
+    Evaluator("responses", evaluate_responses),
+    Evaluator("robustness", evaluate_robustness),
+    Evaluator("swing_up", evaluate_swing_up),
+    Evaluator("relevance", evaluate_relevance),
+)
+
+
+def evaluate_controller(
+    spec: RunSpec, controller: torch.nn.Module, variant: Variant = LEOC
+) -> dict[str, Any]:
+    """Every evaluation of :data:`EVALUATORS` of one controller, at its period, on the system
+    stepping under ``variant``'s rules: ``{evaluator.name: evaluator(context)}`` in order."""
+    system = variant.system(spec.system)
+    context = EvaluationContext(spec.system, system, controller, spec.seed, variant)
+    return {evaluator.name: evaluator(context) for evaluator in EVALUATORS}
