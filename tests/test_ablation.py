@@ -37,6 +37,7 @@ from leoc.experiments.ablation_report import (
 )
 from leoc.experiments.stats import wilson_interval
 from leoc.experiments.variants import AUTHORS
+from leoc.policies.spec import HybridSpec, legacy_hybrid_config
 from leoc.systems import StepRules
 
 # What each single-factor setting is meant to switch (issue 20), written out here rather than
@@ -91,8 +92,16 @@ PRE_ISSUE_20 = {
 PAPER_BUDGETS = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
 
 
+def _fields(config: DDPGConfig) -> dict[str, object]:
+    """Every setting of ``config`` by name: its own fields and its hybrid spec's (a baseline's at
+    HybridSpec's defaults), as the grid's settings name them."""
+    own = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
+    spec = own.pop("hybrid") or HybridSpec()
+    return {**own, **dataclasses.asdict(spec)}
+
+
 def _differences(first: DDPGConfig, second: DDPGConfig) -> dict[str, tuple]:
-    one, two = dataclasses.asdict(first), dataclasses.asdict(second)
+    one, two = _fields(first), _fields(second)
     return {name: (one[name], two[name]) for name in one if one[name] != two[name]}
 
 
@@ -129,7 +138,7 @@ def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_v
     elif setting in INTENDED:
         assert set(differences) == INTENDED[setting]
         for name in differences:
-            assert getattr(config, name) == AUTHORS_DDPG[name] == ISSUE_VALUES[name]
+            assert _fields(config)[name] == AUTHORS_DDPG[name] == ISSUE_VALUES[name]
     elif setting == "exit_penalty":
         assert set(differences) == {"step_rules"}
         rules, authors = StepRules(**config.step_rules), AUTHORS.rules_for(system)
@@ -137,12 +146,14 @@ def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_v
         assert rules.reward_on_next_state is authors.reward_on_next_state is True
         assert rules.legacy_integrator is False
     else:  # the authors' full setup: every field of AUTHORS_DDPG that is not leoc's, + rules
-        defaults = dataclasses.asdict(leoc)
+        defaults = _fields(leoc)
         expected = {
             name
             for name, value in AUTHORS_DDPG.items()
             if json.dumps(value) != json.dumps(defaults[name])
         } | {"step_rules"}
+        if controller == "ddpg_baseline":  # a baseline has no hybrid: its spec's fields drop
+            expected -= set(HybridSpec.field_names())
         if system == "cartpole" and controller == "ddpg_baseline":
             expected.add("actor_learning_rate")
             assert config.actor_learning_rate == AUTHORS_CARTPOLE_BASELINE_ACTOR_LR == 1e-4
@@ -150,7 +161,7 @@ def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_v
         assert INTENDED["exploration"] | INTENDED["critic"] <= expected
         assert StepRules(**config.step_rules) == AUTHORS.rules_for(system)
         for name in expected - {"step_rules", "actor_learning_rate"}:
-            assert getattr(config, name) == AUTHORS_DDPG[name]
+            assert _fields(config)[name] == AUTHORS_DDPG[name]
 
 
 def test_the_grid_has_the_issues_seeds_and_no_exit_penalty_on_the_pendulum() -> None:
@@ -524,7 +535,7 @@ def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> N
     plan = AblationPlan()
     for spec in sac:
         config = plan.config(spec)
-        assert spec.algo == "sac" and config.algo == "sac" and config.relevance == "roa"
+        assert spec.algo == "sac" and config.algo == "sac" and config.hybrid.relevance == "roa"
         # SAC's defaults before issue 20: leoc's step rules, the final actor on 5 episodes,
         # SB3's critics (written out: an independent reference for SB3_SAC_CRITIC)
         expected = DDPGConfig.for_system(
@@ -644,6 +655,8 @@ def test_every_setting_builds_the_config_the_published_grid_ran(cell) -> None:
     recorded = dict(GRID_CONFIGS["leoc"][key])
     if setting != "leoc":
         recorded.update(GRID_CONFIGS["settings"][setting][key])
+    # written before HybridSpec: the hybrid's fields beside the config's, read into its spec
+    recorded = legacy_hybrid_config(recorded)
     built = AblationPlan().config(AblationSpec(system, controller, setting, 0)).as_dict()
     # StepRules fields added since (horizon_exit) keep their defaults: compare the rules
     assert StepRules(**built.pop("step_rules")) == StepRules(**recorded.pop("step_rules"))

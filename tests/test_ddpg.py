@@ -34,6 +34,7 @@ from leoc.ddpg import (
     physical_policy,
     train_ddpg,
 )
+from leoc.policies import HybridDesign, HybridSpec
 from leoc.systems import SYSTEM_NAMES, StepRules, make_env, make_system
 from leoc.training import CURVE_COLUMNS
 
@@ -180,10 +181,8 @@ def test_identity_with_asymmetric_action_box():
         SMALL_NET,
         FlattenExtractor(obs_space),
         3,
-        lqr_gain=gain,
-        lqr_bias=bias,
-        operating_obs=point,
-        lambda_init=[0.3, 2.0, 0.7],
+        hybrid_spec=HybridSpec(lambda_init=(0.3, 2.0, 0.7)),
+        hybrid_design=HybridDesign(gain, bias, point),
     )
     _randomise(actor, torch.Generator().manual_seed(1))
     policy = physical_policy(actor)
@@ -366,7 +365,11 @@ def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo, monkey
     assert expected | {"learning_curve.png"} <= files
     assert not any(name.endswith(".tmp") for name in files)
     config = json.loads((tmp_path / "r0" / "config.json").read_text())
-    assert config["seed"] == 3 and config["hybrid"] is True and config["algo"] == algo
+    assert (
+        config["seed"] == 3
+        and config["hybrid"] == HybridSpec().to_dict()
+        and config["algo"] == algo
+    )
     # no SB3-<date> folder in the system temp folder (torch's own caches may go there)
     assert not [path for path in temp.iterdir() if path.name.startswith("SB3")]
     rows = runs[0].curve
@@ -489,8 +492,8 @@ def _roa_model(system_name: str, **kw):
 def _roa_band_obs(model, system, count: int, low: float, high: float) -> torch.Tensor:
     """float32 observations whose level V / rho_in lies in [low, high] (random directions)."""
     module = model.actor.hybrid.relevance_module
-    P = np.asarray(model.actor.roa_kwargs["roa_lyapunov_matrix"])
-    rho_in = model.actor.roa_kwargs["roa_rho_in"]
+    P = np.asarray(model.actor.hybrid_design.relevance_data["lyapunov_matrix"])
+    rho_in = model.actor.hybrid_design.relevance_data["rho_in"]
     rng = np.random.default_rng(0)
     directions = rng.standard_normal((count, system.state_dim))
     levels = rng.uniform(low, high, size=count) * rho_in
@@ -545,7 +548,7 @@ def test_roa_training_step_reaches_width_and_network_and_round_trips(tmp_path):
     # SB3 save/load rebuilds the ROA actor with its learned width.
     model.save(tmp_path / "roa.zip")
     loaded = DDPG.load(tmp_path / "roa.zip", device="cpu")
-    assert loaded.actor.relevance_kind == "roa" and loaded.actor_target.relevance_kind == "roa"
+    assert loaded.actor.hybrid_spec.relevance == loaded.actor_target.hybrid_spec.relevance == "roa"
     probe = _roa_band_obs(model, system, 16, 0.5, 2.5)
     with torch.no_grad():
         torch.testing.assert_close(loaded.actor(probe), model.actor(probe), rtol=0, atol=0)

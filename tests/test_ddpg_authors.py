@@ -95,7 +95,6 @@ def test_new_fields_default_to_the_ablations_choice_and_are_validated():
         "critic_action_units": "physical",
         "hidden_init": "tf_agents",
         "last_layer_init": 0.003,
-        "relevance_parametrisation": "log_lambda",
         "actor_output_clip": True,
         "model_selection": "best_held",
         "eval_episodes": 3,
@@ -107,7 +106,6 @@ def test_new_fields_default_to_the_ablations_choice_and_are_validated():
         "critic_loss": "l1",
         "critic_action_units": "raw",
         "hidden_init": "xavier",
-        "relevance_parametrisation": "lambda",
         "model_selection": "best",
         "critic_action_layer": 3,
         "last_layer_init": -0.1,
@@ -117,6 +115,13 @@ def test_new_fields_default_to_the_ablations_choice_and_are_validated():
     for name, value in bad.items():
         with pytest.raises(ValueError, match=name):
             DDPGConfig.for_system("pendulum", **{name: value})
+    # the hybrid's fields are the HybridSpec's: checked for a hybrid and for a baseline alike
+    assert DDPGConfig.for_system("pendulum", hybrid=True).hybrid.relevance_parametrisation == (
+        "log_lambda"
+    )
+    for hybrid in (None, True):
+        with pytest.raises(ValueError, match="relevance_parametrisation"):
+            DDPGConfig.for_system("pendulum", hybrid=hybrid, relevance_parametrisation="lambda")
 
 
 # -------------------------------------------------------------------------------------- noise

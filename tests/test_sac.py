@@ -39,6 +39,7 @@ from leoc.ddpg.algorithms import critic_loss_fn
 from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.policies import SplitCritic
 from leoc.ddpg.sac import SquashedMean, squashed_blend_mean
+from leoc.policies import HybridDesign, HybridSpec
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
 
 SMALL_NET = [32, 32]
@@ -63,14 +64,17 @@ pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 def _roa_kwargs(system, design) -> dict:
-    """``roa_*`` kwargs at a fixed level (the proof of the level is leoc.control's, not ours)."""
+    """The ROA hybrid's spec and design at a fixed level (the proof of the level is
+    leoc.control's, not ours)."""
+    data = {
+        "obs_layout": system.observation.to_list(),
+        "operating_state": np.asarray(system.operating_state).tolist(),
+        "lyapunov_matrix": np.asarray(design.P).tolist(),
+        "rho_in": ROA_LEVEL,
+    }
     return {
-        "roa_obs_layout": system.observation.to_list(),
-        "roa_operating_state": np.asarray(system.operating_state).tolist(),
-        "roa_lyapunov_matrix": np.asarray(design.P).tolist(),
-        "roa_rho_in": ROA_LEVEL,
-        "roa_width_init": 1.0,
-        "learn_width": True,
+        "hybrid_spec": HybridSpec(relevance="roa", width_init=1.0, learn_width=True).to_dict(),
+        "hybrid_design": HybridDesign(design.W, design.b, system.operating_obs, data).to_dict(),
     }
 
 
@@ -78,7 +82,7 @@ def _sac_model(system_name: str, relevance: str = "paper", seed: int = 0, **kw) 
     system = make_system(system_name)
     kwargs = hybrid_policy_kwargs(system, net_arch=SMALL_NET)
     if relevance == "roa":
-        kwargs.update(relevance="roa", **_roa_kwargs(system, design_lqr(system)))
+        kwargs.update(_roa_kwargs(system, design_lqr(system)))
     env = make_env(system_name)
     return SAC(HybridSACPolicy, env, policy_kwargs=kwargs, seed=seed, device="cpu", **kw)
 
@@ -176,11 +180,8 @@ def test_identities_with_an_asymmetric_box_where_g_of_a_is_not_zero():
             SMALL_NET,
             FlattenExtractor(obs_space),
             3,
-            lqr_gain=gain,
-            lqr_bias=bias,
-            operating_obs=point,
-            lambda_init=0.3,
-            relevance_parametrisation=parametrisation,
+            hybrid_spec=HybridSpec(lambda_init=0.3, relevance_parametrisation=parametrisation),
+            hybrid_design=HybridDesign(gain, bias, point),
         )
         with torch.no_grad():
             for param in actor.hybrid.nonlinear.parameters():
@@ -529,7 +530,7 @@ def test_train_ddpg_sac_writes_a_run_that_loads(tmp_path):
         "mountaincar", algo="sac", hybrid=True, seed=2, run_dir=tmp_path, **TINY_RUN
     )
     config = json.loads((tmp_path / "config.json").read_text())
-    assert config["algo"] == "sac" and config["hybrid"] is True
+    assert config["algo"] == "sac" and config["hybrid"] == HybridSpec().to_dict()
     assert config["polyak"] == SAC_DEFAULTS["polyak"] and config["total_steps"] == 240
     assert [row["steps"] for row in result.curve] == [0, 120, 240]
     policy = load_ddpg_controller(tmp_path)
@@ -595,7 +596,7 @@ def test_sac_config_defaults_leave_ddpg_unchanged():
         ({"algo": "sac", "sac_entropy_coef": "auto_x"}, "sac_entropy_coef: expected 'auto'"),
         ({"algo": "sac", "sac_entropy_coef": -1.0}, "sac_entropy_coef: expected 'auto'"),
         ({"algo": "sac", "sac_target_entropy": "low"}, "sac_target_entropy: expected"),
-        ({"algo": "sac", "hybrid": "yes"}, "hybrid: expected a bool"),
+        ({"algo": "sac", "hybrid": "yes"}, "hybrid: expected None"),
     ],
 )
 def test_bad_config_is_an_error_naming_the_field(overrides, message):
@@ -611,7 +612,11 @@ def test_what_cannot_be_a_sac_hybrid_is_refused():
     with pytest.raises(ValueError, match="clip_output: the SAC hybrid"):
         SAC(HybridSACPolicy, make_env("pendulum"), policy_kwargs={**kwargs, "clip_output": False})
     with pytest.raises(ValueError, match="relevance: expected one of"):
-        SAC(HybridSACPolicy, make_env("pendulum"), policy_kwargs={**kwargs, "relevance": "flat"})
+        SAC(
+            HybridSACPolicy,
+            make_env("pendulum"),
+            policy_kwargs={**kwargs, "hybrid_spec": {"relevance": "flat"}},
+        )
     with pytest.raises(ValueError, match="algo: expected one of"):
         train_ddpg("pendulum", algo="pilco", hybrid=True, run_dir=None, progress=False)
 
@@ -627,7 +632,11 @@ def test_cli_trains_a_sac_hybrid_that_simulate_reads(tmp_path, monkeypatch, caps
     argv = ["train", "pendulum", "--algo", "sac", "--hybrid", "--steps", "300", "--out", str(out)]
     assert main([*argv, "--quiet", "--seed", "3"]) == 0
     config = json.loads((out / "config.json").read_text())
-    assert (config["algo"], config["hybrid"], config["actor_hidden"]) == ("sac", True, [16, 16])
+    assert (config["algo"], config["hybrid"], config["actor_hidden"]) == (
+        "sac",
+        HybridSpec().to_dict(),
+        [16, 16],
+    )
     capsys.readouterr()
     assert main(["simulate", str(out), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)

@@ -36,7 +36,7 @@ Run folder (every file written atomically)::
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -250,14 +250,20 @@ def config_differences(saved: dict[str, Any], config: dict[str, Any]) -> list[st
     ]
 
 
-def same_run(run_dir: str | Path, config: dict[str, Any], overwrite: bool = False) -> bool:
+def same_run(
+    run_dir: str | Path,
+    config: dict[str, Any],
+    overwrite: bool = False,
+    normalise: Callable[[dict[str, Any]], dict[str, Any]] | None = None,
+) -> bool:
     """Whether ``run_dir`` already holds a run of ``config`` (so a trainer resumes or reuses
     it), the one rule of a rerun for every learner.
 
     A folder without ``config.json`` is new (False). One whose config equals ``config`` (both
     as JSON; library versions aside) holds the same run (True). One with another config is
     refused, unless ``overwrite``, in which case it is treated as new (False) and the trainer
-    replaces its files.
+    replaces its files. ``normalise`` maps a saved config to today's form before the
+    comparison (a learner whose config layout changed reads its older runs as the same run).
 
     Raises
     ------
@@ -269,6 +275,8 @@ def same_run(run_dir: str | Path, config: dict[str, Any], overwrite: bool = Fals
     if not path.is_file():
         return False
     saved = read_config(Path(run_dir))
+    if normalise is not None:
+        saved = normalise(saved)
     differences = config_differences(saved, json.loads(json.dumps(config)))
     if not differences:
         return True

@@ -42,10 +42,11 @@ import dataclasses
 import math
 from typing import Any, Literal
 
-from leoc.policies.relevance import (
-    DEFAULT_ROA_WIDTH,
-    RELEVANCE_KINDS,
-    RELEVANCE_PARAMETRISATIONS,
+from leoc.policies.spec import (
+    HybridSpec,
+    as_hybrid_spec,
+    legacy_hybrid_config,
+    with_hybrid_overrides,
 )
 
 #: Model-free learners: Stable-Baselines3's DDPG, TD3 and SAC (each as baseline or hybrid).
@@ -250,9 +251,11 @@ class DDPGConfig:
         policy smoothing and a single critic. SAC (:mod:`leoc.ddpg.sac`) explores with its own
         entropy-regularised Gaussian: the fields of :data:`TD3_FAMILY_FIELDS` must keep their
         defaults, and :meth:`for_system` applies :data:`SAC_DEFAULTS`.
-    hybrid : bool
-        Whether the actor is the LEOC hybrid ``sat(r G + (1 - r) H)`` or the plain MLP ``H``
-        (for SAC: whether the squashed mean is).
+    hybrid : HybridSpec or None
+        The LEOC hybrid actor ``sat(r G + (1 - r) H)`` this spec describes
+        (:class:`~leoc.policies.HybridSpec`: relevance design, its parameters, what the actor
+        loss trains), or None: the plain MLP ``H`` (for SAC: the squashed mean). ``True`` and a
+        dict are read as ``HybridSpec()`` and ``HybridSpec.from_dict``.
     total_steps : int
         Environment steps (interaction time ``total_steps * dt`` seconds).
     actor_learning_rate, critic_learning_rate : float
@@ -304,30 +307,12 @@ class DDPGConfig:
         None: as ``hidden_init``.
     td3_policy_delay, td3_target_noise, td3_target_noise_clip : float
         TD3's delayed actor updates and target policy smoothing (SB3 defaults; unused by DDPG).
-    lambda_init : float
-        Initial diagonal of Lambda (the paper: identity).
-    learn_lambda : bool
-        Train Lambda's parameter with the actor (False: frozen buffer).
     actor_output_clip : bool
         Clip the hybrid actor's blend and the target actions to the action box inside the
         training graph (leoc, SB3) or leave them unbounded as TF-Agents' DDPG does (the
         executed action is clipped either way).
-    relevance_parametrisation : {"log_lambda", "precision"}
-        The paper's relevance trained in :math:`\log\lambda` (positive Lambda, leoc) or in the
-        precision :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 /
-        lambda_init`` (the authors' ``S``).
     lqr_method : {"discrete", "continuous"}
         LQR design used for G (see :func:`leoc.control.design_lqr`).
-    relevance : {"paper", "roa"}
-        The hybrid's relevance: the paper's :math:`(1 + d)^{-2}` (``lambda_init``,
-        ``learn_lambda``), or :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's
-        certified region of attraction (``roa_rho_fraction``, ``roa_width``, ``learn_width``).
-    roa_rho_fraction : float in (0, 1]
-        Flat top level as a fraction of the certified rho (``relevance="roa"``).
-    roa_width : float
-        Initial width of the ROA relevance's transition band.
-    learn_width : bool
-        Train the band width with the actor (False: frozen).
     eval_interval : int
         Environment steps between two evaluations (:meth:`for_system`: 200, 300 on the
         cart-pole).
@@ -360,7 +345,7 @@ class DDPGConfig:
 
     system: str
     algo: str = "ddpg"
-    hybrid: bool = False
+    hybrid: HybridSpec | None = None
     total_steps: int = DEFAULT_TOTAL_STEPS
     actor_learning_rate: float = 5e-4
     critic_learning_rate: float = 1e-3
@@ -387,15 +372,8 @@ class DDPGConfig:
     td3_policy_delay: int = 2
     td3_target_noise: float = 0.2
     td3_target_noise_clip: float = 0.5
-    lambda_init: float = 1.0
-    learn_lambda: bool = True
-    relevance_parametrisation: str = "log_lambda"
     actor_output_clip: bool = True
     lqr_method: str = "discrete"
-    relevance: str = "paper"
-    roa_rho_fraction: float = 1.0
-    roa_width: float = DEFAULT_ROA_WIDTH
-    learn_width: bool = True
     eval_interval: int = 1_000
     eval_episodes: int = 3
     model_selection: str = "best_held"
@@ -411,8 +389,7 @@ class DDPGConfig:
             raise ValueError(f"system: expected one of {system_names()}, found {self.system!r}")
         if self.algo not in ALGOS:
             raise ValueError(f"algo: expected one of {ALGOS}, found {self.algo!r}")
-        if not isinstance(self.hybrid, bool):
-            raise ValueError(f"hybrid: expected a bool, found {self.hybrid!r}")
+        object.__setattr__(self, "hybrid", as_hybrid_spec(self.hybrid))
         positive_ints = (
             "total_steps",
             "batch_size",
@@ -433,7 +410,6 @@ class DDPGConfig:
             "critic_learning_rate",
             "discount",
             "polyak",
-            "lambda_init",
         )
         for name in positive_floats:
             value = getattr(self, name)
@@ -443,16 +419,6 @@ class DDPGConfig:
             raise ValueError(
                 f"discount, polyak: expected values in (0, 1], found {self.discount}, {self.polyak}"
             )
-        if self.relevance not in RELEVANCE_KINDS:
-            raise ValueError(
-                f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"
-            )
-        if not 0.0 < self.roa_rho_fraction <= 1.0:
-            raise ValueError(
-                f"roa_rho_fraction: expected a number in (0, 1], found {self.roa_rho_fraction!r}"
-            )
-        if not isinstance(self.roa_width, (int, float)) or not self.roa_width > 0:
-            raise ValueError(f"roa_width: expected a positive number, found {self.roa_width!r}")
         from leoc.systems import StepRules
 
         if not isinstance(self.step_rules, dict):
@@ -505,7 +471,6 @@ class DDPGConfig:
             "critic_loss": CRITIC_LOSSES,
             "critic_action_units": CRITIC_ACTION_UNITS,
             "hidden_init": HIDDEN_INITS,
-            "relevance_parametrisation": RELEVANCE_PARAMETRISATIONS,
             "model_selection": MODEL_SELECTIONS,
         }
         for name, allowed in choices.items():
@@ -547,18 +512,25 @@ class DDPGConfig:
         (:data:`STEP_RULES_BY_SYSTEM`; an override replaces them whole, so
         ``step_rules={}`` is leoc's rules). ``algo="sac"`` starts from :data:`SAC_DEFAULTS`
         (the overrides still win). The hold test is the system's own (``System.hold_step``).
+        ``hybrid`` (None, True, a :class:`~leoc.policies.HybridSpec` or its dict) makes the
+        hybrid; an override that names a ``HybridSpec`` field (``relevance="roa"``,
+        ``learn_lambda=False``) changes that spec, and is dropped for a baseline
+        (:func:`leoc.policies.spec.with_hybrid_overrides`).
 
         Raises
         ------
         ValueError
             On an unknown system, algorithm or override name, or an invalid value.
         """
+        overrides = dict(overrides)
+        hybrid = with_hybrid_overrides(overrides.pop("hybrid", None), overrides)
         fields = {field.name for field in dataclasses.fields(cls)}
         unknown = set(overrides) - fields
         if unknown:
             raise ValueError(
                 f"overrides: unknown DDPGConfig fields {sorted(unknown)}; "
-                f"expected some of {sorted(fields - {'system', 'algo'})}"
+                f"expected some of {sorted(fields - {'system', 'algo'})} or of the hybrid's "
+                f"{list(HybridSpec.field_names())}"
             )
         values: dict[str, Any] = {
             "total_steps": TOTAL_STEPS_BY_SYSTEM.get(name, DEFAULT_TOTAL_STEPS),
@@ -571,7 +543,7 @@ class DDPGConfig:
         for key in ("actor_hidden", "critic_hidden"):
             if key in values:
                 values[key] = tuple(int(width) for width in values[key])
-        return cls(system=name, algo=algo, **values)
+        return cls(system=name, algo=algo, hybrid=hybrid, **values)
 
     def network_kwargs(self) -> dict[str, Any]:
         """The critic layout and the networks' initialisation of this config, as keywords of
@@ -583,34 +555,22 @@ class DDPGConfig:
             "last_layer_init": self.last_layer_init,
         }
 
-    def hybrid_kwargs(self) -> dict[str, Any]:
-        """The hybrid's design options of this config, as keywords of
-        :func:`leoc.ddpg.policies.hybrid_policy_kwargs` (for the TD3/DDPG and the SAC hybrid
-        alike; each algorithm adds its own, e.g. TD3's ``clip_output``)."""
-        return {
-            "lambda_init": self.lambda_init,
-            "learn_lambda": self.learn_lambda,
-            "relevance_parametrisation": self.relevance_parametrisation,
-            "lqr_method": self.lqr_method,
-            "relevance": self.relevance,
-            "rho_in_fraction": self.roa_rho_fraction,
-            "width_init": self.roa_width,
-            "learn_width": self.learn_width,
-        }
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-friendly dict (tuples become lists)."""
         data = dataclasses.asdict(self)
         for key, value in data.items():
             if isinstance(value, tuple):
                 data[key] = list(value)
+        data["hybrid"] = None if self.hybrid is None else self.hybrid.to_dict()
         return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> DDPGConfig:
-        """Inverse of :meth:`as_dict` (unknown keys such as ``seed`` are ignored)."""
+        """Inverse of :meth:`as_dict` (unknown keys such as ``seed`` are ignored; a config saved
+        before :class:`~leoc.policies.HybridSpec`, with ``hybrid`` a bool and the hybrid's
+        fields beside it, is read into its spec)."""
         fields = {field.name for field in dataclasses.fields(cls)}
-        values = {key: value for key, value in data.items() if key in fields}
+        values = {key: value for key, value in legacy_hybrid_config(data).items() if key in fields}
         for key in ("actor_hidden", "critic_hidden"):
             if key in values:
                 values[key] = tuple(values[key])

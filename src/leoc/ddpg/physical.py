@@ -30,7 +30,7 @@ from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
-from leoc.ddpg.policies import HybridActorMixin, action_box, roa_relevance
+from leoc.ddpg.policies import HybridActorMixin, action_box
 from leoc.ddpg.sac import SquashedMean
 from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance
 
@@ -160,8 +160,9 @@ def physical_policy(actor: Actor | SACActor | TD3Policy | SACPolicy) -> Physical
             # actor's learned band width, frozen.
             # float32 sigmoid can round w up to w_max itself; the float64 rebuild needs w < w_max
             width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
-            roa_kwargs = {**actor.roa_kwargs, "roa_width_init": width, "learn_width": False}
-            relevance = {"relevance": roa_relevance(roa_kwargs, DTYPE)}
+            frozen = actor.hybrid_spec.replace(width_init=width, learn_width=False)
+            data = actor.hybrid_design.relevance_data
+            relevance = frozen.design.build(frozen, data, actor.operating_obs.cpu().numpy(), DTYPE)
         hybrid = HybridPolicy(
             LinearController(actor.physical_gain.detach().cpu(), actor.physical_bias.cpu()),
             AffineOutput(mlp, centre, half),

@@ -70,16 +70,11 @@ from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
 from leoc.ddpg.config import CRITIC_ACTION_UNITS, HIDDEN_INITS
-from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance, ROARelevance
-from leoc.policies.relevance import (
-    DEFAULT_ROA_WIDTH,
-    RELEVANCE_KINDS,
-    RELEVANCE_PARAMETRISATIONS,
-)
+from leoc.policies import HybridPolicy
+from leoc.policies.spec import HybridDesign, HybridSpec, build_hybrid, hybrid_design
 
 __all__ = [
     "CRITIC_ACTION_UNITS",
-    "ROA_KWARG_NAMES",
     "HIDDEN_INITS",
     "HybridActor",
     "HybridActorMixin",
@@ -89,11 +84,9 @@ __all__ = [
     "NetworkOptionsMixin",
     "SplitCritic",
     "action_box",
-    "check_hybrid_options",
-    "hybrid_actor_kwargs",
+    "hybrid_arguments",
     "hybrid_policy_kwargs",
     "initialise_mlp",
-    "roa_relevance_kwargs",
 ]
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
@@ -118,30 +111,6 @@ def action_box(action_space: spaces.Box) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (high + low), 0.5 * (high - low)
 
 
-def _as_matrix(value: object, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != shape or not np.all(np.isfinite(array)):
-        raise ValueError(f"{name}: expected finite numbers of shape {shape}, found {array!r}")
-    return array
-
-
-def check_hybrid_options(relevance: object, relevance_parametrisation: object) -> None:
-    """Check a hybrid actor's ``relevance`` and ``relevance_parametrisation`` names.
-
-    Raises
-    ------
-    ValueError
-        Naming the argument, with the expected and found values.
-    """
-    if relevance not in RELEVANCE_KINDS:
-        raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
-    if relevance_parametrisation not in RELEVANCE_PARAMETRISATIONS:
-        raise ValueError(
-            f"relevance_parametrisation: expected one of {RELEVANCE_PARAMETRISATIONS}, "
-            f"found {relevance_parametrisation!r}"
-        )
-
-
 class HybridActorMixin:
     r"""The LEOC blend in SB3's normalised action units, shared by the DDPG/TD3 and SAC actors.
 
@@ -161,12 +130,15 @@ class HybridActorMixin:
     physical_gain, physical_bias, operating_obs : Tensor
         float64 buffers with ``W``, ``b`` and ``a`` in physical units (for exact float64
         evaluation, see :func:`leoc.ddpg.physical_policy`).
-    relevance_kind : {"paper", "roa"}
-    roa_kwargs : dict
-        The ``roa_*`` constructor data of an ROA relevance (empty otherwise).
+    hybrid_spec : HybridSpec
+        The choices that made the hybrid (relevance design, its parameters, what is learned).
+    hybrid_design : HybridDesign
+        ``W``, ``b``, ``a`` and the relevance design's data, in physical units.
     """
 
     hybrid: HybridPolicy
+    hybrid_spec: HybridSpec
+    hybrid_design: HybridDesign
     physical_gain: Tensor
     physical_bias: Tensor
     operating_obs: Tensor
@@ -174,112 +146,45 @@ class HybridActorMixin:
     features_extractor: nn.Module
 
     def _init_hybrid(
-        self,
-        nonlinear: nn.Module,
-        features_dim: int,
-        *,
-        lqr_gain: object,
-        lqr_bias: object,
-        operating_obs: object,
-        lambda_init: float | Sequence[float],
-        learn_lambda: bool,
-        relevance: str,
-        relevance_parametrisation: str,
-        roa_obs_layout: Sequence[Sequence[Any]] | None,
-        roa_operating_state: Sequence[float] | None,
-        roa_lyapunov_matrix: Sequence[Sequence[float]] | None,
-        roa_rho_in: float | None,
-        roa_width_init: float,
-        learn_width: bool,
+        self, nonlinear: nn.Module, features_dim: int, spec: object, design: object
     ) -> None:
-        """Build ``self.hybrid`` around ``nonlinear`` (:math:`\tilde H`, (B, D) -> (B, F)) and
-        register the physical-units buffers (arguments: see :class:`HybridActor`)."""
-        check_hybrid_options(relevance, relevance_parametrisation)
+        """Build ``self.hybrid`` around ``nonlinear`` (:math:`\tilde H`, (B, D) -> (B, F)) by
+        :func:`leoc.policies.build_hybrid` in normalised units, and register the physical-units
+        buffers. ``spec`` and ``design``: a :class:`~leoc.policies.HybridSpec` and a
+        :class:`~leoc.policies.HybridDesign` or their dicts (what SB3 saves)."""
+        spec = spec if isinstance(spec, HybridSpec) else HybridSpec.from_dict(spec)  # type: ignore[arg-type]
+        if not isinstance(design, HybridDesign):
+            design = HybridDesign.from_dict(design)  # type: ignore[arg-type]
         act_dim = int(np.prod(self.action_space.shape))
-        gain = _as_matrix(lqr_gain, "lqr_gain", (act_dim, features_dim))
-        bias = _as_matrix(lqr_bias, "lqr_bias", (act_dim,))
-        point = _as_matrix(operating_obs, "operating_obs", (features_dim,))
-        centre, half = action_box(self.action_space)
-        self.lqr_gain = gain.tolist()
-        self.lqr_bias = bias.tolist()
-        self.operating_obs_init = point.tolist()
-        self.lambda_init = lambda_init
-        self.learn_lambda = learn_lambda
-        self.relevance_kind = relevance
-        self.relevance_parametrisation = relevance_parametrisation
-        self.roa_kwargs: dict[str, Any] = {}
-        self.register_buffer("physical_gain", torch.as_tensor(gain))  # type: ignore[attr-defined]
-        self.register_buffer("physical_bias", torch.as_tensor(bias))  # type: ignore[attr-defined]
-        self.register_buffer("operating_obs", torch.as_tensor(point))  # type: ignore[attr-defined]
-        # G in normalised units: (W x + b - c) / h.
-        linear = LinearController(gain / half[:, None], (bias - centre) / half, dtype=ACTION_DTYPE)
-        if relevance == "paper" and relevance_parametrisation == "precision":
-            precision = PrecisionRelevance(
-                point,
-                1.0 / np.asarray(lambda_init, dtype=np.float64),
-                learn_precision=learn_lambda,
-                dtype=ACTION_DTYPE,
+        found = (len(design.bias), len(design.operating_obs))
+        if found != (act_dim, features_dim):
+            raise ValueError(
+                f"hybrid_design: expected an action of size F = {act_dim} and an observation of "
+                f"size D = {features_dim} (the spaces), found (F, D) = {found}"
             )
-            self.hybrid = HybridPolicy(
-                linear,
-                nonlinear,
-                point,
-                action_limit=NORMALISED_LIMIT,
-                saturation="clip",
-                relevance=precision,
-            )
-            return
-        if relevance == "paper":
-            self.hybrid = HybridPolicy(
-                linear,
-                nonlinear,
-                point,
-                lambda_init=lambda_init,
-                learn_lambda=learn_lambda,
-                action_limit=NORMALISED_LIMIT,
-                saturation="clip",
-            )
-            return
-        missing = [
-            name
-            for name, value in (
-                ("roa_obs_layout", roa_obs_layout),
-                ("roa_operating_state", roa_operating_state),
-                ("roa_lyapunov_matrix", roa_lyapunov_matrix),
-                ("roa_rho_in", roa_rho_in),
-            )
-            if value is None
-        ]
-        if missing:
-            raise ValueError(f"relevance='roa' needs {', '.join(missing)}; found None")
-        self.roa_kwargs = {
-            "roa_obs_layout": [[str(kind), int(index)] for kind, index in roa_obs_layout],  # type: ignore[union-attr]
-            "roa_operating_state": np.asarray(roa_operating_state, dtype=np.float64).tolist(),
-            "roa_lyapunov_matrix": np.asarray(roa_lyapunov_matrix, dtype=np.float64).tolist(),
-            "roa_rho_in": float(roa_rho_in),  # type: ignore[arg-type]
-            "roa_width_init": float(roa_width_init),
-            "learn_width": bool(learn_width),
-        }
-        self.hybrid = HybridPolicy(
-            linear,
+        self.hybrid_spec = spec
+        self.hybrid_design = design
+        gain = torch.as_tensor(np.asarray(design.gain, dtype=np.float64))
+        bias = torch.as_tensor(np.asarray(design.bias, dtype=np.float64))
+        point = torch.as_tensor(np.asarray(design.operating_obs, dtype=np.float64))
+        self.register_buffer("physical_gain", gain)  # type: ignore[attr-defined]
+        self.register_buffer("physical_bias", bias)  # type: ignore[attr-defined]
+        self.register_buffer("operating_obs", point)  # type: ignore[attr-defined]
+        self.hybrid = build_hybrid(
+            spec,
+            design,
             nonlinear,
-            point,
             action_limit=NORMALISED_LIMIT,
             saturation="clip",
-            relevance=roa_relevance(self.roa_kwargs, ACTION_DTYPE),
+            action_box=action_box(self.action_space),
+            dtype=ACTION_DTYPE,
         )
 
     def hybrid_constructor_parameters(self) -> dict[str, Any]:
         """The hybrid's constructor arguments (what SB3 saves to rebuild the actor)."""
         return {
-            "lqr_gain": self.lqr_gain,
-            "lqr_bias": self.lqr_bias,
-            "operating_obs": self.operating_obs_init,
-            "lambda_init": self.lambda_init,
-            "learn_lambda": self.learn_lambda,
-            "relevance": self.relevance_kind,
-            "relevance_parametrisation": self.relevance_parametrisation,
-            **self.roa_kwargs,
+            "hybrid_spec": self.hybrid_spec.to_dict(),
+            "hybrid_design": self.hybrid_design.to_dict(),
         }
 
     def fused_relevance_and_linear(self, features: Tensor) -> tuple[Tensor, Tensor]:
@@ -320,45 +225,18 @@ class HybridActor(HybridActorMixin, Actor):
     activation_fn, normalize_images
         As for SB3's :class:`stable_baselines3.td3.policies.Actor`. The observation must be a
         flat box (the features are the observation itself) so that ``a`` and ``W`` act on it.
-    lqr_gain : array-like, shape (F, D)
-        ``W`` of the linear controller, in physical units (N or N m per observation unit).
-    lqr_bias : array-like, shape (F,)
-        ``b`` of the linear controller, in physical units.
-    operating_obs : array-like, shape (D,)
-        Operating point ``a`` in observation coordinates.
-    lambda_init : float or array-like (D,)
-        Initial diagonal of Lambda (> 0).
-    learn_lambda : bool
-        Whether ``log_lambda`` is an ``nn.Parameter`` (trained by the actor loss) or a buffer.
-    relevance_parametrisation : {"log_lambda", "precision"}
-        How the paper's relevance holds its weights: ``log_lambda`` (positive
-        :math:`\lambda = e^{\ell}`, the default) or ``precision``: the precision
-        :math:`S = \Lambda^{-1}` itself, unconstrained, starting at ``1 / lambda_init``
-        (:class:`~leoc.policies.PrecisionRelevance`, nrjc/LEOC's ``S``); ``learn_lambda`` then
-        says whether :math:`S` is trained.
+    hybrid_spec : HybridSpec or dict
+        The hybrid's choices (:class:`~leoc.policies.HybridSpec`: relevance design and its
+        parameters, what the actor loss trains). Its relevance reads the raw observation, so it
+        is the same function in normalised and physical units.
+    hybrid_design : HybridDesign or dict
+        ``W``, ``b`` (physical units), the operating point ``a`` in observation coordinates and
+        the relevance design's data (:func:`leoc.policies.hybrid_design`).
     clip_output : bool
         Whether the actor clips its blend to [-1, 1] (default). False: the blend is returned
         unbounded, as TF-Agents' actor network returns ``scale_to_spec(r g + (1 - r) h)``
         (nrjc/LEOC ``DDPG/ddpg.py``), so the actor loss sees the critic beyond the box; the
         executed action is clipped all the same (SB3's collection, :func:`physical_policy`).
-    relevance : {"paper", "roa"}
-        ``paper``: :math:`r = (1 + d)^{-2}` with ``lambda_init``/``learn_lambda``. ``roa``:
-        :class:`~leoc.policies.ROARelevance`, exactly 1 on the LQR's certified set
-        :math:`\{V \le \rho_{in}\}` (needs the ``roa_*`` arguments;
-        :func:`roa_relevance_kwargs` builds them). The relevance does not depend on the action
-        scaling, so it is the same function in normalised and physical units.
-    roa_obs_layout : list of (kind, state_index)
-        ``System.obs_layout`` (how the observation is built from the state).
-    roa_operating_state : array-like (S,)
-        Operating point in state coordinates.
-    roa_lyapunov_matrix : array-like (S, S)
-        ``P`` of the LQR design.
-    roa_rho_in : float
-        Level of the flat top (at most the certified rho).
-    roa_width_init : float
-        Initial band width (see :class:`~leoc.policies.ROARelevance`).
-    learn_width : bool
-        Whether the band width is trained by the actor loss.
 
     Attributes
     ----------
@@ -383,22 +261,10 @@ class HybridActor(HybridActorMixin, Actor):
         activation_fn: type[nn.Module] = nn.ReLU,
         normalize_images: bool = True,
         *,
-        lqr_gain: object,
-        lqr_bias: object,
-        operating_obs: object,
-        lambda_init: float | Sequence[float] = 1.0,
-        learn_lambda: bool = True,
-        relevance: str = "paper",
-        relevance_parametrisation: str = "log_lambda",
+        hybrid_spec: HybridSpec | dict[str, Any],
+        hybrid_design: HybridDesign | dict[str, Any],
         clip_output: bool = True,
-        roa_obs_layout: Sequence[Sequence[Any]] | None = None,
-        roa_operating_state: Sequence[float] | None = None,
-        roa_lyapunov_matrix: Sequence[Sequence[float]] | None = None,
-        roa_rho_in: float | None = None,
-        roa_width_init: float = DEFAULT_ROA_WIDTH,
-        learn_width: bool = True,
     ) -> None:
-        check_hybrid_options(relevance, relevance_parametrisation)
         super().__init__(
             observation_space,
             action_space,
@@ -410,23 +276,7 @@ class HybridActor(HybridActorMixin, Actor):
         )
         mlp = self.mu
         del self.mu  # the MLP lives on as hybrid.nonlinear (one copy in the state_dict)
-        self._init_hybrid(
-            mlp,
-            features_dim,
-            lqr_gain=lqr_gain,
-            lqr_bias=lqr_bias,
-            operating_obs=operating_obs,
-            lambda_init=lambda_init,
-            learn_lambda=learn_lambda,
-            relevance=relevance,
-            relevance_parametrisation=relevance_parametrisation,
-            roa_obs_layout=roa_obs_layout,
-            roa_operating_state=roa_operating_state,
-            roa_lyapunov_matrix=roa_lyapunov_matrix,
-            roa_rho_in=roa_rho_in,
-            roa_width_init=roa_width_init,
-            learn_width=learn_width,
-        )
+        self._init_hybrid(mlp, features_dim, hybrid_spec, hybrid_design)
         self.clip_output = bool(clip_output)
 
     @property
@@ -694,8 +544,16 @@ class LeocTD3Policy(NetworkOptionsMixin, TD3Policy):
         return actor
 
 
-#: The ``roa_*`` keyword arguments of the hybrid actors (:func:`roa_relevance_kwargs`).
-ROA_KWARG_NAMES = (
+#: Constructor keywords of the hybrid actors before :class:`~leoc.policies.HybridSpec` (models
+#: saved by leoc 0.1 until November 2026), read by :func:`hybrid_arguments` so they still load.
+LEGACY_HYBRID_KEYWORDS = (
+    "lqr_gain",
+    "lqr_bias",
+    "operating_obs",
+    "lambda_init",
+    "learn_lambda",
+    "relevance",
+    "relevance_parametrisation",
     "roa_obs_layout",
     "roa_operating_state",
     "roa_lyapunov_matrix",
@@ -705,33 +563,62 @@ ROA_KWARG_NAMES = (
 )
 
 
-def hybrid_actor_kwargs(
-    policy_kwargs: dict[str, Any],
-    *,
-    lqr_gain: object,
-    lqr_bias: object,
-    operating_obs: object,
-    lambda_init: float | Sequence[float],
-    learn_lambda: bool,
-    relevance: str,
-    relevance_parametrisation: str,
-) -> dict[str, Any]:
-    """The hybrid actor's keyword arguments of a hybrid policy, JSON-friendly.
+def _from_legacy_keywords(old: dict[str, Any]) -> dict[str, Any]:
+    """``hybrid_spec``/``hybrid_design`` dicts of a model saved with the keywords of
+    :data:`LEGACY_HYBRID_KEYWORDS` (the resolved ROA level is kept as it was saved)."""
+    spec = {
+        key: old[key]
+        for key in ("lambda_init", "learn_lambda", "relevance", "relevance_parametrisation")
+        if key in old
+    }
+    data = {}
+    if old.get("relevance") == "roa":
+        spec.update(width_init=old["roa_width_init"], learn_width=old["learn_width"])
+        data = {
+            "obs_layout": old["roa_obs_layout"],
+            "operating_state": old["roa_operating_state"],
+            "lyapunov_matrix": old["roa_lyapunov_matrix"],
+            "rho_in": old["roa_rho_in"],
+        }
+    design = {
+        "gain": old["lqr_gain"],
+        "bias": old["lqr_bias"],
+        "operating_obs": old["operating_obs"],
+        "relevance_data": data,
+    }
+    return {"hybrid_spec": HybridSpec.from_dict(spec).to_dict(), "hybrid_design": design}
 
-    The ``roa_*`` entries (:data:`ROA_KWARG_NAMES`) are *popped* from ``policy_kwargs`` (what is
-    left there is the SB3 policy's own); arrays become lists so that SB3 saves them with the
-    model.
+
+def hybrid_arguments(policy_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The hybrid actor's keywords (``hybrid_spec``, ``hybrid_design``, JSON-friendly dicts),
+    *popped* from a hybrid policy's keywords (what is left there is the SB3 policy's own).
+
+    Models saved before :class:`~leoc.policies.HybridSpec` existed give the keywords of
+    :data:`LEGACY_HYBRID_KEYWORDS` instead; they are converted.
+
+    Raises
+    ------
+    ValueError
+        If neither ``hybrid_spec`` and ``hybrid_design`` nor the legacy keywords are given.
     """
-    roa = {name: policy_kwargs.pop(name) for name in ROA_KWARG_NAMES if name in policy_kwargs}
+    legacy = {key: policy_kwargs.pop(key) for key in LEGACY_HYBRID_KEYWORDS if key in policy_kwargs}
+    if legacy and "hybrid_spec" in policy_kwargs:
+        raise ValueError(
+            f"policy_kwargs: {sorted(legacy)} belong in hybrid_spec or hybrid_design "
+            "(leoc.policies.HybridSpec, HybridDesign); found them beside hybrid_spec"
+        )
+    if legacy:
+        return _from_legacy_keywords(legacy)
+    missing = [key for key in ("hybrid_spec", "hybrid_design") if key not in policy_kwargs]
+    if missing:
+        raise ValueError(
+            f"policy_kwargs: a hybrid policy needs {', '.join(missing)} "
+            "(leoc.ddpg.hybrid_policy_kwargs builds them from a system); found none"
+        )
+    spec, design = policy_kwargs.pop("hybrid_spec"), policy_kwargs.pop("hybrid_design")
     return {
-        "lqr_gain": np.asarray(lqr_gain, dtype=np.float64).tolist(),
-        "lqr_bias": np.asarray(lqr_bias, dtype=np.float64).tolist(),
-        "operating_obs": np.asarray(operating_obs, dtype=np.float64).tolist(),
-        "lambda_init": lambda_init,
-        "learn_lambda": bool(learn_lambda),
-        "relevance": relevance,
-        "relevance_parametrisation": relevance_parametrisation,
-        **roa,
+        "hybrid_spec": spec.to_dict() if isinstance(spec, HybridSpec) else dict(spec),
+        "hybrid_design": design.to_dict() if isinstance(design, HybridDesign) else dict(design),
     }
 
 
@@ -748,10 +635,9 @@ class HybridTD3Policy(LeocTD3Policy):
         As for :class:`stable_baselines3.td3.policies.TD3Policy`.
     critic_action_layer, critic_action_units, hidden_init, last_layer_init
         See :class:`LeocTD3Policy`.
-    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance,
-    relevance_parametrisation, clip_output, roa_*, learn_width
+    hybrid_spec, hybrid_design, clip_output
         Passed to :class:`HybridActor` (see there); :func:`hybrid_policy_kwargs` builds them
-        from a system's LQR design (and, for ``relevance="roa"``, its certificate).
+        from a system's LQR design (and, for the ROA relevance, its certificate).
     """
 
     actor: HybridActor
@@ -763,29 +649,10 @@ class HybridTD3Policy(LeocTD3Policy):
         action_space: spaces.Box,
         lr_schedule: Any,
         *args: Any,
-        lqr_gain: object,
-        lqr_bias: object,
-        operating_obs: object,
-        lambda_init: float | Sequence[float] = 1.0,
-        learn_lambda: bool = True,
-        relevance: str = "paper",
-        relevance_parametrisation: str = "log_lambda",
         clip_output: bool = True,
         **kwargs: Any,
     ) -> None:
-        self.hybrid_kwargs = {
-            **hybrid_actor_kwargs(
-                kwargs,
-                lqr_gain=lqr_gain,
-                lqr_bias=lqr_bias,
-                operating_obs=operating_obs,
-                lambda_init=lambda_init,
-                learn_lambda=learn_lambda,
-                relevance=relevance,
-                relevance_parametrisation=relevance_parametrisation,
-            ),
-            "clip_output": bool(clip_output),
-        }
+        self.hybrid_kwargs = {**hybrid_arguments(kwargs), "clip_output": bool(clip_output)}
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
@@ -802,117 +669,44 @@ HybridDDPGPolicy = HybridTD3Policy
 """SB3's DDPG uses TD3's policy classes (with one critic); the hybrid policy is shared too."""
 
 
-def roa_relevance(kwargs: dict[str, Any], dtype: torch.dtype) -> ROARelevance:
-    """The :class:`~leoc.policies.ROARelevance` of :class:`HybridActor`'s ``roa_*`` kwargs."""
-    return ROARelevance(
-        [tuple(entry) for entry in kwargs["roa_obs_layout"]],
-        kwargs["roa_operating_state"],
-        kwargs["roa_lyapunov_matrix"],
-        kwargs["roa_rho_in"],
-        width_init=kwargs["roa_width_init"],
-        learn_width=kwargs["learn_width"],
-        dtype=dtype,
-    )
-
-
-def roa_relevance_kwargs(
-    system: Any,
-    design: Any,
-    rho_in_fraction: float = 1.0,
-    width_init: float = DEFAULT_ROA_WIDTH,
-    learn_width: bool = True,
-    certificate: Any = None,
-) -> dict[str, Any]:
-    """``roa_*`` kwargs of :class:`HybridActor` from a system, its LQR design and certificate.
-
-    Parameters
-    ----------
-    system : leoc.systems.System
-    design : LQRDesign
-        The design whose ``W, b`` the actor uses (its ``P`` defines V).
-    rho_in_fraction : float in (0, 1]
-        Flat top level ``rho_in = rho_in_fraction * rho``.
-    width_init, learn_width
-        See :class:`~leoc.policies.ROARelevance`.
-    certificate : LyapunovCertificate, optional
-        Default :func:`leoc.control.certify_lqr` of ``design`` (default options, seed 0).
-
-    Raises
-    ------
-    ValueError
-        If ``rho_in_fraction`` is outside (0, 1] or the design has no certificate (rho = 0).
-    """
-    from leoc.control import certify_lqr
-
-    if not 0.0 < rho_in_fraction <= 1.0:
-        raise ValueError(f"rho_in_fraction: expected a number in (0, 1], found {rho_in_fraction!r}")
-    certificate = certify_lqr(system, design) if certificate is None else certificate
-    if not certificate.certified:
-        raise ValueError(
-            f"relevance='roa': the LQR of {system.name} has no certified region of attraction "
-            f"(rho = 0, linear decrease {certificate.linear_decrease}); use relevance='paper'"
-        )
-    return {
-        "roa_obs_layout": system.observation.to_list(),
-        "roa_operating_state": np.asarray(system.operating_state, dtype=np.float64).tolist(),
-        "roa_lyapunov_matrix": np.asarray(design.P, dtype=np.float64).tolist(),
-        "roa_rho_in": float(rho_in_fraction * certificate.rho),
-        "roa_width_init": float(width_init),
-        "learn_width": bool(learn_width),
-    }
-
-
 def hybrid_policy_kwargs(
     system: Any,
-    lambda_init: float | Sequence[float] = 1.0,
-    learn_lambda: bool = True,
+    spec: HybridSpec | None = None,
     lqr_method: str = "discrete",
-    relevance: str = "paper",
-    relevance_parametrisation: str = "log_lambda",
     clip_output: bool = True,
-    rho_in_fraction: float = 1.0,
-    width_init: float = DEFAULT_ROA_WIDTH,
-    learn_width: bool = True,
     **extra: Any,
 ) -> dict[str, Any]:
-    """``policy_kwargs`` for :class:`HybridTD3Policy` from a system's LQR design.
+    r"""``policy_kwargs`` of :class:`HybridTD3Policy` (and :class:`~leoc.ddpg.HybridSACPolicy`)
+    from a system's LQR design.
 
     Parameters
     ----------
     system : leoc.systems.System or str
         The system (or its name); ``W, b`` come from :func:`leoc.control.design_lqr` and ``a``
         is ``system.operating_obs``.
-    lambda_init, learn_lambda, relevance_parametrisation, clip_output
-        See :class:`HybridActor`.
+    spec : HybridSpec, optional
+        The hybrid's choices; default :class:`~leoc.policies.HybridSpec` (the paper's
+        relevance, :math:`\Lambda = I` learned).
     lqr_method : {"discrete", "continuous", "authors"}
         LQR design method.
-    relevance : {"paper", "roa"}
-        The paper's relevance, or the ROA relevance flat on the LQR's certified set
-        (:func:`roa_relevance_kwargs`, with ``rho_in_fraction``, ``width_init``,
-        ``learn_width``).
+    clip_output : bool
+        See :class:`HybridActor`.
     **extra
-        Further policy kwargs (``net_arch``, ...).
+        Further policy kwargs (``net_arch``, ...). Keywords that name a
+        :class:`~leoc.policies.HybridSpec` field (``relevance="roa"``, ``learn_lambda=False``)
+        change ``spec`` (a shorthand for ``spec.replace(...)``).
     """
     from leoc.control import design_lqr
     from leoc.systems import make_system
 
     if isinstance(system, str):
         system = make_system(system)
-    if relevance not in RELEVANCE_KINDS:
-        raise ValueError(f"relevance: expected one of {RELEVANCE_KINDS}, found {relevance!r}")
+    changes = {key: extra.pop(key) for key in HybridSpec.field_names() if key in extra}
+    spec = (spec or HybridSpec()).replace(**changes)
     design = design_lqr(system, method=lqr_method)  # type: ignore[arg-type]
-    roa: dict[str, Any] = {}
-    if relevance == "roa":
-        roa = roa_relevance_kwargs(system, design, rho_in_fraction, width_init, learn_width)
     return {
-        "lqr_gain": design.W.tolist(),
-        "lqr_bias": design.b.tolist(),
-        "operating_obs": np.asarray(system.operating_obs, dtype=np.float64).tolist(),
-        "lambda_init": lambda_init,
-        "learn_lambda": learn_lambda,
-        "relevance": relevance,
-        "relevance_parametrisation": relevance_parametrisation,
+        "hybrid_spec": spec.to_dict(),
+        "hybrid_design": hybrid_design(spec, system, design).to_dict(),
         "clip_output": clip_output,
-        **roa,
         **extra,
     }

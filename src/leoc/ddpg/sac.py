@@ -89,7 +89,6 @@ Classical Control Theory", L4DC 2021, eq. 4-5.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import torch
@@ -105,11 +104,10 @@ from leoc.ddpg.noise import exploration_noise
 from leoc.ddpg.policies import (
     HybridActorMixin,
     NetworkOptionsMixin,
-    check_hybrid_options,
-    hybrid_actor_kwargs,
+    hybrid_arguments,
     hybrid_policy_kwargs,
 )
-from leoc.policies.relevance import DEFAULT_ROA_WIDTH
+from leoc.policies.spec import HybridDesign, HybridSpec
 
 __all__ = [
     "HybridSACActor",
@@ -199,9 +197,7 @@ class HybridSACActor(HybridActorMixin, SACActor):
     use_sde : bool
         Must be False: gSDE clips SAC's mean to ``+/- clip_mean``, which would move
         :math:`\mu(a)` off :math:`\operatorname{atanh}\tilde G(a)`.
-    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance,
-    relevance_parametrisation, roa_obs_layout, roa_operating_state, roa_lyapunov_matrix,
-    roa_rho_in, roa_width_init, learn_width
+    hybrid_spec, hybrid_design
         The hybrid, as for :class:`~leoc.ddpg.HybridActor`.
 
     Attributes
@@ -235,22 +231,10 @@ class HybridSACActor(HybridActorMixin, SACActor):
         clip_mean: float = 2.0,
         normalize_images: bool = True,
         *,
-        lqr_gain: object,
-        lqr_bias: object,
-        operating_obs: object,
-        lambda_init: float | Sequence[float] = 1.0,
-        learn_lambda: bool = True,
-        relevance: str = "paper",
-        relevance_parametrisation: str = "log_lambda",
-        roa_obs_layout: Sequence[Sequence[Any]] | None = None,
-        roa_operating_state: Sequence[float] | None = None,
-        roa_lyapunov_matrix: Sequence[Sequence[float]] | None = None,
-        roa_rho_in: float | None = None,
-        roa_width_init: float = DEFAULT_ROA_WIDTH,
-        learn_width: bool = True,
+        hybrid_spec: HybridSpec | dict[str, Any],
+        hybrid_design: HybridDesign | dict[str, Any],
     ) -> None:
         _check_no_sde(use_sde)
-        check_hybrid_options(relevance, relevance_parametrisation)
         super().__init__(
             observation_space,
             action_space,
@@ -269,23 +253,7 @@ class HybridSACActor(HybridActorMixin, SACActor):
         # the hidden layers and the mean head live on in hybrid.nonlinear (one copy each in the
         # state_dict); the log-std head stays where SB3 put it
         del self.latent_pi, self.mu
-        self._init_hybrid(
-            nonlinear,
-            features_dim,
-            lqr_gain=lqr_gain,
-            lqr_bias=lqr_bias,
-            operating_obs=operating_obs,
-            lambda_init=lambda_init,
-            learn_lambda=learn_lambda,
-            relevance=relevance,
-            relevance_parametrisation=relevance_parametrisation,
-            roa_obs_layout=roa_obs_layout,
-            roa_operating_state=roa_operating_state,
-            roa_lyapunov_matrix=roa_lyapunov_matrix,
-            roa_rho_in=roa_rho_in,
-            roa_width_init=roa_width_init,
-            learn_width=learn_width,
-        )
+        self._init_hybrid(nonlinear, features_dim, hybrid_spec, hybrid_design)
 
     @property
     def nonlinear(self) -> SquashedMean:
@@ -360,8 +328,7 @@ class HybridSACPolicy(LeocSACPolicy):
     ----------
     observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
         As for :class:`stable_baselines3.sac.policies.SACPolicy`.
-    lqr_gain, lqr_bias, operating_obs, lambda_init, learn_lambda, relevance,
-    relevance_parametrisation, roa_*, learn_width
+    hybrid_spec, hybrid_design
         Passed to :class:`HybridSACActor`.
     clip_output : bool
         Accepted so that one ``policy_kwargs`` serves every hybrid; must be True (the squash
@@ -381,13 +348,6 @@ class HybridSACPolicy(LeocSACPolicy):
         action_space: spaces.Box,
         lr_schedule: Any,
         *args: Any,
-        lqr_gain: object,
-        lqr_bias: object,
-        operating_obs: object,
-        lambda_init: float | Sequence[float] = 1.0,
-        learn_lambda: bool = True,
-        relevance: str = "paper",
-        relevance_parametrisation: str = "log_lambda",
         clip_output: bool = True,
         **kwargs: Any,
     ) -> None:
@@ -397,17 +357,7 @@ class HybridSACPolicy(LeocSACPolicy):
                 f"found {clip_output!r}"
             )
         _check_no_sde(kwargs.get("use_sde", False))
-        check_hybrid_options(relevance, relevance_parametrisation)
-        self.hybrid_kwargs = hybrid_actor_kwargs(
-            kwargs,
-            lqr_gain=lqr_gain,
-            lqr_bias=lqr_bias,
-            operating_obs=operating_obs,
-            lambda_init=lambda_init,
-            learn_lambda=learn_lambda,
-            relevance=relevance,
-            relevance_parametrisation=relevance_parametrisation,
-        )
+        self.hybrid_kwargs = hybrid_arguments(kwargs)
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
 
     def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridSACActor:
@@ -563,7 +513,9 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
     policy: Any = LeocSACPolicy  # SB3's SACPolicy when the network options are its defaults
     if config.hybrid:
         policy = HybridSACPolicy
-        policy_kwargs = hybrid_policy_kwargs(system, **config.hybrid_kwargs(), **policy_kwargs)
+        policy_kwargs = hybrid_policy_kwargs(
+            system, config.hybrid, config.lqr_method, **policy_kwargs
+        )
     return LeocSAC(
         policy,
         env,

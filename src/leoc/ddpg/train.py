@@ -47,6 +47,8 @@ from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
 from leoc.ddpg.sac import LeocSAC, build_sac_model
 from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
+from leoc.policies.spec import HybridSpec, legacy_hybrid_config
+from leoc.systems.base import System
 from leoc.training import (
     CONFIG_FILE,
     CURVE_CSV,
@@ -70,7 +72,7 @@ __all__ = [
     "train_ddpg",
 ]
 
-DEFAULT_RUN_ROOT = Path("runs") / "ddpg"
+DEFAULT_RUN_ROOT = Path("runs")
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
 #: What a run writes beside its models (:func:`leoc.training.write_curve`).
 RUN_OUTPUTS = (CURVE_JSON, CURVE_CSV, CURVE_PNG)
@@ -100,8 +102,9 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
         policy = HybridTD3Policy
         policy_kwargs = hybrid_policy_kwargs(
             system,
+            config.hybrid,
+            config.lqr_method,
             clip_output=config.actor_output_clip,
-            **config.hybrid_kwargs(),
             **policy_kwargs,
         )
     common: dict[str, Any] = {
@@ -149,9 +152,9 @@ def _versions() -> dict[str, str]:
 
 
 def train_ddpg(
-    system: str,
+    system: str | System,
     algo: str = "ddpg",
-    hybrid: bool = False,
+    hybrid: bool | HybridSpec | None = None,
     seed: int = 0,
     run_dir: str | Path | None = None,
     total_steps: int | None = None,
@@ -165,20 +168,23 @@ def train_ddpg(
 
     Parameters
     ----------
-    system : str
-        ``pendulum``, ``cartpole`` or ``mountaincar``.
+    system : str or leoc.systems.System
+        A system name, or the system itself (built once by the caller; it steps under the
+        config's ``step_rules``).
     algo : {"ddpg", "td3", "sac"}
         SAC's settings start from :data:`~leoc.ddpg.SAC_DEFAULTS`; its budgets are
         DDPG's.
-    hybrid : bool
-        LEOC hybrid actor (LQR blended with the MLP) instead of the plain MLP (for SAC: the
-        hybrid squashed mean, :mod:`leoc.ddpg.sac`).
+    hybrid : HybridSpec, bool or None
+        The LEOC hybrid actor (LQR blended with the MLP) that this
+        :class:`~leoc.policies.HybridSpec` describes (``True``: the default spec) instead of
+        the plain MLP (for SAC: the hybrid squashed mean, :mod:`leoc.ddpg.sac`).
     seed : int
         The only seed: SB3 (torch, numpy, random, action space; SAC's Gaussian samples),
         training env, exploration noise (``seed + 20000``, DDPG/TD3) and evaluation starts
         (``seed + 10000 + k``).
     run_dir : str or Path, optional
-        Output folder; default ``runs/ddpg/{system}-{algo}-{hybrid|baseline}-seed{seed}``.
+        Output folder; default ``runs/SYSTEM/ALGO_KIND/seedN``
+        (:func:`leoc.experiments.layout.default_run_dir`'s scheme).
     total_steps : int, optional
         Environment steps; default per system (:data:`~leoc.ddpg.TOTAL_STEPS_BY_SYSTEM`: 10k
         for the pendulum, 21k for the cart-pole, 20k for the mountain car).
@@ -201,7 +207,8 @@ def train_ddpg(
     checkpoint_interval : int
         Environment steps between checkpoints (:mod:`leoc.ddpg.checkpoint`).
     **overrides
-        Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...).
+        Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...)
+        or :class:`~leoc.policies.HybridSpec` field (changing ``hybrid``).
 
     Returns
     -------
@@ -212,18 +219,18 @@ def train_ddpg(
     ValueError
         On an unknown ``algo`` or system, or a setting ``algo`` does not use (naming it).
     """
-    from leoc.systems import StepRules, make_env, make_system
+    from leoc.systems import StepRules, make_system
 
+    name = system if isinstance(system, str) else system.name
     if total_steps is not None:
         overrides["total_steps"] = total_steps
-    config = DDPGConfig.for_system(system, algo, hybrid=hybrid, **overrides)
-    kind = "hybrid" if hybrid else "baseline"
-    run_path = Path(run_dir or DEFAULT_RUN_ROOT / f"{system}-{algo}-{kind}-seed{seed}")
+    config = DDPGConfig.for_system(name, algo, hybrid=hybrid, **overrides)
+    kind = "hybrid" if config.hybrid else "baseline"
+    run_path = Path(run_dir or DEFAULT_RUN_ROOT / name / f"{algo}_{kind}" / f"seed{seed}")
     config_dict = {**config.as_dict(), "seed": seed}
-    checkpoint_path = run_path / CHECKPOINT_FILE
     resumed = None
-    if same_run(run_path, config_dict, overwrite):
-        resumed = load_checkpoint(checkpoint_path, label=algo)
+    if same_run(run_path, config_dict, overwrite, normalise=legacy_hybrid_config):
+        resumed = load_checkpoint(run_path / CHECKPOINT_FILE, label=algo)
         # a finished run is returned as it is, unless callbacks must watch it train (they would
         # see nothing): then it trains again, to the same result (runs are deterministic)
         reusable = resumed is None and not callbacks
@@ -232,33 +239,71 @@ def train_ddpg(
             if progress:
                 print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
             return done
-    # the edge: the config's name, resolved once, stepping under the config's rules
-    system_obj = make_system(system).with_rules(StepRules(**config.step_rules))
-    if resumed is None:
-        env = make_env(system_obj)
-        model = build_model(config, seed, env)  # may refuse the config: nothing written yet
-        run_path.mkdir(parents=True, exist_ok=True)
-        # a fresh run (new, or replacing another with --overwrite) keeps nothing of an earlier
-        # one: an old controller beside the new config would read as this run, complete
-        for stale in (CHECKPOINT_FILE, *MODEL_FILES.values(), *RUN_OUTPUTS):
-            (run_path / stale).unlink(missing_ok=True)
-        write_text_atomic(
-            run_path / CONFIG_FILE,
-            json.dumps({**config_dict, "versions": _versions()}, indent=2),
-        )
-    else:
-        model = resumed["model"]
-        env = model.get_env()
+    # the edge: the system, resolved once, stepping under the config's rules
+    plant = make_system(name) if isinstance(system, str) else system
+    plant = plant.with_rules(StepRules(**config.step_rules))
+    model = _start_model(config, config_dict, seed, plant, run_path, resumed, progress)
+    return _learn(
+        model, config, config_dict, seed, plant, run_path, resumed, progress, callbacks,
+        checkpoint_interval,
+    )  # fmt: skip
+
+
+def _start_model(
+    config: DDPGConfig,
+    config_dict: dict[str, Any],
+    seed: int,
+    plant: System,
+    run_path: Path,
+    resumed: Any,
+    progress: bool | str,
+) -> Any:
+    """The model to train: the checkpoint's (``resumed``), or a fresh one, written in a
+    cleared run folder with its ``config.json``."""
+    from leoc.systems import make_env
+
+    algo = config.algo
+    if resumed is not None:
         if progress:
             print(
                 f"[{algo}] resuming {run_path} from its checkpoint at step {resumed['steps']}",
                 flush=True,
             )
+        return resumed["model"]
+    model = build_model(config, seed, make_env(plant))  # may refuse the config: nothing written
+    run_path.mkdir(parents=True, exist_ok=True)
+    # a fresh run (new, or replacing another with --overwrite) keeps nothing of an earlier
+    # one: an old controller beside the new config would read as this run, complete
+    for stale in (CHECKPOINT_FILE, *MODEL_FILES.values(), *RUN_OUTPUTS):
+        (run_path / stale).unlink(missing_ok=True)
+    write_text_atomic(
+        run_path / CONFIG_FILE,
+        json.dumps({**config_dict, "versions": _versions()}, indent=2),
+    )
+    return model
+
+
+def _learn(
+    model: Any,
+    config: DDPGConfig,
+    config_dict: dict[str, Any],
+    seed: int,
+    plant: System,
+    run_path: Path,
+    resumed: Any,
+    progress: bool | str,
+    callbacks: Sequence[BaseCallback],
+    checkpoint_interval: int,
+) -> DDPGResult:
+    """Train ``model`` to ``config.total_steps`` with the learning-curve and checkpoint
+    callbacks, then save the controller and the curve (the run is complete)."""
+    algo = config.algo
+    env = model.get_env() if resumed is not None else model.env
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger
     model.set_logger(Logger(folder=None, output_formats=[]))
     callback = LearningCurveCallback(
-        system_obj,
-        evaluation_starts(system_obj, seed, config.eval_episodes),
+        plant,
+        evaluation_starts(plant, seed, config.eval_episodes),
         config.eval_interval,
         save_best=lambda m: _atomic_save_model(m, run_path / MODEL_FILES["best"]),
         progress=progress,
@@ -269,6 +314,7 @@ def train_ddpg(
         ),
         label=algo,
     )
+    checkpoint_path = run_path / CHECKPOINT_FILE
     checkpoint = CheckpointCallback(
         checkpoint_path, checkpoint_interval, (*callbacks, callback), resumed
     )
@@ -280,13 +326,14 @@ def train_ddpg(
     )
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
     env.close()
-
     summary = {
-        **curve_summary(callback.curve, system_obj.dt),
+        **curve_summary(callback.curve, plant.dt),
         "model_selection": config.model_selection,
         "selected_steps": callback.selected_steps,
     }
-    write_curve(run_path, callback.curve, summary, f"{system} {algo.upper()} {kind} (seed {seed})")
+    kind = "hybrid" if config.hybrid else "baseline"
+    title = f"{config.system} {algo.upper()} {kind} (seed {seed})"
+    write_curve(run_path, callback.curve, summary, title)
     checkpoint_path.unlink(missing_ok=True)  # the run is complete: model.zip and curve.json
     return TrainResult(
         physical_policy(model.actor), run_path, callback.curve, config_dict, summary, model

@@ -137,6 +137,7 @@ from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, 
 from leoc.experiments.variants import AUTHORS
 from leoc.io import read_json_object, write_json_atomic
 from leoc.names import controller_framework
+from leoc.policies.spec import HybridSpec
 from leoc.systems.base import DEFAULT_RULES
 
 #: The settings of the grid, in table order (see the module docstring).
@@ -612,7 +613,8 @@ def switched_fields() -> set[str]:
     fields = {"step_rules"}
     for system in ABLATION_SYSTEMS:
         for hybrid in (False, True):
-            defaults = DDPGConfig.for_system(system, hybrid=hybrid).as_dict()
+            # the hybrid's fields (HybridSpec) at their defaults beside the config's own
+            defaults = {**HybridSpec().to_dict(), **DDPGConfig.for_system(system).as_dict()}
             for setting in ALL_SETTINGS:
                 for name, value in setting_overrides(setting, system, hybrid).items():
                     if _json_form(value) != _json_form(defaults[name]):

@@ -10,20 +10,30 @@ from typing import Any
 
 from leoc.control.lqr import DesignMethod
 from leoc.pilco.gp import GPSettings
-from leoc.policies.relevance import RELEVANCE_KINDS
+from leoc.policies.spec import (
+    HybridSpec,
+    as_hybrid_spec,
+    legacy_hybrid_config,
+    with_hybrid_overrides,
+)
 
 
 @dataclasses.dataclass
 class PilcoConfig:
-    """Settings of one PILCO run (defaults: the paper's appendix C and the original PILCO).
+    r"""Settings of one PILCO run (defaults: the paper's appendix C and the original PILCO).
 
     Attributes
     ----------
     system : str
         A registered system name (``pendulum``, ``cartpole``, ``mountaincar``, ``acrobot``, or
         a user's).
-    hybrid : bool
-        Train the LEOC hybrid (RBF + LQR) instead of the RBF baseline.
+    hybrid : HybridSpec or None
+        Train the LEOC hybrid (RBF + LQR) this :class:`~leoc.policies.HybridSpec` describes
+        (relevance design, its parameters, what is optimised with the RBF parameters; ``True``:
+        the default spec) instead of the RBF baseline (None). The paper's relevance is held as
+        :math:`\log\lambda` (``relevance_parametrisation="log_lambda"``); the ROA relevance
+        is 1 on the certified region of attraction of the LQR at the controller's period
+        (:func:`leoc.policies.roa_hybrid`).
     seed : int
         Seeds the numpy and torch generators (everything random derives from it).
     iterations : int
@@ -52,14 +62,6 @@ class PilcoConfig:
         ``quadrature``, or a heuristic with r frozen at the mean observation:
         ``constant_relevance`` (a fixed blend) or ``mixture`` (a two-component mixture); see
         :mod:`leoc.pilco.propagate`.
-    lambda_init : float
-        Initial diagonal of the hybrid's Lambda (paper: identity).
-    learn_lambda : bool
-        Optimise Lambda (paper relevance) or the transition width (ROA relevance) with the RBF
-        parameters.
-    relevance : {"paper", "roa"}
-        The hybrid's relevance: the paper's r(x) = 1 / (1 + d)^2, or exactly 1 on the certified
-        region of attraction of the LQR at ``action_repeat`` (:func:`leoc.policies.roa_hybrid`).
     gp : GPSettings
         GP fitting settings (sparse beyond ``gp.max_full_points`` data).
     num_threads : int or None
@@ -101,7 +103,7 @@ class PilcoConfig:
     """
 
     system: str = "pendulum"
-    hybrid: bool = False
+    hybrid: HybridSpec | None = None
     seed: int = 0
     iterations: int = 10
     horizon: int = 40
@@ -114,9 +116,6 @@ class PilcoConfig:
     eval_episodes: int = 5
     quadrature_order: int = 5
     hybrid_method: str = "quadrature"
-    lambda_init: float = 1.0
-    learn_lambda: bool = True
-    relevance: str = "paper"
     gp: GPSettings = dataclasses.field(default_factory=GPSettings)
     num_threads: int | None = None
     stop_after_held: int = 0
@@ -140,6 +139,8 @@ class PilcoConfig:
 
         if name not in SYSTEM_DEFAULTS and name not in system_names():
             raise ValueError(f"system: expected one of {system_names()}, found {name!r}")
+        overrides = dict(overrides)
+        hybrid = with_hybrid_overrides(overrides.pop("hybrid", None), overrides)
         gp_fields = {f.name for f in dataclasses.fields(GPSettings)}
         gp_over = {k[3:]: v for k, v in overrides.items() if k.startswith("gp_")}
         unknown = set(gp_over) - gp_fields
@@ -151,7 +152,7 @@ class PilcoConfig:
         if isinstance(gp, dict):
             gp = GPSettings(**gp)
         gp = dataclasses.replace(gp or GPSettings(), **gp_over)
-        return cls(system=name, gp=gp, **{**SYSTEM_DEFAULTS.get(name, {}), **own})
+        return cls(system=name, gp=gp, hybrid=hybrid, **{**SYSTEM_DEFAULTS.get(name, {}), **own})
 
     def __post_init__(self) -> None:
         for name in (
@@ -177,7 +178,7 @@ class PilcoConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")
-        for name in ("cost_width", "lambda_init"):
+        for name in ("cost_width",):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not 0 < value < math.inf:
                 raise ValueError(f"{name}: expected a positive number, found {value!r}")
@@ -189,9 +190,12 @@ class PilcoConfig:
             StepRules(**self.step_rules)
         except TypeError as error:
             raise ValueError(f"step_rules: {error}") from error
-        if self.relevance not in RELEVANCE_KINDS:
+        self.hybrid = as_hybrid_spec(self.hybrid)
+        if self.hybrid is not None and self.hybrid.relevance_parametrisation != "log_lambda":
             raise ValueError(
-                f"relevance: expected one of {RELEVANCE_KINDS}, found {self.relevance!r}"
+                "relevance_parametrisation: PILCO's hybrid holds the paper's relevance as "
+                f"log lambda; expected 'log_lambda', found "
+                f"{self.hybrid.relevance_parametrisation!r}"
             )
         methods = typing.get_args(DesignMethod)
         if self.lqr_method not in methods:
@@ -216,13 +220,16 @@ class PilcoConfig:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The settings as plain data (JSON-ready), nested ``gp`` included."""
-        return dataclasses.asdict(self)
+        """The settings as plain data (JSON-ready), nested ``gp`` and ``hybrid`` included."""
+        data = dataclasses.asdict(self)
+        data["hybrid"] = None if self.hybrid is None else self.hybrid.to_dict()
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PilcoConfig:
-        """Inverse of :meth:`to_dict`."""
-        data = dict(data)
+        """Inverse of :meth:`to_dict` (a config saved before :class:`~leoc.policies.HybridSpec`,
+        with ``hybrid`` a bool and the hybrid's fields beside it, is read into its spec)."""
+        data = legacy_hybrid_config(data)
         data["gp"] = GPSettings(**data["gp"])
         return cls(**data)
 

@@ -11,7 +11,8 @@ from torch import nn
 
 from leoc.pilco.config import PilcoConfig
 from leoc.pilco.propagate import SaturatedPolicy
-from leoc.policies import HybridPolicy, LinearController, RBFNetwork, roa_hybrid
+from leoc.policies import RBFNetwork
+from leoc.policies.spec import build_hybrid, hybrid_design
 from leoc.systems.base import DTYPE, System
 
 # Initial RBF weights: standard deviation as a fraction of the actuator limit.
@@ -52,14 +53,11 @@ def build_policy(
     design = design_lqr(
         system, method=config.lqr_method, action_repeat=config.controller_action_repeat
     )
-    if config.relevance == "roa":
-        return roa_hybrid(system, design, rbf, learn_width=config.learn_lambda, saturation="sin")
-    return HybridPolicy(
-        LinearController(design.W, design.b),
+    spec = config.hybrid
+    return build_hybrid(
+        spec,
+        hybrid_design(spec, system, design, saturation="sin", action_limit=limit),
         rbf,
-        operating_point=system.operating_obs,
-        lambda_init=config.lambda_init,
-        learn_lambda=config.learn_lambda,
         action_limit=limit,
         saturation="sin",
     )

@@ -7,7 +7,7 @@ operating point a (Zhang & Capel, L4DC 2021).
 """
 
 from .held import HeldPolicy, lqr_controller, with_control_period
-from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy, roa_hybrid
+from .hybrid import SMOOTH_SATURATION_ATOL, HybridOutput, HybridPolicy
 from .linear import LinearController
 from .mlp import DEFAULT_HIDDEN_SIZES, MLPActor
 from .rbf import RBFNetwork
@@ -22,17 +22,29 @@ from .relevance import (
     paper_relevance,
 )
 from .saturation import SATURATION_MODES, saturate
+from .spec import (
+    RELEVANCE_DESIGNS,
+    HybridDesign,
+    HybridSpec,
+    RelevanceDesign,
+    build_hybrid,
+    hybrid_design,
+    roa_hybrid,
+)
 
 __all__ = [
     "DEFAULT_HIDDEN_SIZES",
     "DEFAULT_ROA_WIDTH",
+    "RELEVANCE_DESIGNS",
     "RELEVANCE_KINDS",
     "RELEVANCE_PARAMETRISATIONS",
     "SATURATION_MODES",
     "SMOOTH_SATURATION_ATOL",
     "HeldPolicy",
+    "HybridDesign",
     "HybridOutput",
     "HybridPolicy",
+    "HybridSpec",
     "LinearController",
     "MLPActor",
     "ObservationDeviation",
@@ -40,6 +52,9 @@ __all__ = [
     "PrecisionRelevance",
     "ROARelevance",
     "RBFNetwork",
+    "RelevanceDesign",
+    "build_hybrid",
+    "hybrid_design",
     "lqr_controller",
     "paper_relevance",
     "roa_hybrid",

@@ -71,7 +71,7 @@ from ._checks import (
     shape_str,
 )
 from .linear import LinearController
-from .relevance import DEFAULT_ROA_WIDTH, ROARelevance, paper_relevance
+from .relevance import paper_relevance
 from .saturation import apply_saturation, check_saturation_mode
 
 __all__ = [
@@ -80,7 +80,6 @@ __all__ = [
     "HybridPolicy",
     "SMOOTH_SATURATION_ATOL",
     "lqr_certificate",
-    "roa_hybrid",
     "saturated_lqr",
 ]
 
@@ -141,7 +140,8 @@ class HybridPolicy(nn.Module):
     relevance : nn.Module, optional
         A relevance module mapping (..., D) to (..., 1) with :math:`r(a) = 1` exactly (checked),
         e.g. :class:`~leoc.policies.ROARelevance` (flat on the LQR's certified region of
-        attraction; see :func:`roa_hybrid`). Registered as ``relevance_module``. ``None``
+        attraction; see :func:`~leoc.policies.roa_hybrid`). Registered as
+        ``relevance_module``. ``None``
         (default): the paper's :math:`r = (1 + d)^{-2}` with ``log_lambda`` on the policy
         itself, so state dicts saved before relevance modules existed still load.
 
@@ -387,93 +387,6 @@ class HybridPolicy(nn.Module):
         )
 
 
-def roa_hybrid(
-    system: Any,
-    design: Any,
-    nonlinear: nn.Module,
-    certificate: Any = None,
-    rho_in: float | None = None,
-    rho_in_fraction: float = 1.0,
-    width_init: float = DEFAULT_ROA_WIDTH,
-    learn_width: bool = True,
-    action_limit: float | None = None,
-    saturation: str = "clip",
-    **certify_options: Any,
-) -> HybridPolicy:
-    r"""A :class:`HybridPolicy` whose relevance is 1 on the LQR's certified region of attraction.
-
-    One line for either framework, e.g. PILCO's
-    ``roa_hybrid(system, design_lqr(system, action_repeat=3), rbf, saturation="sin")``
-    (wrap it in :class:`~leoc.policies.HeldPolicy` to run it at the design's period).
-
-    Parameters
-    ----------
-    system : leoc.systems.System
-    design : LQRDesign
-        The linear part :math:`G(o) = W o + b` and the Lyapunov matrix :math:`P`, for the
-        control period the hybrid runs at (``design.action_repeat``).
-    nonlinear : nn.Module
-        :math:`H`, (..., D) -> (..., F), float64.
-    certificate : LyapunovCertificate, optional
-        Default: :func:`leoc.control.certify_lqr` of the closed loop
-        :math:`\operatorname{sat}(G)` with this hybrid's saturation and the design's period
-        (``certify_options`` passed on). A given certificate must be for ``design.P`` at
-        ``design.action_repeat``.
-    rho_in : float, optional
-        Level of the flat top, ``0 < rho_in <= rho``; default ``rho_in_fraction * rho``.
-    rho_in_fraction : float in (0, 1]
-    width_init, learn_width
-        See :class:`~leoc.policies.ROARelevance`.
-    action_limit : float, optional
-        Default ``system.action_limit``.
-    saturation : {"clip", "sin", "tanh"}
-        The hybrid's saturation (the certificate is for the same one).
-
-    Raises
-    ------
-    ValueError
-        If the certificate does not match the design, has no certified set, or ``rho_in`` is
-        not in (0, rho].
-    """
-    limit = float(system.action_limit if action_limit is None else action_limit)
-    linear = LinearController(design.W, design.b)
-    if certificate is None:
-        certificate = lqr_certificate(system, design, saturation, limit, **certify_options)
-    elif certificate.action_repeat != design.action_repeat or not np.array_equal(
-        certificate.P, design.P
-    ):
-        raise ValueError(
-            f"certificate: expected one for design.P at action_repeat={design.action_repeat}, "
-            f"found action_repeat={certificate.action_repeat} and a different P"
-        )
-    if not certificate.certified:
-        raise ValueError(
-            f"certificate: the LQR has no certified region of attraction (rho = 0, linear "
-            f"decrease {certificate.linear_decrease})"
-        )
-    level = rho_in_fraction * certificate.rho if rho_in is None else float(rho_in)
-    if not 0.0 < level <= certificate.rho:
-        raise ValueError(
-            f"rho_in: expected a level in (0, rho = {certificate.rho:.6g}], found {level!r}"
-        )
-    relevance = ROARelevance(
-        system.obs_layout,
-        system.operating_state,
-        design.P,
-        level,
-        width_init=width_init,
-        learn_width=learn_width,
-    )
-    return HybridPolicy(
-        linear,
-        nonlinear,
-        system.operating_obs,
-        action_limit=limit,
-        saturation=saturation,
-        relevance=relevance,
-    )
-
-
 ACTUATOR_CLIPS = ("clip", "none")
 """Saturations of G that are the actuator's own clip (the step clips every action to
 ``system.action_limit``), so that the saturated LQR is the design's plain ``G``."""
@@ -525,8 +438,8 @@ def lqr_certificate(
     **certify_options: Any,
 ) -> Any:
     r"""Certificate (:func:`leoc.control.certify_lqr`) of :func:`saturated_lqr` at the design's
-    period: the region of attraction an ROA hybrid is flat on (:func:`roa_hybrid`; a DDPG/TD3/SAC
-    hybrid's is the ``clip`` case, :func:`leoc.ddpg.policies.roa_relevance_kwargs`), and the one
+    period: the region of attraction an ROA hybrid is flat on (:func:`~leoc.policies.roa_hybrid`;
+    a DDPG/TD3/SAC hybrid's is the ``clip`` case, :func:`leoc.policies.hybrid_design`), and the one
     ``leoc roa --controller`` certifies for a trained run.
 
     ``clip``/``none`` at the system's limit is the design's own certificate (cached per process);
