@@ -201,6 +201,12 @@ def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
     assert names.ABLATION_SYSTEM_NAMES == ablation.ABLATION_SYSTEMS
     assert names.BACKEND_NAMES == sweep.BACKENDS
     assert names.METRIC_SET_NAMES == tuple(METRIC_SETS)
+    from leoc.learners import get_learner, learner_names
+    from leoc.policies import RELEVANCE_DESIGNS
+
+    assert names.LEARNER_NAMES == learner_names()
+    assert set(names.FRAMEWORKS) == {get_learner(name).settings_of for name in learner_names()}
+    assert names.RELEVANCE_NAMES == tuple(RELEVANCE_DESIGNS)
     for name, (env_id, entry_point) in names.BUILTIN_ENV_IDS.items():
         assert gym.registry[env_id].max_episode_steps == make_system(name).episode_steps
         if name in envs.BUILTIN_ENVS:

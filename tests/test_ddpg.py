@@ -552,8 +552,8 @@ def test_roa_training_step_reaches_width_and_network_and_round_trips(tmp_path):
     probe = _roa_band_obs(model, system, 16, 0.5, 2.5)
     with torch.no_grad():
         torch.testing.assert_close(loaded.actor(probe), model.actor(probe), rtol=0, atol=0)
-    config = DDPGConfig.for_system("pendulum", relevance="roa")
-    assert DDPGConfig.from_dict(config.as_dict()).relevance == "roa"
+    config = DDPGConfig.for_system("pendulum", hybrid=True, relevance="roa")
+    assert DDPGConfig.from_dict(config.as_dict()).hybrid.relevance == "roa"
     with pytest.raises(ValueError, match="relevance: expected one of"):
         DDPGConfig.for_system("pendulum", relevance="flat")
 

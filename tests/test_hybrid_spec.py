@@ -727,12 +727,6 @@ def test_config_for_system_with_spec_fields():
     assert PilcoConfig.for_system("pendulum", relevance_parametrisation="precision").hybrid is None
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="spec.py checks relevance_parametrisation only when relevance='paper' and "
-    "rho_in_fraction, width_init only when relevance='roa': a bad value of the other design's "
-    "field is kept in the spec (and saved), and a baseline's is dropped unchecked",
-)
 @pytest.mark.parametrize(
     "fields",
     [

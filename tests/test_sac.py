@@ -692,7 +692,8 @@ def test_sac_controllers_are_named_but_not_default():
     for name in ("sac_baseline", "sac_hybrid", "sac_hybrid_roa"):
         assert name in CONTROLLERS and name not in DEFAULT_CONTROLLERS
     spec = RunSpec("cartpole", "sac_hybrid_roa", 1)
-    assert (spec.framework, spec.hybrid, spec.relevance) == ("sac", True, "roa")
+    controller = spec.controller_spec
+    assert (controller.learner, controller.hybrid.relevance) == ("sac", "roa") and spec.hybrid
     assert LINEAR_REFERENCE["sac"] == "linear"
 
 

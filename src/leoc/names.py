@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib.abc
 import importlib.machinery
 import sys
-from typing import Any
+from typing import Any, NamedTuple
 
 PAPER_SYSTEM_NAMES = ("pendulum", "cartpole", "mountaincar")
 """The paper's three benchmark systems (what ``leoc reproduce`` runs by default)."""
@@ -41,15 +41,83 @@ CONTROLLERS = (
     "pilco_hybrid_roa",
 )
 """Every controller ``leoc reproduce`` knows, in report order."""
+LEARNER_NAMES = ("pilco", "ddpg", "td3", "sac")
+"""leoc's learners (``leoc.learners.learner_names()``, registration order): ``leoc train
+--algo``'s choices."""
 FRAMEWORKS = ("ddpg", "sac", "pilco")
 """The learners of ``leoc reproduce``'s trained controllers (each controller's name starts with
 one), in report order."""
 
 
+LINEAR = "linear"
+"""The learner name of the linear references (designed, not trained)."""
+CONTROLLER_KINDS = {"baseline": None, "hybrid": "paper", "hybrid_roa": "roa"}
+"""A trained controller's name is ``LEARNER_KIND``: each kind and its hybrid's relevance (None:
+the learned policy alone). A relevance design of another name ``X`` is the kind ``hybrid_X``."""
+HYBRID_KIND = "hybrid"
+
+
+class ControllerName(NamedTuple):
+    """What a controller name says (:func:`parse_controller`): the one reading of the names of
+    ``leoc reproduce``'s controllers, run folders and the report.
+
+    Attributes
+    ----------
+    learner : str
+        A learner (``ddpg``, ``td3``, ``sac``, ``pilco``, or one registered) or ``linear``.
+    relevance : str or None
+        The hybrid's relevance design (``paper``, ``roa``), None for a baseline or an LQR.
+    period_of : str or None
+        A linear reference's control period: that of this learner (``linear_pilco``: PILCO's);
+        None: every simulator step.
+    """
+
+    learner: str
+    relevance: str | None = None
+    period_of: str | None = None
+
+    @property
+    def hybrid(self) -> bool:
+        """Whether the name is a hybrid's."""
+        return self.relevance is not None
+
+    @property
+    def name(self) -> str:
+        """The controller name again (:func:`parse_controller`'s inverse)."""
+        if self.learner == LINEAR:
+            return LINEAR if self.period_of is None else f"{LINEAR}_{self.period_of}"
+        kinds = (k for k, relevance in CONTROLLER_KINDS.items() if relevance == self.relevance)
+        return f"{self.learner}_{next(kinds, f'{HYBRID_KIND}_{self.relevance}')}"
+
+
+def parse_controller(name: str) -> ControllerName:
+    """Read a controller name: ``linear``, ``linear_LEARNER`` (the LQR at that learner's control
+    period) or ``LEARNER_KIND`` with KIND in :data:`CONTROLLER_KINDS` (``ddpg_hybrid_roa``).
+
+    Raises
+    ------
+    ValueError
+        On a name of neither form, naming ``controller``.
+    """
+    learner, _, kind = str(name).partition("_")
+    if learner == LINEAR:
+        return ControllerName(LINEAR, None, kind or None)
+    hybrid, _, relevance = kind.partition("_")
+    if learner and kind in CONTROLLER_KINDS:
+        return ControllerName(learner, CONTROLLER_KINDS[kind])
+    if not learner or hybrid != HYBRID_KIND or not relevance:
+        raise ValueError(
+            f"controller: expected 'linear', 'linear_LEARNER' or 'LEARNER_KIND' with KIND one of "
+            f"{tuple(CONTROLLER_KINDS)} or 'hybrid_RELEVANCE' (e.g. 'ddpg_hybrid_roa'), found "
+            f"{name!r}"
+        )
+    return ControllerName(learner, relevance)
+
+
 def controller_framework(controller: str) -> str:
-    """The learner a controller name starts with (``ddpg``, ``sac``, ``pilco``), or ``linear``
-    for the linear references (``linear``, ``linear_pilco``)."""
-    return controller.split("_")[0]
+    """The learner of a controller name (``ddpg``, ``sac``, ``pilco``), or ``linear`` for the
+    linear references (``linear``, ``linear_pilco``)."""
+    return parse_controller(controller).learner
 
 
 REQUEST_ONLY_FRAMEWORKS = ("sac",)

@@ -221,6 +221,13 @@ def write_curve(
     plot_curve(curve, title, run_dir / CURVE_PNG)
 
 
+def run_folder(root: str | Path, system: str, controller: str, seed: int) -> Path:
+    """``ROOT/SYSTEM/CONTROLLER/seedN``: the one naming scheme of run folders (``leoc train``'s
+    under ``runs/``, ``leoc reproduce``'s under ``OUT/runs/``), CONTROLLER a controller name
+    (:func:`leoc.names.parse_controller`: ``ddpg_hybrid_roa``, ``pilco_baseline``)."""
+    return Path(root) / system / controller / f"seed{seed}"
+
+
 def read_config(run_dir: Path) -> dict[str, Any]:
     """``config.json`` of a run folder, with errors that name the file."""
     path = Path(run_dir) / CONFIG_FILE

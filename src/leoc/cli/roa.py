@@ -106,7 +106,7 @@ def roa_plant(args: argparse.Namespace):
         if not runs:
             raise ValueError(
                 "system: expected a system name or --controller RUN_DIR (e.g. 'leoc roa "
-                "pendulum' or 'leoc roa --controller runs/pendulum_ddpg_hybrid_seed0'), found "
+                "pendulum' or 'leoc roa --controller runs/pendulum/ddpg_hybrid/seed0'), found "
                 "neither"
             )
         args.system = trained_system(runs[0])

@@ -137,7 +137,7 @@ def resolve_target(target: str | Path | None, controller: str) -> Target:
         if controller == LINEAR:
             raise ValueError(
                 "system: expected a system name or a run folder (e.g. 'leoc simulate pendulum' "
-                "or 'leoc simulate runs/pendulum_ddpg_hybrid_seed0'), found neither"
+                "or 'leoc simulate runs/pendulum/ddpg_hybrid/seed0'), found neither"
             )
         return Target(trained_system(controller), controller)
     return Target(target, controller)

@@ -7,12 +7,16 @@ from pathlib import Path
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, non_negative_int, positive_int, system_name
-from leoc.names import PROFILE_NAMES, RELEVANCE_NAMES, VARIANT_NAMES
+from leoc.names import (
+    LEARNER_NAMES,
+    PROFILE_NAMES,
+    RELEVANCE_NAMES,
+    VARIANT_NAMES,
+    ControllerName,
+)
 
-ALGO_CHOICES = ("pilco", "ddpg", "td3", "sac")
+ALGO_CHOICES = LEARNER_NAMES
 MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.ddpg.config.ALGOS, without importing SB3
-#: The learner whose settings (leoc.names.FRAMEWORKS) each algorithm takes: TD3 takes DDPG's.
-FRAMEWORK_OF = {"pilco": "pilco", "ddpg": "ddpg", "td3": "ddpg", "sac": "sac"}
 DEFAULT_RUNS_DIR = Path("runs")
 
 
@@ -55,7 +59,12 @@ def add_parser(commands: Any) -> None:
         "own (the variant's budgets); --steps/--iterations override its budget",
     )
     train.add_argument("--seed", type=non_negative_int, default=0, help="seed (default 0)")
-    train.add_argument("--out", type=Path, help="run folder (default runs/SYSTEM_ALGO_KIND_seedN)")
+    train.add_argument(
+        "--out",
+        type=Path,
+        help="run folder (default runs/SYSTEM/CONTROLLER/seedN, under runs/authors/ for the "
+        "authors' variant; CONTROLLER e.g. td3_hybrid_roa)",
+    )
     train.add_argument(
         "--iterations", type=positive_int, help="PILCO iterations (default per system)"
     )
@@ -90,39 +99,43 @@ def check_budget_arguments(args: argparse.Namespace) -> None:
 
 
 def default_run_dir(args: argparse.Namespace) -> Path:
-    """``runs/SYSTEM_ALGO_KIND[_authors]_seedN``: KIND is ``baseline``, ``hybrid`` or
-    ``hybrid_roa`` (the names of ``leoc reproduce``'s controllers)."""
-    kind = "hybrid" if args.hybrid else "baseline"
-    if args.hybrid and args.relevance == "roa":
-        kind += "_roa"
-    variant = "" if args.variant == "leoc" else f"_{args.variant}"
-    return DEFAULT_RUNS_DIR / f"{args.system}_{args.algo}_{kind}{variant}_seed{args.seed}"
+    """``runs[/VARIANT]/SYSTEM/CONTROLLER/seedN`` (``leoc.training.run_folder``'s scheme, with
+    the variant's folder for any but leoc's): CONTROLLER names the learner and the kind as
+    ``leoc reproduce``'s controllers do (``td3_hybrid_roa``)."""
+    relevance = (args.relevance or "paper") if args.hybrid else None
+    controller = ControllerName(args.algo, relevance).name
+    root = DEFAULT_RUNS_DIR if args.variant == "leoc" else DEFAULT_RUNS_DIR / args.variant
+    return root / args.system / controller / f"seed{args.seed}"
+
+
+def controller_of(args: argparse.Namespace) -> Any:
+    """The :class:`~leoc.learners.ControllerSpec` ``args`` describe (``--algo``, ``--hybrid``,
+    ``--relevance``)."""
+    from leoc.learners import ControllerSpec
+
+    relevance = (args.relevance or "paper") if args.hybrid else None
+    return ControllerSpec.from_name(ControllerName(args.algo, relevance).name)
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Config fields of the run ``args`` describe: the variant's settings at the profile's (or
-    the given) budget, the profile's overrides and the relevance
+    the given) budget and the profile's overrides
     (:meth:`leoc.experiments.profiles.Profile.training_settings`, as ``leoc reproduce``)."""
     from leoc.experiments.profiles import Profile, get_profile
     from leoc.experiments.variants import get_variant
 
     profile = get_profile(args.profile) if args.profile else Profile("default", (), {}, {})
     budget = args.iterations if args.algo == "pilco" else args.steps
-    settings = profile.training_settings(
-        get_variant(args.variant),
-        FRAMEWORK_OF[args.algo],
-        args.system,
-        args.hybrid,
-        args.relevance or "paper",
-        budget,
-    )
-    if not args.hybrid:
-        settings.pop("relevance")  # a baseline has none: its config keeps the default
-    return settings
+    variant = get_variant(args.variant)
+    return profile.training_settings(variant, controller_of(args), args.system, budget)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Train the controller ``args`` describe; prints the run folder."""
+    """Train the controller ``args`` describe with its learner (``leoc.learners``); prints the
+    run folder."""
+    from leoc.experiments.variants import get_variant
+    from leoc.learners import get_learner
+
     check_budget_arguments(args)
     if args.relevance is not None and not args.hybrid:
         raise ValueError(
@@ -131,30 +144,17 @@ def run(args: argparse.Namespace) -> int:
         )
     run_dir = args.out or default_run_dir(args)
     settings = run_settings(args)
-    if args.algo == "pilco":
-        from leoc.pilco.train import train_pilco
-
-        result = train_pilco(
-            args.system,
-            hybrid=args.hybrid,
-            seed=args.seed,
-            run_dir=run_dir,
-            resume=not args.overwrite,
-            progress=not args.quiet,
-            **settings,
-        )
-    else:
-        from leoc.ddpg.train import train_ddpg
-
-        result = train_ddpg(
-            args.system,
-            algo=args.algo,
-            hybrid=args.hybrid,
-            seed=args.seed,
-            run_dir=run_dir,
-            overwrite=args.overwrite,
-            progress=not args.quiet,
-            **settings,
-        )
+    controller = controller_of(args)
+    # the system, built once: the variant's, stepping under the rules the settings record
+    system = get_variant(args.variant).system(args.system)
+    result = get_learner(args.algo).train(
+        system,
+        controller,
+        args.seed,
+        run_dir,
+        settings,
+        progress=not args.quiet,
+        overwrite=args.overwrite,
+    )
     print(f"run folder: {result.run_dir}")
     return 0

@@ -47,6 +47,7 @@ from leoc.ddpg.physical import physical_policy
 from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
 from leoc.ddpg.sac import LeocSAC, build_sac_model
 from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
+from leoc.names import ControllerName
 from leoc.policies.spec import HybridSpec, legacy_hybrid_config
 from leoc.systems.base import System
 from leoc.training import (
@@ -59,6 +60,7 @@ from leoc.training import (
     evaluation_starts,
     held_and_reached,
     read_config,
+    run_folder,
     same_run,
     write_curve,
 )
@@ -183,8 +185,8 @@ def train_ddpg(
         training env, exploration noise (``seed + 20000``, DDPG/TD3) and evaluation starts
         (``seed + 10000 + k``).
     run_dir : str or Path, optional
-        Output folder; default ``runs/SYSTEM/ALGO_KIND/seedN``
-        (:func:`leoc.experiments.layout.default_run_dir`'s scheme).
+        Output folder; default ``runs/SYSTEM/CONTROLLER/seedN``
+        (:func:`leoc.training.run_folder`, CONTROLLER e.g. ``td3_hybrid_roa``).
     total_steps : int, optional
         Environment steps; default per system (:data:`~leoc.ddpg.TOTAL_STEPS_BY_SYSTEM`: 10k
         for the pendulum, 21k for the cart-pole, 20k for the mountain car).
@@ -225,8 +227,9 @@ def train_ddpg(
     if total_steps is not None:
         overrides["total_steps"] = total_steps
     config = DDPGConfig.for_system(name, algo, hybrid=hybrid, **overrides)
-    kind = "hybrid" if config.hybrid else "baseline"
-    run_path = Path(run_dir or DEFAULT_RUN_ROOT / name / f"{algo}_{kind}" / f"seed{seed}")
+    relevance = None if config.hybrid is None else config.hybrid.relevance
+    controller = ControllerName(algo, relevance).name
+    run_path = Path(run_dir or run_folder(DEFAULT_RUN_ROOT, name, controller, seed))
     config_dict = {**config.as_dict(), "seed": seed}
     resumed = None
     if same_run(run_path, config_dict, overwrite, normalise=legacy_hybrid_config):

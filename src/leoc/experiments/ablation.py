@@ -136,6 +136,7 @@ from leoc.experiments.layout import LOG_FILE
 from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
 from leoc.experiments.variants import AUTHORS
 from leoc.io import read_json_object, write_json_atomic
+from leoc.learners import ControllerSpec
 from leoc.names import controller_framework
 from leoc.policies.spec import HybridSpec
 from leoc.systems.base import DEFAULT_RULES
@@ -450,19 +451,19 @@ class AblationSpec(NamedTuple):
         return f"{self.system}/{self.controller}/{self.setting}/seed{self.seed}"
 
     @property
+    def controller_spec(self) -> ControllerSpec:
+        """What the run trains (:class:`~leoc.learners.ControllerSpec`, read from its name)."""
+        return ControllerSpec.from_name(self.controller)
+
+    @property
     def algo(self) -> str:
-        """The learner: ``"ddpg"`` or ``"sac"`` (``leoc.names.controller_framework``)."""
+        """The learner: ``"ddpg"`` or ``"sac"``."""
         return controller_framework(self.controller)
 
     @property
     def hybrid(self) -> bool:
         """Whether the controller is a hybrid."""
-        return "_hybrid" in self.controller
-
-    @property
-    def relevance(self) -> str:
-        """``roa`` for the ``*_hybrid_roa`` controllers, else ``paper``."""
-        return "roa" if self.controller.endswith("_roa") else "paper"
+        return self.controller_spec.hybrid is not None
 
 
 def grid_specs(
@@ -584,7 +585,6 @@ class AblationPlan:
         budget = self.budget_for(spec.system)
         return {
             **setting_overrides(spec.setting, spec.system, spec.hybrid, budget, spec.algo),
-            "relevance": spec.relevance,
             "total_steps": budget,
             "eval_interval": self.eval_interval_for(spec.system),
             **self.overrides,
@@ -593,7 +593,8 @@ class AblationPlan:
     def config(self, spec: AblationSpec) -> DDPGConfig:
         """The :class:`~leoc.ddpg.DDPGConfig` of ``spec``."""
         overrides = self.config_overrides(spec)
-        return DDPGConfig.for_system(spec.system, spec.algo, hybrid=spec.hybrid, **overrides)
+        hybrid = spec.controller_spec.hybrid
+        return DDPGConfig.for_system(spec.system, spec.algo, hybrid=hybrid, **overrides)
 
     def pinned(self, systems: Sequence[str]) -> dict[str, Any]:
         """JSON form of the plan for ``systems`` (what a folder's :data:`PLAN_FILE` pins)."""
@@ -742,7 +743,7 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
         result = train_ddpg(
             spec.system,
             spec.algo,
-            hybrid=spec.hybrid,
+            hybrid=spec.controller_spec.hybrid,
             seed=spec.seed,
             run_dir=run_dir / TRAIN_DIR,
             progress="lines",

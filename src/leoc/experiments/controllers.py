@@ -13,15 +13,23 @@ from typing import TYPE_CHECKING
 import torch
 
 from leoc.experiments.layout import EVALUATION_FILE
-from leoc.names import controller_framework
+from leoc.learners import Learner, get_learner, learner_names
+from leoc.names import LINEAR
 from leoc.training import read_config
 
 if TYPE_CHECKING:
     from leoc.systems.base import StepRules, System
 
-PILCO_MARKER = "controller.pt"
-DDPG_MARKER = "model.zip"
 REPRODUCE_TRAIN_DIR = "train"
+
+
+def _learner_of(folder: Path) -> Learner | None:
+    """The registered learner whose run folder ``folder`` is (its marker file), or None."""
+    for name in learner_names():
+        learner = get_learner(name)
+        if (folder / learner.marker).is_file():
+            return learner
+    return None
 
 
 def trainer_dir(run_dir: str | Path) -> Path:
@@ -30,11 +38,11 @@ def trainer_dir(run_dir: str | Path) -> Path:
     if not path.is_dir():
         raise FileNotFoundError(f"controller: run folder {str(path)!r} does not exist")
     for candidate in (path, path / REPRODUCE_TRAIN_DIR):
-        if (candidate / PILCO_MARKER).is_file() or (candidate / DDPG_MARKER).is_file():
+        if _learner_of(candidate) is not None:
             return candidate
     recorded = _reproduce_record(path)
     spec = recorded.get("spec") if isinstance(recorded.get("spec"), dict) else {}
-    if controller_framework(str(spec.get("controller"))) == "linear":  # designed, not trained
+    if spec.get("controller") == LINEAR or str(spec.get("controller")).startswith(f"{LINEAR}_"):
         command = f"leoc simulate {spec.get('system')} --variant {recorded.get('variant')}"
         if recorded.get("action_repeat", 1) != 1:
             command += f" --action-repeat {recorded.get('action_repeat')}"
@@ -42,10 +50,10 @@ def trainer_dir(run_dir: str | Path) -> Path:
             f"controller: {str(path)!r} is a linear reference of 'leoc reproduce' (designed, not "
             f"trained: it holds no controller file); simulate it as '{command}'"
         )
+    markers = " or ".join(f"{get_learner(name).marker} ({name})" for name in learner_names())
     raise FileNotFoundError(
-        f"controller: expected 'linear' or a run folder holding {PILCO_MARKER} (PILCO) or "
-        f"{DDPG_MARKER} (DDPG/TD3), directly or in {REPRODUCE_TRAIN_DIR}/, found neither in "
-        f"{str(path)!r}"
+        f"controller: expected 'linear' or a run folder holding {markers}, directly or in "
+        f"{REPRODUCE_TRAIN_DIR}/, found none in {str(path)!r}"
     )
 
 
@@ -133,10 +141,6 @@ def load_trained_controller(run_dir: str | Path, system: str | None = None) -> t
             f"controller: {str(Path(run_dir))!r} was trained for {trained_for!r}, "
             f"not for {system!r}"
         )
-    if (folder / PILCO_MARKER).is_file():
-        from leoc.pilco.checkpoint import load_pilco_controller
-
-        return load_pilco_controller(folder)
-    from leoc.ddpg.train import load_ddpg_controller
-
-    return load_ddpg_controller(folder)
+    learner = _learner_of(folder)
+    assert learner is not None  # trainer_dir found its marker
+    return learner.load(folder)

@@ -242,10 +242,14 @@ EVALUATORS: tuple[Evaluator, ...] = (
 
 
 def evaluate_controller(
-    spec: RunSpec, controller: torch.nn.Module, variant: Variant = LEOC
+    spec: RunSpec,
+    controller: torch.nn.Module,
+    variant: Variant = LEOC,
+    system: System | None = None,
 ) -> dict[str, Any]:
     """Every evaluation of :data:`EVALUATORS` of one controller, at its period, on the system
-    stepping under ``variant``'s rules: ``{evaluator.name: evaluator(context)}`` in order."""
-    system = variant.system(spec.system)
+    stepping under ``variant``'s rules (``system``, built once by the caller; default
+    ``variant.system(spec.system)``): ``{evaluator.name: evaluator(context)}`` in order."""
+    system = variant.system(spec.system) if system is None else system
     context = EvaluationContext(spec.system, system, controller, spec.seed, variant)
     return {evaluator.name: evaluator(context) for evaluator in EVALUATORS}

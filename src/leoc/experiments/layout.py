@@ -27,8 +27,11 @@ SWING_UP_EPISODES = 5
 
 
 def run_dir_of(out_dir: Path, spec: Any) -> Path:
-    """The folder of one run (a :class:`~leoc.experiments.profiles.RunSpec`)."""
-    return Path(out_dir) / "runs" / spec.system / spec.controller / f"seed{spec.seed}"
+    """The folder of one run (a :class:`~leoc.experiments.profiles.RunSpec`):
+    ``OUT/runs/SYSTEM/CONTROLLER/seedN`` (:func:`leoc.training.run_folder`)."""
+    from leoc.training import run_folder  # torch: not needed to import this module
+
+    return run_folder(Path(out_dir) / "runs", spec.system, spec.controller, spec.seed)
 
 
 Evaluations = dict[str, dict[str, list[dict[str, Any]]]]  # system -> controller -> seeds

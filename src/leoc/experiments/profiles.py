@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, NamedTuple
 
-from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework
+from leoc.learners import ControllerSpec, get_learner
+from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework, parse_controller
 from leoc.systems import SYSTEM_NAMES, system_names
 
 # Every controller, in report order, and the default set (the paper's controllers and the two
@@ -107,26 +108,24 @@ class Profile:
         return self.ddpg_steps.get(system, self.default_ddpg_steps)
 
     def training_settings(
-        self,
-        variant: Any,
-        framework: str,
-        system: str,
-        hybrid: bool,
-        relevance: str = "paper",
-        budget: int | None = None,
+        self, variant: Any, controller: ControllerSpec, system: str, budget: int | None = None
     ) -> dict[str, Any]:
-        """Config fields of one run under this profile: the variant's settings
-        (:meth:`~leoc.experiments.variants.Variant.training_settings`) at this profile's
-        budget, or ``budget`` where given, then this profile's overrides, then the relevance.
-        The one assembly ``leoc reproduce`` and ``leoc train`` share. ``framework`` is a
-        learner of ``leoc.names.FRAMEWORKS`` (TD3 takes DDPG's settings)."""
+        """Config fields of one run of ``controller`` under this profile: the variant's
+        settings (:meth:`~leoc.experiments.variants.Variant.training_settings`) at this
+        profile's budget, or ``budget`` where given, then this profile's overrides. The one
+        assembly ``leoc reproduce`` and ``leoc train`` share. The learner's ``settings_of``
+        says whose settings it takes (TD3 DDPG's); its ``budget_unit`` which budget (PILCO's
+        iterations, or the others' environment steps). The hybrid itself is
+        ``controller.hybrid``, which these fields may refine (the authors' Lambda)."""
+        learner = get_learner(controller.learner)
+        iterations = learner.budget_unit == "iterations"
         if budget is None:
-            budget = self.iterations_for(system) if framework == "pilco" else self.steps_for(system)
-        overrides = self.pilco_overrides if framework == "pilco" else self.ddpg_overrides
+            budget = self.iterations_for(system) if iterations else self.steps_for(system)
+        overrides = self.pilco_overrides if iterations else self.ddpg_overrides
+        hybrid = controller.hybrid is not None
         return {
-            **variant.training_settings(framework, system, hybrid, budget),
+            **variant.training_settings(learner.settings_of, system, hybrid, budget),
             **overrides,
-            "relevance": relevance,
         }
 
 
@@ -314,19 +313,19 @@ class RunSpec(NamedTuple):
         return f"{self.system}/{self.controller}/seed{self.seed}"
 
     @property
+    def controller_spec(self) -> ControllerSpec:
+        """What the run trains (:class:`~leoc.learners.ControllerSpec`, read from its name)."""
+        return ControllerSpec.from_name(self.controller)
+
+    @property
     def framework(self) -> str:
-        """``linear``, ``ddpg``, ``sac`` or ``pilco``."""
+        """The learner (``ddpg``, ``sac``, ``pilco``, ...) or ``linear``."""
         return controller_framework(self.controller)
 
     @property
     def hybrid(self) -> bool:
         """Whether the controller is a hybrid."""
-        return "_hybrid" in self.controller
-
-    @property
-    def relevance(self) -> str:
-        """The hybrid's relevance: ``roa`` for the ``*_hybrid_roa`` controllers, else ``paper``."""
-        return "roa" if self.controller.endswith("_roa") else "paper"
+        return parse_controller(self.controller).hybrid
 
 
 def run_specs(

@@ -38,7 +38,9 @@ from leoc.experiments.profiles import (
 from leoc.experiments.sweep import check_backend, sweep
 from leoc.experiments.variants import LEOC, Variant, get_variant
 from leoc.io import read_json_object, write_json_atomic
+from leoc.learners import get_learner
 from leoc.systems import SYSTEM_NAMES
+from leoc.systems.base import System
 
 WORKER_THREADS = 1
 
@@ -133,46 +135,28 @@ def pilco_action_repeat(profile: Profile, system: str, variant: Variant = LEOC) 
 
 
 def train_controller(
-    spec: RunSpec, profile: Profile, train_dir: Path, variant: Variant = LEOC
+    spec: RunSpec,
+    profile: Profile,
+    train_dir: Path,
+    variant: Variant = LEOC,
+    system: System | None = None,
 ) -> tuple[torch.nn.Module, dict[str, Any] | None]:
     """Design (linear) or train one controller under ``variant``; returns it (at its control
-    period) and its learning curve."""
-    system = variant.system(spec.system)
-    if spec.framework == "linear":
-        repeat = (
-            pilco_action_repeat(profile, spec.system, variant)
-            if spec.controller == "linear_pilco"
-            else 1
-        )
+    period) and its learning curve. ``system``: the run's system, built once by the caller
+    (default: ``variant.system(spec.system)``); trained by the learner its controller names
+    (:func:`leoc.learners.get_learner`)."""
+    system = variant.system(spec.system) if system is None else system
+    controller = spec.controller_spec
+    if controller.linear:
+        repeat = 1
+        if controller.period_of is not None:
+            repeat = pilco_action_repeat(profile, spec.system, variant)
         return variant.linear_controller(system, repeat), None
-    # the variant's settings, then the profile's budgets and overrides, then the run's relevance
-    # SAC runs at DDPG's budgets and with the profile's DDPG overrides
-    settings = profile.training_settings(
-        variant, spec.framework, spec.system, spec.hybrid, spec.relevance
-    )
-    if spec.framework == "pilco":
-        from leoc.pilco.train import train_pilco
-
-        result = train_pilco(
-            spec.system,
-            hybrid=spec.hybrid,
-            seed=spec.seed,
-            run_dir=train_dir,
-            progress=True,
-            **settings,
-        )
-    else:
-        from leoc.ddpg.train import train_ddpg
-
-        result = train_ddpg(
-            spec.system,
-            algo=spec.framework,
-            hybrid=spec.hybrid,
-            seed=spec.seed,
-            run_dir=train_dir,
-            progress="lines",
-            **settings,
-        )
+    # the variant's settings, then the profile's budgets and overrides; SAC runs at DDPG's
+    # budgets and with the profile's DDPG overrides
+    settings = profile.training_settings(variant, controller, spec.system)
+    learner = get_learner(controller.learner)
+    result = learner.train(system, controller, spec.seed, train_dir, settings)
     return result.policy, _curve(result.curve, result.summary)
 
 
@@ -196,10 +180,11 @@ def execute_run(
         contextlib.redirect_stderr(log),
     ):
         print(f"== {spec.key} ({profile.name} profile, {variant.name} variant)", flush=True)
-        controller, curve = train_controller(spec, profile, run_dir / "train", variant)
+        system = variant.system(spec.system)  # built once, for training and evaluation
+        controller, curve = train_controller(spec, profile, run_dir / "train", variant, system)
         trained = time.perf_counter() - started
         print(f"trained in {trained:.1f} s; evaluating", flush=True)
-        evaluation = evaluate_controller(spec, controller, variant)
+        evaluation = evaluate_controller(spec, controller, variant, system)
     evaluation.update(
         spec=spec._asdict(),
         variant=variant.name,
@@ -261,41 +246,17 @@ def reproduce(
     if jobs is not None and (int(jobs) != jobs or jobs < 1):
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")
     check_backend(backend, address)  # before anything is written
-    meta_path = out / META_FILE
-    meta = read_meta(meta_path, echo)
-    if meta and meta.get("profile") != profile.name:
-        raise ValueError(
-            f"out: {out} holds a {meta.get('profile')!r} run; use another folder for "
-            f"the {profile.name!r} profile"
-        )
-    if meta and meta.get("variant", LEOC.name) != chosen.name:
-        raise ValueError(
-            f"out: {out} holds runs of the {meta.get('variant', LEOC.name)!r} variant; use "
-            f"another folder for the {chosen.name!r} variant"
-        )
+    meta = _folder_meta(out, profile, chosen, echo)
     specs = run_specs(profile, tuple(systems), tuple(controllers))
     # a rerun with other seeds, systems or controllers extends the folder: earlier runs stay on
     # disk, and the report aggregates exactly the runs of this invocation (and lists them)
-    meta.update(
-        profile=profile.name,
-        variant=chosen.name,
-        variant_settings=chosen.summary(),
-        description=profile.description,
-        seeds=list(profile.seeds),
-        settings={
-            "pilco_iterations": profile.pilco_iterations,
-            "ddpg_steps": profile.ddpg_steps,
-            "pilco_overrides": profile.pilco_overrides,
-            "ddpg_overrides": profile.ddpg_overrides,
-        },
-        systems=list(systems),
-        controllers=list(controllers),
-    )
+    meta.update(_study_meta(profile, chosen, systems, controllers))
+    runner = ProfileRunner(profile, chosen.name)
     if not any(_pending(out, spec, echo) for spec in specs):
         # nothing to run: the report is rewritten, and the record of the invocations that ran
         # (their wall times, machine, versions, workers) stays as they left it
-        write_json_atomic(meta_path, meta)
-        sweep(specs, ProfileRunner(profile, chosen.name), out, run_dir=run_dir_of, echo=echo)
+        write_json_atomic(out / META_FILE, meta)
+        sweep(specs, runner, out, run_dir=run_dir_of, echo=echo)
         return write_report(out)
     meta.update(
         # the report says "on JOBS workers"
@@ -306,24 +267,75 @@ def reproduce(
         machine=machine(),
         command=" ".join(sys.argv),
     )
-    write_json_atomic(meta_path, meta)
-    log = InvocationLog(meta_path, meta, out, specs)
+    write_json_atomic(out / META_FILE, meta)
+    options = {"backend": backend, "jobs": jobs, "address": address, "echo": echo}
+    _run_sweep(specs, runner, out, meta, profile, options)
+    return write_report(out)
+
+
+def _folder_meta(
+    out: Path, profile: Profile, variant: Variant, echo: Callable[[str], None]
+) -> dict[str, Any]:
+    """The folder's ``meta.json`` (empty for a new folder), refused when it holds runs of
+    another profile or variant."""
+    meta = read_meta(out / META_FILE, echo)
+    if meta and meta.get("profile") != profile.name:
+        raise ValueError(
+            f"out: {out} holds a {meta.get('profile')!r} run; use another folder for "
+            f"the {profile.name!r} profile"
+        )
+    if meta and meta.get("variant", LEOC.name) != variant.name:
+        raise ValueError(
+            f"out: {out} holds runs of the {meta.get('variant', LEOC.name)!r} variant; use "
+            f"another folder for the {variant.name!r} variant"
+        )
+    return meta
+
+
+def _study_meta(
+    profile: Profile, variant: Variant, systems: Sequence[str], controllers: Sequence[str]
+) -> dict[str, Any]:
+    """What ``meta.json`` records of the study an invocation runs."""
+    return {
+        "profile": profile.name,
+        "variant": variant.name,
+        "variant_settings": variant.summary(),
+        "description": profile.description,
+        "seeds": list(profile.seeds),
+        "settings": {
+            "pilco_iterations": profile.pilco_iterations,
+            "ddpg_steps": profile.ddpg_steps,
+            "pilco_overrides": profile.pilco_overrides,
+            "ddpg_overrides": profile.ddpg_overrides,
+        },
+        "systems": list(systems),
+        "controllers": list(controllers),
+    }
+
+
+def _run_sweep(
+    specs: Sequence[RunSpec],
+    runner: ProfileRunner,
+    out: Path,
+    meta: dict[str, Any],
+    profile: Profile,
+    options: dict[str, Any],
+) -> None:
+    """Run ``specs`` through the sweep, recording each invocation's end in ``meta.json``."""
+    log = InvocationLog(out / META_FILE, meta, out, specs)
     try:
         result = sweep(
             specs,
-            ProfileRunner(profile, chosen.name),
+            runner,
             out,
-            backend=backend,
-            jobs=jobs,
-            address=address,
             run_dir=run_dir_of,
             done_file=EVALUATION_FILE,
             log_file=LOG_FILE,
-            echo=echo,
             expected_seconds=profile.cost_model,
             progress_of=trainer_progress,
             on_finished=lambda _key: log.write(RUNNING),
             kind_of=lambda spec: spec.framework,  # each learner's own speed (leoc.experiments.eta)
+            **options,
         )
     except BaseException:
         # Ctrl-C, SIGTERM (the command raises it as an exception) or an error: a study resumed
@@ -331,10 +343,9 @@ def reproduce(
         log.write(INTERRUPTED)
         raise
     if result.failed:
-        echo(f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")
+        options["echo"](f"{len(result.failed)} run(s) failed: {', '.join(sorted(result.failed))}")
     meta["wall_seconds_last_invocation"] = time.perf_counter() - log.started
     log.write(FINISHED)
-    return write_report(out)
 
 
 # How an invocation in ``meta.json``'s ``invocations`` ended.

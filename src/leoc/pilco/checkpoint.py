@@ -111,7 +111,7 @@ def resume_checkpoint(
         )
         return None
     if dataclasses.replace(old, iterations=config.iterations) != config:
-        differences = config_differences(saved["config"], config.to_dict())
+        differences = config_differences(old.to_dict(), config.to_dict())
         raise ValueError(
             f"run folder: {str(run_dir)!r} holds a PILCO run of another configuration "
             f"({'; '.join(differences[:3])}); pass --overwrite (resume=False) to replace it, or "

@@ -54,11 +54,14 @@ class SeedOutcome(NamedTuple):
 def _train_one(
     system: str, hybrid: bool, seed: int, out: str, held_to_stop: int, overrides: dict[str, Any]
 ) -> SeedOutcome:
+    from leoc.names import ControllerName
     from leoc.pilco.train import held_long_enough, train_pilco
+    from leoc.training import run_folder
 
     torch.set_num_threads(1)
     started = time.perf_counter()
-    run_dir = Path(out) / f"{system}_{'hybrid' if hybrid else 'baseline'}_seed{seed}"
+    controller = ControllerName("pilco", "paper" if hybrid else None).name
+    run_dir = run_folder(out, system, controller, seed)
     result = train_pilco(
         system,
         hybrid=hybrid,
@@ -97,7 +100,8 @@ def train_seeds(
     """Train PILCO on ``system`` once per seed, ``jobs`` at a time; outcomes in seed order.
 
     ``overrides`` are :class:`~leoc.pilco.config.PilcoConfig` fields (``iterations=10`` ...).
-    Run folders ``out_dir/SYSTEM_KIND_seedN`` resume when they exist.
+    Run folders ``out_dir/SYSTEM/CONTROLLER/seedN`` (:func:`leoc.training.run_folder`) resume
+    when they exist.
     """
     if jobs < 1:
         raise ValueError(f"jobs: expected a positive integer, found {jobs}")

@@ -28,13 +28,14 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 from torch import nn
 
 from leoc.io import write_text_atomic
+from leoc.names import ControllerName
 from leoc.pilco.checkpoint import (
     BestPolicy,
     RunState,
@@ -49,6 +50,7 @@ from leoc.pilco.objective import PolicyOptimisation, optimise_policy
 from leoc.pilco.policy import build_policy, redraw_rbf
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
+from leoc.policies.spec import HybridSpec
 from leoc.progress import ProgressLine, evaluation_text, iterations_line
 from leoc.systems import StepRules, make_system
 from leoc.systems.base import System
@@ -60,6 +62,7 @@ from leoc.training import (
     curve_summary,
     evaluate_episodes,
     evaluation_starts,
+    run_folder,
     write_curve,
 )
 
@@ -114,11 +117,6 @@ def _random_rollouts(
         for _ in range(config.initial_rollouts)
     ]
     return rollouts, time.perf_counter() - start_time
-
-
-def _default_run_dir(config: PilcoConfig) -> Path:
-    kind = "hybrid" if config.hybrid else "rbf"
-    return DEFAULT_RUN_ROOT / f"pilco_{config.system}_{kind}_seed{config.seed}"
 
 
 def _progress_line(log: list[dict[str, Any]], total: int) -> str:
@@ -277,8 +275,8 @@ def _title(config: PilcoConfig) -> str:
 
 
 def train_pilco(
-    system: str,
-    hybrid: bool = False,
+    system: str | System,
+    hybrid: bool | HybridSpec | None = None,
     seed: int = 0,
     run_dir: str | Path | None = None,
     iterations: int | None = None,
@@ -290,14 +288,17 @@ def train_pilco(
 
     Parameters
     ----------
-    system : str
-        A registered system name (``leoc.systems.system_names()``).
-    hybrid : bool
-        The hybrid RBF + LQR policy instead of the RBF baseline.
+    system : str or leoc.systems.System
+        A registered system name (``leoc.systems.system_names()``), or the system itself
+        (built once by the caller; it steps under the config's ``step_rules``).
+    hybrid : HybridSpec, bool or None
+        The hybrid RBF + LQR policy this :class:`~leoc.policies.HybridSpec` describes
+        (``True``: the default spec) instead of the RBF baseline (None).
     seed : int
         The one seed of the run (numpy and torch generators, evaluation starts).
     run_dir : path, optional
-        Run folder; default ``runs/pilco_<system>_<rbf|hybrid>_seed<seed>``.
+        Run folder; default ``runs/SYSTEM/CONTROLLER/seedN`` (:func:`leoc.training.run_folder`,
+        CONTROLLER e.g. ``pilco_hybrid``).
     iterations : int, optional
         Policy-learning iterations (default: the config's).
     resume : bool
@@ -306,24 +307,74 @@ def train_pilco(
         Show the progress (``leoc.progress``): a live bar on a terminal, one line per
         iteration elsewhere, each with an ETA from the mean time per iteration so far.
     **overrides
-        Any :class:`PilcoConfig` field (``horizon=...``, ``num_basis=...``, ``gp_<field>=...``).
+        Any :class:`PilcoConfig` field (``horizon=...``, ``gp_<field>=...``) or
+        :class:`~leoc.policies.HybridSpec` field (changing ``hybrid``).
 
     Returns
     -------
     TrainResult
         The run's controller (the final policy, or the ``select_best_from`` one) as a
-        :class:`~leoc.policies.HeldPolicy` at ``controller_action_repeat``, the
-        learning curve (one row per iteration, iteration 0 = the random rollouts), the config,
-        its summary and the last GP posterior.
+        :class:`~leoc.policies.HeldPolicy` at ``controller_action_repeat``, the learning curve
+        (one row per iteration, iteration 0 = the random rollouts), the config, its summary and
+        the last GP posterior.
     """
+    name = system if isinstance(system, str) else system.name
     if iterations is not None:
         overrides["iterations"] = iterations
-    config = PilcoConfig.for_system(system, hybrid=hybrid, seed=seed, **overrides)
+    config = PilcoConfig.for_system(name, hybrid=hybrid, seed=seed, **overrides)
     if config.num_threads is not None:
         torch.set_num_threads(config.num_threads)
-    run_path = Path(run_dir) if run_dir is not None else _default_run_dir(config)
-    plant = make_system(system).with_rules(StepRules(**config.step_rules))
+    relevance = None if config.hybrid is None else config.hybrid.relevance
+    controller = ControllerName("pilco", relevance).name
+    run_path = Path(run_dir or run_folder(DEFAULT_RUN_ROOT, name, controller, seed))
+    plant = make_system(name) if isinstance(system, str) else system
+    plant = plant.with_rules(StepRules(**config.step_rules))
     plant.episode_steps = config.episode_steps
+    run = _start_run(plant, config, run_path, resume)
+    state, model = _learn(plant, config, run_path, run, progress)
+    return _finish(plant, config, run_path, run.policy, state, model)
+
+
+def _finish(
+    plant: System,
+    config: PilcoConfig,
+    run_path: Path,
+    policy: nn.Module,
+    state: RunState,
+    model: GPPosterior | None,
+) -> TrainResult:
+    """The run's controller (the selected iteration's policy when ``select_best_from`` chose
+    one, saved as the controller) and its curve, written."""
+    summary = curve_summary(state.log, plant.dt)
+    if state.best is not None:
+        policy.load_state_dict(state.best.policy_state)
+        save_controller(run_path, config, state.best.policy_state, model)
+        summary["model_selection"] = (
+            f"best evaluation of iterations >= {config.select_best_from} "
+            f"(iteration {state.best.iteration})"
+        )
+    write_curve(run_path, state.log, summary, _title(config))
+    policy.eval()
+    held = HeldPolicy(policy, config.controller_action_repeat).eval()
+    return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)
+
+
+class _Run(NamedTuple):
+    """A PILCO run under way: its state and policy, the last GP model (None before the first
+    iteration of this process), its random generators and evaluation starts."""
+
+    state: RunState
+    policy: nn.Module
+    model: GPPosterior | None
+    rng: np.random.Generator
+    generator: torch.Generator
+    starts: np.ndarray
+
+
+def _start_run(plant: System, config: PilcoConfig, run_path: Path, resume: bool) -> _Run:
+    """The run's checkpoint (``resume``), or a new run: iteration 0 done, its config and first
+    checkpoint written (a rerun's config records its budget: a larger one extends the run)."""
+    seed = config.seed
     rng = np.random.default_rng(seed)
     generator = torch.Generator().manual_seed(seed)
     starts = evaluation_starts(plant, seed, config.eval_episodes)
@@ -337,30 +388,29 @@ def train_pilco(
     else:
         state, policy, model = resumed
         rng.bit_generator.state = state.rng_state
-        # a rerun with a larger budget extends the run: its config records the new budget
         write_text_atomic(run_path / CONFIG_FILE, json.dumps(config.to_dict(), indent=2))
+    return _Run(state, policy, model, rng, generator, starts)
+
+
+def _learn(
+    plant: System, config: PilcoConfig, run_path: Path, run: _Run, progress: bool
+) -> tuple[RunState, GPPosterior | None]:
+    """Iterate to ``config.iterations`` (or until held long enough), checkpointing and writing
+    the curve after each iteration; returns the last state and GP model."""
+    state, model = run.state, run.model
     shown = _show_progress(state.log, config.iterations) if progress else None
     while state.iteration < config.iterations and not held_long_enough(
         state.log, config.stop_after_held
     ):
         kept = state.best
-        state, model = _iterate(plant, config, state, policy, rng, generator, starts)
-        state = state._replace(best=_best_policy(config, state, policy, kept))
-        save_checkpoint(run_path, config, state, policy, model, generator)
+        state, model = _iterate(
+            plant, config, state, run.policy, run.rng, run.generator, run.starts
+        )
+        state = state._replace(best=_best_policy(config, state, run.policy, kept))
+        save_checkpoint(run_path, config, state, run.policy, model, run.generator)
         write_curve(run_path, state.log, curve_summary(state.log, plant.dt), _title(config))
         if shown is not None:
             _update_progress(shown, state.log, config.iterations)
     if shown is not None:
         shown.close()
-    summary = curve_summary(state.log, plant.dt)
-    if state.best is not None:
-        policy.load_state_dict(state.best.policy_state)
-        save_controller(run_path, config, state.best.policy_state, model)
-        summary["model_selection"] = (
-            f"best evaluation of iterations >= {config.select_best_from} "
-            f"(iteration {state.best.iteration})"
-        )
-    write_curve(run_path, state.log, summary, _title(config))
-    policy.eval()
-    held = HeldPolicy(policy, config.controller_action_repeat).eval()
-    return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)
+    return state, model

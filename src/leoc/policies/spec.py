@@ -124,7 +124,10 @@ class HybridSpec:
             _positive(self.lambda_init, "lambda_init")
         for name in ("learn_lambda", "learn_width"):
             _flag(getattr(self, name), name)
-        self.design.check(self)
+        # every design's fields are checked, whichever design is chosen: a spec saved with a
+        # bad value for another design would fail only once someone switched to it
+        for design in RELEVANCE_DESIGNS.values():
+            design.check(self)
 
     @property
     def design(self) -> RelevanceDesign:
