@@ -20,20 +20,22 @@ MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.ddpg.config.ALGOS, without imp
 DEFAULT_RUNS_DIR = Path("runs")
 
 
+DESCRIPTION = (
+    "Train a baseline (the learned policy alone) or the LEOC hybrid (LQR near the operating "
+    "point, the learned policy elsewhere) with PILCO, DDPG, TD3 or SAC (for SAC the hybrid is "
+    "its deterministic action, the squashed mean; it explores with its own Gaussian around it). "
+    "The run folder keeps the weights, config, learning curve and checkpoints. Rerunning the "
+    "same command resumes an interrupted run from its last checkpoint (PILCO: every iteration; "
+    "DDPG/TD3/SAC: every 1000 steps, exactly as if it had not stopped) and returns a finished "
+    "one without training; PILCO extends a run given more --iterations. A run folder holding "
+    "another configuration is refused unless --overwrite."
+)
+
+
 def add_parser(commands: Any) -> None:
     """Add the ``train`` command to the subparsers ``commands``."""
     train = commands.add_parser(
-        "train",
-        help="train a baseline or hybrid controller",
-        description="Train a baseline (the learned policy alone) or the LEOC hybrid (LQR near "
-        "the operating point, the learned policy elsewhere) with PILCO, DDPG, TD3 or SAC (for "
-        "SAC the hybrid is its deterministic action, the squashed mean; it explores with its "
-        "own Gaussian around it). The run folder keeps the weights, config, learning curve and "
-        "checkpoints. Rerunning the same command resumes an interrupted run from its last "
-        "checkpoint (PILCO: every iteration; DDPG/TD3/SAC: every 1000 steps, exactly as if it "
-        "had not stopped) and returns a finished one without training; PILCO extends a run "
-        "given more --iterations. A run folder holding another configuration is refused "
-        "unless --overwrite.",
+        "train", help="train a baseline or hybrid controller", description=DESCRIPTION
     )
     train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")

@@ -85,9 +85,8 @@ def hybrid_claims(
         The LQR's (proved) certificate at that period.
     box : (S,) array
         Half-widths of the basin box.
-    seed : int
-    starts : int
-        Starts in the proved set and in the box (each).
+    seed, starts : int
+        The seed, and the starts in the proved set and in the box (each).
     shell_starts : int
         Starts per shell of V.
 

@@ -403,19 +403,19 @@ def response_metrics(
         Absolute settling band :math:`b > 0`, in the units of ``e``. Default: relative,
         ``band_fraction`` of the peak error (:func:`relative_band`).
     final_window : int, optional
-        Window :math:`W \\ge 1` (samples, clipped to :math:`T`). Default 20.
+        Window :math:`W \\ge 1` (samples, clipped to :math:`T`; default 20).
     band_fraction : float, optional
-        Fraction of the peak error of the default relative band (default 0.02, 2 %).
+        The default relative band's fraction of the peak error (default 0.02, 2 %).
     dt : float, optional
         Time step in seconds; fills ``settling_seconds``.
     terminated : bool, optional
-        Whether the episode ended early (recorded in the result).
+        Whether the episode ended early (recorded).
 
     Returns
     -------
     ResponseMetrics
-        :math:`e_f` from :func:`steady_state_error`, then :func:`overshoot` and
-        :func:`settling_time` evaluated with that same :math:`e_f`, and the peak deviation.
+        :math:`e_f` (:func:`steady_state_error`), :func:`overshoot` and :func:`settling_time`
+        with that same :math:`e_f`, and the peak deviation.
     """
     signal = _as_signal(e)
     window = _check_final_window(final_window, signal.size)
@@ -425,13 +425,11 @@ def response_metrics(
         fraction: float | None = float(band_fraction)
     else:
         band_value, fraction = _check_band(band), None
+    settle = 0  # a flat record (band 0): no sample ever leaves its final value
     if band_value > 0.0:
         settle = settling_time(signal, band_value, final_value=e_final, final_window=window)
-    else:  # a flat record: no sample ever leaves its final value
-        settle = 0
-    seconds = None
-    if dt is not None and settle is not None:
-        seconds = settle * _check_band_like(dt, "dt")
+    timed = dt is not None and settle is not None
+    seconds = settle * _check_band_like(dt, "dt") if timed else None
     return ResponseMetrics(
         steady_state_error=e_final,
         overshoot=overshoot(signal, final_value=e_final),

@@ -366,13 +366,22 @@ def probability_of_improvement(
     if min(n_x, n_y) < MIN_RUNS_FOR_INTERVAL:
         note = _no_interval_note(min(n_x, n_y))
         return ImprovementEstimate(point, None, None, n_x, n_y, confidence, note)
+    low, high = _percentile_interval(
+        _resampled_improvements(x_scores, y_scores, reps, rng), confidence
+    )
+    return ImprovementEstimate(point, float(low), float(high), n_x, n_y, confidence, None)
+
+
+def _resampled_improvements(
+    x_scores: np.ndarray, y_scores: np.ndarray, reps: int, rng: np.random.Generator
+) -> np.ndarray:
+    """P(X > Y) of ``reps`` stratified resamples of X and Y (in blocks that bound the memory)."""
     blocks = []
-    for count in _block_sizes(reps, n_x * n_y * x_scores.shape[1]):
+    for count in _block_sizes(reps, x_scores.shape[0] * y_scores.shape[0] * x_scores.shape[1]):
         x_resamples = _stratified_resample(x_scores, count, rng)
         y_resamples = _stratified_resample(y_scores, count, rng)
         blocks.append(_improvement_of_resamples(x_resamples, y_resamples))
-    low, high = _percentile_interval(np.concatenate(blocks), confidence)
-    return ImprovementEstimate(point, float(low), float(high), n_x, n_y, confidence, None)
+    return np.concatenate(blocks)
 
 
 def curve_bands(

@@ -495,46 +495,38 @@ def roa_hybrid(
     r"""A :class:`~leoc.policies.HybridPolicy` whose relevance is 1 on the LQR's certified region
     of attraction, in physical units: :func:`build_hybrid` of the ``roa`` :class:`HybridSpec`.
 
-    One line for either framework, e.g. PILCO's
-    ``roa_hybrid(system, design_lqr(system, action_repeat=3), rbf, saturation="sin")``
-    (wrap it in :class:`~leoc.policies.HeldPolicy` to run it at the design's period).
+    E.g. ``roa_hybrid(system, design_lqr(system, action_repeat=3), rbf, saturation="sin")``,
+    run at the design's period in a :class:`~leoc.policies.HeldPolicy`.
 
     Parameters
     ----------
     system : leoc.systems.System
     design : LQRDesign
-        The linear part :math:`G(o) = W o + b` and the Lyapunov matrix :math:`P`, for the
-        control period the hybrid runs at (``design.action_repeat``).
+        :math:`G(o) = W o + b` and the Lyapunov matrix :math:`P`, at the hybrid's period.
     nonlinear : nn.Module
         :math:`H`, (..., D) -> (..., F), float64.
     certificate : LyapunovCertificate, optional
-        Default: :func:`leoc.control.certify_lqr` of the closed loop
-        :math:`\operatorname{sat}(G)` with this hybrid's saturation and the design's period
-        (``certify_options`` passed on). A given certificate must be for ``design.P`` at
-        ``design.action_repeat``.
+        Default: :func:`leoc.control.certify_lqr` of :math:`\operatorname{sat}(G)` with this
+        saturation at the design's period (``certify_options`` passed on). A given certificate
+        must be for ``design.P`` at ``design.action_repeat``.
     rho_in : float, optional
         Level of the flat top, ``0 < rho_in <= rho``; default ``rho_in_fraction * rho``.
-    rho_in_fraction : float in (0, 1]
-    width_init, learn_width
-        See :class:`~leoc.policies.ROARelevance`.
+    rho_in_fraction, width_init, learn_width
+        See :class:`HybridSpec` and :class:`~leoc.policies.ROARelevance`.
     action_limit : float, optional
         Default ``system.action_limit``.
     saturation : {"clip", "sin", "tanh"}
-        The hybrid's saturation (the certificate is for the same one).
+        The hybrid's saturation (and its certificate's).
 
     Raises
     ------
     ValueError
-        If the certificate does not match the design, has no certified set, or ``rho_in`` is
-        not in (0, rho].
+        If the certificate does not match the design or proves nothing, or ``rho_in`` is not in
+        (0, rho].
     """
     limit = float(system.action_limit if action_limit is None else action_limit)
-    spec = HybridSpec(
-        relevance="roa",
-        rho_in_fraction=rho_in_fraction,
-        width_init=width_init,
-        learn_width=learn_width,
-    )
+    spec = HybridSpec("roa", rho_in_fraction=rho_in_fraction, width_init=width_init)
+    spec = spec.replace(learn_width=learn_width)
     if certificate is None:
         certificate = lqr_certificate(system, design, saturation, limit, **certify_options)
     resolved = hybrid_design(spec, system, design, certificate=certificate)

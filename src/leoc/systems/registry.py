@@ -73,22 +73,9 @@ def register_system(
     """
     import gymnasium as gym
 
-    if not isinstance(name, str) or not _NAME_PATTERN.match(name):
-        raise ValueError(
-            f"name: expected a lower-case identifier (letters, digits, _), found {name!r}"
-        )
-    if name in _REGISTRY and not replace:
+    if name in _REGISTRY and not replace and isinstance(name, str):
         raise ValueError(f"name: {name!r} is already registered (pass replace=True to replace)")
-    if not callable(factory):
-        raise TypeError(f"factory: expected a callable returning a System, found {factory!r}")
-    system = factory()
-    if not isinstance(system, System):
-        raise TypeError(f"factory: expected a System, found {type(system).__name__}")
-    if getattr(system, "name", None) != name:
-        raise ValueError(
-            f"factory: expected a system named {name!r}, found {getattr(system, 'name', None)!r}"
-        )
-    system.validate()
+    system = _checked_system(name, factory)
     env_id = default_env_id(name) if env_id is None else env_id
     registration = Registration(name, factory, env_id)
     _REGISTRY[name] = registration
@@ -102,6 +89,25 @@ def register_system(
         kwargs=kwargs,
     )
     return registration
+
+
+def _checked_system(name: object, factory: object) -> System:
+    """``factory()``, checked: a well-formed ``name`` it carries, and a valid system."""
+    if not isinstance(name, str) or not _NAME_PATTERN.match(name):
+        raise ValueError(
+            f"name: expected a lower-case identifier (letters, digits, _), found {name!r}"
+        )
+    if not callable(factory):
+        raise TypeError(f"factory: expected a callable returning a System, found {factory!r}")
+    system = factory()
+    if not isinstance(system, System):
+        raise TypeError(f"factory: expected a System, found {type(system).__name__}")
+    if getattr(system, "name", None) != name:
+        raise ValueError(
+            f"factory: expected a system named {name!r}, found {getattr(system, 'name', None)!r}"
+        )
+    system.validate()
+    return system
 
 
 def unregister_system(name: str) -> None:
