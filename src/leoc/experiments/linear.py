@@ -15,6 +15,7 @@ from leoc.control import LQRDesign, design_lqr
 from leoc.evaluation.metrics import ResponseMetrics
 from leoc.evaluation.plots import plot_responses
 from leoc.evaluation.rollout import RESPONSE_TESTS, ResponseResult, response_test
+from leoc.experiments.markdown import markdown_table
 from leoc.experiments.paper import PAPER_IMPULSE_METRICS
 from leoc.io import write_json_atomic, write_text_atomic
 from leoc.policies import LinearController
@@ -63,13 +64,47 @@ def linear_responses(
     return designs, responses
 
 
+METRICS_HEADERS = (
+    "system",
+    "unit",
+    "steady-state error",
+    "overshoot",
+    "settling time [steps]",
+    "paper: steady-state error",
+    "paper: overshoot",
+    "paper: settling time",
+)
+"""Columns of :func:`metrics_table`."""
+GAINS_HEADERS = (
+    "system",
+    "K (state)",
+    "W (observation)",
+    "spectral radius",
+    "gain margin",
+    "phase margin [deg]",
+    "stable gain interval",
+)
+"""Columns of the linear report's gains table."""
+
+
+def _gains_row(item: tuple[str, LQRDesign]) -> list[str]:
+    """One system's cells of the gains table."""
+    name, design = item
+    low, high = design.margins.gain_interval
+    return [
+        name,
+        np.array2string(design.K[0], precision=4),
+        np.array2string(design.W[0], precision=4),
+        f"{design.spectral_radius:.4f}",
+        f"{design.margins.gain_margin:.3f}",
+        f"{design.margins.phase_margin:.1f}",
+        f"[{low:.3f}, {high:.3f}]",
+    ]
+
+
 def metrics_table(responses: dict[str, dict[str, ResponseResult]], test: str) -> list[str]:
     """Markdown rows: ours (linear) beside the paper's "Linear" row (impulse only)."""
-    rows = [
-        "| system | unit | steady-state error | overshoot | settling time [steps] "
-        "| paper: steady-state error | paper: overshoot | paper: settling time |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+    rows = []
     for name, by_test in responses.items():
         metrics = by_test[test].metrics
         unit = "deg" if make_system(name).main_in_degrees else "m"
@@ -83,13 +118,13 @@ def metrics_table(responses: dict[str, dict[str, ResponseResult]], test: str) ->
             if paper
             else ["n/a", "n/a", "n/a"]
         )
-        rows.append(
-            f"| {name} | {unit} | {NUMBER_FORMAT.format(metrics.steady_state_error)} "
-            f"| {NUMBER_FORMAT.format(metrics.overshoot)} | {format_settling(metrics)} | "
-            + " | ".join(paper_cells)
-            + " |"
-        )
-    return rows
+        ours = [
+            NUMBER_FORMAT.format(metrics.steady_state_error),
+            NUMBER_FORMAT.format(metrics.overshoot),
+            format_settling(metrics),
+        ]
+        rows.append([name, unit, *ours, *paper_cells])
+    return markdown_table(METRICS_HEADERS, rows)
 
 
 def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
@@ -118,21 +153,7 @@ def write_linear_report(out_dir: str | Path, method: str = "discrete") -> Path:
     }
     write_json_atomic(out / "linear.json", data)
     lines = ["# Linear (LQR) controllers", "", f"Design method: {method}.", ""]
-    lines += [
-        "## Gains",
-        "",
-        "| system | K (state) | W (observation) | spectral radius "
-        "| gain margin | phase margin [deg] | stable gain interval |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for name, design in designs.items():
-        low, high = design.margins.gain_interval
-        lines.append(
-            f"| {name} | {np.array2string(design.K[0], precision=4)} "
-            f"| {np.array2string(design.W[0], precision=4)} | {design.spectral_radius:.4f} "
-            f"| {design.margins.gain_margin:.3f} | {design.margins.phase_margin:.1f} "
-            f"| [{low:.3f}, {high:.3f}] |"
-        )
+    lines += ["## Gains", ""] + markdown_table(GAINS_HEADERS, map(_gains_row, designs.items()))
     for test in RESPONSE_TESTS:
         lines += ["", f"## {test.capitalize()} response (from the operating point)", ""]
         lines += metrics_table(responses, test)
