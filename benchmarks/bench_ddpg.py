@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from leoc.ddpg import DDPGConfig, build_model
+from leoc.sb3 import DDPGConfig, build_model
 from leoc.systems import make_env
 
 WARMUP_STEPS = 200  # = learning_starts: the first timed step already trains

@@ -35,7 +35,7 @@ def train_one(
 ) -> dict[str, Any]:
     import torch
 
-    from leoc.ddpg.train import train_ddpg
+    from leoc.sb3.train import train_ddpg
 
     torch.set_num_threads(1)
     started = time.perf_counter()

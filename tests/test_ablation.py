@@ -10,11 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from leoc.ddpg.config import (
-    AUTHORS_CARTPOLE_BASELINE_ACTOR_LR,
-    AUTHORS_DDPG,
-    DDPGConfig,
-)
 from leoc.experiments.ablation import (
     ABLATION_CONTROLLERS,
     ALL_SETTINGS,
@@ -38,6 +33,11 @@ from leoc.experiments.ablation_report import (
 from leoc.experiments.stats import wilson_interval
 from leoc.experiments.variants import AUTHORS
 from leoc.policies.spec import HybridSpec, legacy_hybrid_config
+from leoc.sb3.config import (
+    AUTHORS_CARTPOLE_BASELINE_ACTOR_LR,
+    AUTHORS_DDPG,
+    DDPGConfig,
+)
 from leoc.systems import StepRules
 
 # What each single-factor setting is meant to switch (issue 20), written out here rather than

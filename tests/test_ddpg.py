@@ -1,4 +1,4 @@
-"""Tests of leoc.ddpg: the LEOC hybrid actor inside Stable-Baselines3's DDPG and TD3.
+"""Tests of leoc.sb3: the LEOC hybrid actor inside Stable-Baselines3's DDPG and TD3.
 
 References are independent of the code under test: the LQR design recomputed with
 ``design_lqr``, the blend recomputed from its formula, autograd Jacobians, closed forms.
@@ -6,11 +6,15 @@ References are independent of the code under test: the LQR design recomputed wit
 
 from __future__ import annotations
 
+import base64
+import importlib.util
+import io
 import json
 import math
 import subprocess
 import sys
 import tempfile
+import zipfile
 
 import numpy as np
 import pytest
@@ -20,7 +24,8 @@ from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.torch_layers import FlattenExtractor
 
 from leoc.control import design_lqr
-from leoc.ddpg import (
+from leoc.policies import HybridDesign, HybridSpec
+from leoc.sb3 import (
     DDPGConfig,
     HybridActor,
     HybridTD3Policy,
@@ -34,7 +39,6 @@ from leoc.ddpg import (
     physical_policy,
     train_ddpg,
 )
-from leoc.policies import HybridDesign, HybridSpec
 from leoc.systems import SYSTEM_NAMES, StepRules, make_env, make_system
 from leoc.training import CURVE_COLUMNS
 
@@ -390,7 +394,7 @@ def test_save_load_round_trip_in_fresh_process(tmp_path):
     expected_lambda = result.model.actor.hybrid.lambda_.detach().double().numpy()
     script = (
         "import json, sys, torch\n"
-        "from leoc.ddpg import load_ddpg_controller, load_ddpg_model\n"
+        "from leoc.sb3 import load_ddpg_controller, load_ddpg_model\n"
         "run, obs = sys.argv[1], torch.tensor(json.loads(sys.argv[2]), dtype=torch.float64)\n"
         "policy = load_ddpg_controller(run, 'final')\n"
         "model = load_ddpg_model(run, 'final')\n"
@@ -414,6 +418,72 @@ def test_save_load_round_trip_in_fresh_process(tmp_path):
     np.testing.assert_allclose(best(obs).numpy(), result.policy(obs).numpy(), rtol=0, atol=F64_ATOL)
 
 
+#: Where leoc.ddpg kept the SB3 classes a model zip names (the package is leoc.sb3 since issue 39).
+MODULES_BEFORE_THE_MOVE = {
+    "ddpg": "leoc.ddpg.policies",
+    "td3": "leoc.ddpg.policies",
+    "sac": "leoc.ddpg.sac",
+}
+NOISE_MODULE_BEFORE_THE_MOVE = "leoc.ddpg.noise"
+
+
+def _pickled_reference(module: str, name: str) -> dict[str, str]:
+    """A zip ``data`` entry that unpickles to ``module.name`` (protocol 0's GLOBAL opcode)."""
+    reference = f"c{module}\n{name}\n.".encode()
+    return {":type:": "<class 'type'>", ":serialized:": base64.b64encode(reference).decode()}
+
+
+def _save_as_before_the_move(model, algo: str, path) -> None:
+    """Save ``model`` as leoc.ddpg did: its zip names the policy class and the exploration noise
+    by modules of leoc.ddpg, which are gone."""
+    buffer = io.BytesIO()
+    model.save(buffer)
+    with zipfile.ZipFile(buffer) as saved:
+        entries = {name: saved.read(name) for name in saved.namelist()}
+    data = json.loads(entries["data"])
+    policy_name = type(model.policy).__name__  # HybridDDPGPolicy is HybridTD3Policy
+    data["policy_class"] = _pickled_reference(MODULES_BEFORE_THE_MOVE[algo], policy_name)
+    if isinstance(data.get("action_noise"), dict):  # DDPG's and TD3's OU noise
+        data["action_noise"] = _pickled_reference(NOISE_MODULE_BEFORE_THE_MOVE, "SeededOUNoise")
+    entries["data"] = json.dumps(data).encode()
+    with zipfile.ZipFile(path, "w") as moved:
+        for name, raw in entries.items():
+            moved.writestr(name, raw)
+
+
+@pytest.mark.parametrize(
+    ("algo", "hybrid", "saved_hybrid"),
+    [
+        ("ddpg", True, "spec"),
+        ("td3", False, "spec"),
+        ("td3", True, "bool"),  # a config saved before HybridSpec
+        ("sac", True, "spec"),
+        ("sac", False, "bool"),
+    ],
+)
+def test_a_model_saved_before_the_move_still_loads(tmp_path, algo, hybrid, saved_hybrid):
+    """load_ddpg_controller gives SB3 the policy class from the run's config, so a zip that names
+    leoc.ddpg's classes (unloadable: SB3's own load fails) still loads, with the same actions."""
+    assert importlib.util.find_spec("leoc.ddpg") is None  # the old module is gone
+    config = DDPGConfig.for_system(
+        "pendulum", algo, hybrid=hybrid, actor_hidden=(16, 16), critic_hidden=(16, 16)
+    )
+    model = build_model(config, seed=3, env=make_env("pendulum"))
+    run = tmp_path / "run"
+    run.mkdir()
+    _save_as_before_the_move(model, algo, run / "model.zip")
+    config_dict = {**config.as_dict(), "seed": 3}
+    if saved_hybrid == "bool":
+        config_dict["hybrid"] = hybrid
+    (run / "config.json").write_text(json.dumps(config_dict))
+    with pytest.raises(ModuleNotFoundError, match="leoc.ddpg"):
+        type(model).load(run / "model.zip", device="cpu")
+    obs = torch.randn(8, 3, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    loaded = load_ddpg_controller(run)
+    assert loaded.is_hybrid is hybrid
+    assert torch.equal(loaded(obs), physical_policy(model.actor)(obs))
+
+
 def test_baseline_physical_policy_matches_sb3_predict():
     env = make_env("mountaincar")
     model = LeocTD3("MlpPolicy", env, policy_kwargs={"net_arch": SMALL_NET}, seed=0, device="cpu")
@@ -431,7 +501,7 @@ def test_physical_policy_accepts_the_sb3_policy(algo, hybrid):
     SB3 actor's deterministic action (``model.predict``) to float32 precision."""
     from stable_baselines3 import SAC
 
-    from leoc.ddpg import HybridSACPolicy
+    from leoc.sb3 import HybridSACPolicy
 
     env = make_env("cartpole")
     if hybrid:
@@ -565,7 +635,7 @@ def test_ddpg_progress_lines_give_steps_speed_and_the_last_return() -> None:
     import re
     import time
 
-    from leoc.ddpg.callbacks import LearningCurveCallback
+    from leoc.sb3.callbacks import LearningCurveCallback
     from leoc.training import Evaluation
 
     callback = LearningCurveCallback(

@@ -19,7 +19,9 @@ from stable_baselines3.td3.policies import TD3Policy
 from torch import nn
 
 from leoc.control import design_lqr
-from leoc.ddpg import (
+from leoc.experiments.ablation import delivered_steps
+from leoc.policies import PrecisionRelevance
+from leoc.sb3 import (
     DDPGConfig,
     HybridActor,
     HybridTD3Policy,
@@ -28,15 +30,13 @@ from leoc.ddpg import (
     hybrid_policy_kwargs,
     physical_policy,
 )
-from leoc.ddpg.algorithms import HUBER_DELTA, critic_loss_fn
-from leoc.ddpg.callbacks import last_third_start, selection_key, selection_start
-from leoc.ddpg.config import AUTHORS_DDPG, authors_ddpg_overrides
-from leoc.ddpg.noise import NOISE_SEED_OFFSET, exploration_noise
-from leoc.ddpg.policies import LeocTD3Policy, SplitCritic
-from leoc.ddpg.sac import LeocSACPolicy
-from leoc.ddpg.train import train_ddpg
-from leoc.experiments.ablation import delivered_steps
-from leoc.policies import PrecisionRelevance
+from leoc.sb3.callbacks import last_third_start, selection_key, selection_start
+from leoc.sb3.common import HUBER_DELTA, SplitCritic, critic_loss_fn
+from leoc.sb3.config import AUTHORS_DDPG, authors_ddpg_overrides
+from leoc.sb3.noise import NOISE_SEED_OFFSET, exploration_noise
+from leoc.sb3.sac import LeocSACPolicy
+from leoc.sb3.td3 import LeocTD3Policy
+from leoc.sb3.train import train_ddpg
 from leoc.systems import StepRules, make_env, make_system
 from leoc.training import Evaluation, evaluate_episodes, evaluation_starts
 

@@ -1,5 +1,5 @@
 """A rerun of a DDPG/TD3/SAC run resumes it exactly, reuses it when complete, and refuses
-another configuration unless told to overwrite (``leoc.ddpg.checkpoint``, ``train_ddpg``)."""
+another configuration unless told to overwrite (``leoc.sb3.checkpoint``, ``train_ddpg``)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
-from leoc.ddpg.checkpoint import CHECKPOINT_FILE
-from leoc.ddpg.train import train_ddpg
+from leoc.sb3.checkpoint import CHECKPOINT_FILE
+from leoc.sb3.train import train_ddpg
 
 # small networks and budgets: the point is the bookkeeping, not learning
 TINY = {
@@ -101,3 +101,22 @@ def test_a_complete_run_is_reused_and_another_budget_refused(tmp_path, capsys) -
     replaced = train_ddpg("pendulum", algo="ddpg", seed=1, run_dir=run, **other)
     assert replaced.curve[-1]["steps"] == 200
     assert json.loads((run / "config.json").read_text())["total_steps"] == 200
+
+
+def test_a_checkpoint_from_before_the_move_to_leoc_sb3_is_set_aside(tmp_path, capsys) -> None:
+    """A run interrupted before leoc.ddpg became leoc.sb3 left a checkpoint that names leoc.ddpg's
+    classes; the rerun sets it aside in one line naming the cause and trains afresh, to the
+    result of a run never interrupted."""
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train_ddpg("pendulum", algo="td3", seed=2, run_dir=run, callbacks=[StopAt(150)], **TINY)
+    (run / CHECKPOINT_FILE).write_bytes(b"cleoc.ddpg.algorithms\nLeocTD3\n.")  # a pickled class
+    capsys.readouterr()
+    rerun = train_ddpg("pendulum", algo="td3", seed=2, run_dir=run, **TINY)
+    out = capsys.readouterr().out
+    assert "checkpoint of an older leoc" in out and "No module named 'leoc.ddpg'" in out
+    assert "starting the run afresh" in out
+    aside = [path.name.split(".damaged-")[0] for path in run.glob("*.damaged-*")]
+    assert aside == [CHECKPOINT_FILE]
+    whole = train_ddpg("pendulum", algo="td3", seed=2, run_dir=tmp_path / "whole", **TINY)
+    assert rerun.curve == whole.curve and torch.equal(_parameters(rerun), _parameters(whole))

@@ -1,5 +1,5 @@
 """Tests of leoc.policies.spec (HybridSpec, HybridDesign, hybrid_design, build_hybrid, the legacy
-readers) and of the SB3 hybrid actor's legacy keywords (leoc.ddpg.policies.hybrid_arguments).
+readers) and of the SB3 hybrid actor's legacy keywords (leoc.sb3.common.hybrid_arguments).
 
 Every number is checked against a reference written here independently of the code under test:
 the hybrid's formula in numpy, the ROA relevance's level and smootherstep in numpy, the
@@ -19,8 +19,6 @@ from stable_baselines3 import DDPG
 from torch import nn
 
 from leoc.control import certify_lqr, design_lqr
-from leoc.ddpg.config import DDPGConfig
-from leoc.ddpg.policies import HybridTD3Policy, hybrid_arguments, hybrid_policy_kwargs
 from leoc.pilco.config import PilcoConfig
 from leoc.policies.spec import (
     RELEVANCE_DESIGNS,
@@ -35,6 +33,9 @@ from leoc.policies.spec import (
     roa_hybrid,
     with_hybrid_overrides,
 )
+from leoc.sb3.common import hybrid_arguments, hybrid_policy_kwargs
+from leoc.sb3.config import DDPGConfig
+from leoc.sb3.td3 import HybridTD3Policy
 from leoc.systems import make_env, make_system
 
 pytestmark = pytest.mark.usefixtures("single_thread")

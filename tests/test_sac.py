@@ -1,4 +1,4 @@
-"""Tests of leoc.ddpg.sac: the LEOC hybrid as the squashed mean of Stable-Baselines3's SAC.
+"""Tests of leoc.sb3.sac: the LEOC hybrid as the squashed mean of Stable-Baselines3's SAC.
 
 References are independent of the code under test: the LQR design recomputed with
 ``design_lqr``, the blend recomputed from its formula, autograd Jacobians, Monte Carlo moments
@@ -20,7 +20,8 @@ from stable_baselines3.common.torch_layers import FlattenExtractor
 from torch import nn
 
 from leoc.control import design_lqr
-from leoc.ddpg import (
+from leoc.policies import HybridDesign, HybridSpec
+from leoc.sb3 import (
     SAC_DEFAULTS,
     DDPGConfig,
     HybridSACActor,
@@ -34,12 +35,10 @@ from leoc.ddpg import (
     physical_policy,
     train_ddpg,
 )
-from leoc.ddpg import sac as sac_module
-from leoc.ddpg.algorithms import critic_loss_fn
-from leoc.ddpg.noise import exploration_noise
-from leoc.ddpg.policies import SplitCritic
-from leoc.ddpg.sac import SquashedMean, squashed_blend_mean
-from leoc.policies import HybridDesign, HybridSpec
+from leoc.sb3 import sac as sac_module
+from leoc.sb3.common import SplitCritic, critic_loss_fn
+from leoc.sb3.noise import exploration_noise
+from leoc.sb3.sac import SquashedMean, squashed_blend_mean
 from leoc.systems import SYSTEM_NAMES, make_env, make_system
 
 SMALL_NET = [32, 32]
@@ -665,8 +664,8 @@ def test_cli_budget_and_algo_errors_name_the_argument(argv, expected, capsys):
 
 
 def test_progress_lines_name_sac_and_the_eta_reads_them():
-    from leoc.ddpg.callbacks import LearningCurveCallback
     from leoc.experiments.eta import trainer_progress
+    from leoc.sb3.callbacks import LearningCurveCallback
 
     callback = LearningCurveCallback(
         make_system("pendulum"),

@@ -42,7 +42,7 @@ PUBLIC_PACKAGES = (
     "leoc.policies",
     "leoc.systems",
     "leoc.pilco",
-    "leoc.ddpg",
+    "leoc.sb3",
     "leoc.evaluation",
     "leoc.experiments",
 )
@@ -300,6 +300,8 @@ def write_pages(app: Sphinx) -> None:
         text = package_page(package)
         if not page.exists() or page.read_text() != text:  # unchanged pages stay unchanged
             page.write_text(text)
+    for stale in set(out_dir.glob("*.rst")) - {out_dir / f"{name}.rst" for name in packages}:
+        stale.unlink()  # the page of a package that moved or went
     if app.config.leoc_api_check_docstrings:
         for problem in missing_docstrings(list(app.config.leoc_api_packages)):
             LOGGER.warning(problem, type=WARNING_TYPE, subtype="docstring")

@@ -129,9 +129,9 @@ def main(steps: int = 2_000, run_dir: str | None = None) -> dict[str, float]:
     Returns the peak deviation (m) of the LQR's and the hybrid's impulse responses.
     """
     from leoc.control import design_lqr
-    from leoc.ddpg.train import load_ddpg_controller, train_ddpg
     from leoc.evaluation.rollout import response_test
     from leoc.policies import LinearController
+    from leoc.sb3.train import load_ddpg_controller, train_ddpg
     from leoc.systems import make_system
 
     register()

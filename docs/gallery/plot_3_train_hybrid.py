@@ -24,10 +24,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from leoc.control import design_lqr
-from leoc.ddpg import load_ddpg_controller, train_ddpg
 from leoc.evaluation.robustness import relevance_trace
 from leoc.evaluation.rollout import response_test
 from leoc.policies import LinearController
+from leoc.sb3 import load_ddpg_controller, train_ddpg
 from leoc.systems import make_system
 from leoc.systems.rollout import rollout
 

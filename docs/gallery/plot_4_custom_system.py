@@ -16,9 +16,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from leoc.control import design_lqr
-from leoc.ddpg import load_ddpg_controller
 from leoc.evaluation.rollout import response_test
 from leoc.policies import LinearController
+from leoc.sb3 import load_ddpg_controller
 from leoc.systems import make_system
 
 run_dir = tempfile.mkdtemp(prefix="damped_cart_")

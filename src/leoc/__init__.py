@@ -17,7 +17,7 @@ from leoc.names import register_builtin_envs_with_gymnasium
 # registers each system in full when first imported.
 register_builtin_envs_with_gymnasium()
 
-_SUBPACKAGES = ("control", "ddpg", "evaluation", "experiments", "pilco", "policies", "systems")
+_SUBPACKAGES = ("control", "evaluation", "experiments", "pilco", "policies", "sb3", "systems")
 
 
 def __getattr__(name: str) -> Any:

@@ -3,7 +3,7 @@
 A learner trains a controller on a system and loads it back from its run folder. Each is
 registered by name, as systems are (:func:`register_learner`; ``leoc.systems.register``):
 ``leoc train --algo NAME``, ``leoc reproduce`` and the report find it there. leoc registers
-four: ``ddpg``, ``td3`` and ``sac`` (Stable-Baselines3, :mod:`leoc.ddpg`) and ``pilco``
+four: ``ddpg``, ``td3`` and ``sac`` (Stable-Baselines3, :mod:`leoc.sb3`) and ``pilco``
 (:mod:`leoc.pilco`). A learner outside SB3 is one class with the :class:`Learner` methods and
 one :func:`register_learner` call.
 
@@ -135,7 +135,7 @@ class Learner(Protocol):
 
 
 class SB3Learner:
-    """DDPG, TD3 or SAC through Stable-Baselines3 (:func:`leoc.ddpg.train_ddpg`)."""
+    """DDPG, TD3 or SAC through Stable-Baselines3 (:func:`leoc.sb3.train_ddpg`)."""
 
     budget_unit: ClassVar[str] = "steps"
     marker: ClassVar[str] = "model.zip"
@@ -145,7 +145,7 @@ class SB3Learner:
         self.settings_of = settings_of or algo
 
     def default_budget(self, system: str) -> int | None:
-        from leoc.ddpg.config import DEFAULT_TOTAL_STEPS, TOTAL_STEPS_BY_SYSTEM
+        from leoc.sb3.config import DEFAULT_TOTAL_STEPS, TOTAL_STEPS_BY_SYSTEM
 
         return TOTAL_STEPS_BY_SYSTEM.get(system, DEFAULT_TOTAL_STEPS)
 
@@ -161,8 +161,8 @@ class SB3Learner:
     ) -> TrainResult:
         import sys
 
-        from leoc.ddpg.train import train_ddpg
         from leoc.progress import is_terminal
+        from leoc.sb3.train import train_ddpg
 
         # a bar on a terminal, plain lines in a log (leoc reproduce's workers)
         shown = (True if is_terminal(sys.stdout) else "lines") if progress else False
@@ -178,7 +178,7 @@ class SB3Learner:
         )
 
     def load(self, run_dir: Path) -> nn.Module:
-        from leoc.ddpg.train import load_ddpg_controller
+        from leoc.sb3.train import load_ddpg_controller
 
         return load_ddpg_controller(run_dir)
 

@@ -1,7 +1,7 @@
 """One trainer contract for PILCO and DDPG/TD3: evaluation episodes, learning curve, result,
 run folder.
 
-Both trainers (:func:`leoc.pilco.train_pilco`, :func:`leoc.ddpg.train_ddpg`) evaluate their
+Both trainers (:func:`leoc.pilco.train_pilco`, :func:`leoc.sb3.train_ddpg`) evaluate their
 current controller the same way, return the same :class:`TrainResult` and write the same files.
 
 Evaluation. After every iteration (PILCO) or every ``eval_interval`` environment steps
@@ -18,7 +18,7 @@ holds; ``held_steps``: the first evaluation from which every later evaluation ho
 Model selection: each trainer records the rule that chose the run's controller in its curve
 summary (``model_selection``): ``MODEL_SELECTION`` (``"final"``, the policy at the end of
 the training budget) unless the trainer selects otherwise: DDPG/TD3/SAC by their config's
-``model_selection`` (leoc's default ``"best_held"``, :mod:`leoc.ddpg.callbacks`), PILCO by
+``model_selection`` (leoc's default ``"best_held"``, :mod:`leoc.sb3.callbacks`), PILCO by
 ``select_best_from``. A rule other than ``"final"`` selects on the evaluation episodes, and the
 report says so from what the runs recorded.
 

@@ -16,7 +16,7 @@ from leoc.names import (
 )
 
 ALGO_CHOICES = LEARNER_NAMES
-MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.ddpg.config.ALGOS, without importing SB3
+MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.sb3.config.ALGOS, without importing SB3
 DEFAULT_RUNS_DIR = Path("runs")
 
 

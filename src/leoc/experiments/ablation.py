@@ -1,16 +1,16 @@
 r"""The DDPG ablation: which of the authors' DDPG choices decide whether DDPG learns a swing-up.
 
 A grid of *settings* x controllers x systems x seeds (issue 20). Each setting is a set of
-:class:`~leoc.ddpg.DDPGConfig` overrides relative to leoc's defaults, derived from the one
-place that holds the authors' values (:data:`~leoc.ddpg.AUTHORS_DDPG`,
-:func:`~leoc.ddpg.authors_ddpg_overrides`, ``AUTHORS.rules_for``), never from numbers of its own:
+:class:`~leoc.sb3.DDPGConfig` overrides relative to leoc's defaults, derived from the one
+place that holds the authors' values (:data:`~leoc.sb3.AUTHORS_DDPG`,
+:func:`~leoc.sb3.authors_ddpg_overrides`, ``AUTHORS.rules_for``), never from numbers of its own:
 
 ===================  ==========================================================================
 setting              DDPGConfig fields, relative to leoc's defaults
 ===================  ==========================================================================
 ``leoc``             none: leoc's defaults when the grid ran, written out as
                      :data:`LEOC_ABLATION_BASE` (every setting starts from them)
-``authors``          the authors' full DDPG setup, :func:`~leoc.ddpg.authors_ddpg_overrides`
+``authors``          the authors' full DDPG setup, :func:`~leoc.sb3.authors_ddpg_overrides`
                      (every field below, plus their precision relevance, unclipped actor
                      output and, on the cart-pole baseline, actor learning rate 1e-4), and all
                      their step rules (``AUTHORS.rules_for(system)``: the -100 exit and the
@@ -35,7 +35,7 @@ setting              DDPGConfig fields, relative to leoc's defaults
 The setting ``defaults`` (:data:`DEFAULTS_SETTING`, not in the default grid) is leoc's
 defaults as the running code has them, no override: the choices issue 20 took from this grid
 (``all_safe_exit`` with the ``best_held`` selection, and budgets of 21k steps on the cart-pole
-and 20k on the mountain car, :mod:`leoc.ddpg.config`). It measures those defaults in the same
+and 20k on the mountain car, :mod:`leoc.sb3.config`). It measures those defaults in the same
 harness, for DDPG, TD3 and SAC alike.
 
 Where no single choice is enough, combinations decide which are needed
@@ -56,7 +56,7 @@ the steps left, which the observation does not show; it still never pays), and
 ``all_horizon_exit`` is ``all_safe_exit`` with that exit. They apply where a system can leave
 its region (the cart-pole and the mountain car).
 
-SAC (:mod:`leoc.ddpg.sac`) runs in the same harness, with the same held-out success test:
+SAC (:mod:`leoc.sb3.sac`) runs in the same harness, with the same held-out success test:
 its controllers ``sac_baseline``, ``sac_hybrid`` and ``sac_hybrid_roa`` take the settings that
 are not DDPG choices (:data:`SAC_SETTINGS`: leoc's defaults and the exit rule), so the grid
 also measures SAC's success rate against the budget, and SAC's own settings
@@ -79,7 +79,7 @@ that for every evaluated budget :math:`T \le T_{max}`, honestly:
 
 * SB3's DDPG with a constant learning rate does not depend on the total budget, so the first
   T steps of the long run *are* the run of budget T (a test checks it);
-* the held-out episodes (:class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback`) evaluate
+* the held-out episodes (:class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback`) evaluate
   the actor at every evaluation step on starts seeded ``seed + 30000 + k``, on leoc's system
   (leoc's step rules, whatever rules the setting trains under: every cell faces the same
   test); they feed nothing back into training or selection;
@@ -87,7 +87,7 @@ that for every evaluated budget :math:`T \le T_{max}`, honestly:
   (:func:`delivered_steps`): with ``"final"`` the actor at step T; with ``"best_last_third"``
   the actor of the best *selection* evaluation (the trainer's own ``eval_episodes`` episodes,
   under the setting's rules, as the run itself selects) after
-  :func:`~leoc.ddpg.callbacks.last_third_start` of T. Its held-out episodes then measure it
+  :func:`~leoc.sb3.callbacks.last_third_start` of T. Its held-out episodes then measure it
   without the optimism of having been chosen on them.
 
 "The actor at step T" is the one the trainer's learning curve evaluates at step T (before
@@ -121,8 +121,15 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from leoc import names
-from leoc.ddpg.callbacks import selection_key, selection_start
-from leoc.ddpg.config import (
+from leoc.experiments.layout import LOG_FILE
+from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
+from leoc.experiments.variants import AUTHORS
+from leoc.io import read_json_object, write_json_atomic
+from leoc.learners import ControllerSpec
+from leoc.names import controller_framework
+from leoc.policies.spec import HybridSpec
+from leoc.sb3.callbacks import selection_key, selection_start
+from leoc.sb3.config import (
     AUTHORS_DDPG,
     AUTHORS_EVAL_INTERVAL,
     DEFAULT_TOTAL_STEPS,
@@ -132,13 +139,6 @@ from leoc.ddpg.config import (
     DDPGConfig,
     authors_ddpg_overrides,
 )
-from leoc.experiments.layout import LOG_FILE
-from leoc.experiments.sweep import SweepResult, check_backend, default_run_dir, sweep
-from leoc.experiments.variants import AUTHORS
-from leoc.io import read_json_object, write_json_atomic
-from leoc.learners import ControllerSpec
-from leoc.names import controller_framework
-from leoc.policies.spec import HybridSpec
 from leoc.systems.base import DEFAULT_RULES
 
 #: The settings of the grid, in table order (see the module docstring).
@@ -156,7 +156,7 @@ COMBINED_SETTINGS = (
 )
 #: leoc's exit charged for a whole episode, alone and on ``all_safe_exit`` (module docstring).
 HORIZON_EXIT_SETTINGS = ("horizon_exit", "all_horizon_exit")
-#: leoc's defaults of the code that runs it (:meth:`~leoc.ddpg.DDPGConfig.for_system`, no
+#: leoc's defaults of the code that runs it (:meth:`~leoc.sb3.DDPGConfig.for_system`, no
 #: override), for DDPG, TD3 and SAC alike: the setting that measures the defaults issue 20
 #: chose from this grid (module docstring).
 DEFAULTS_SETTING = "defaults"
@@ -220,7 +220,7 @@ SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
     "model_selection": ("model_selection", "eval_episodes"),
 }
 #: leoc's DDPG defaults, as they were when the ablation ran, of every field its settings
-#: switch (written out, not read from :class:`~leoc.ddpg.DDPGConfig`): ``leoc`` is these
+#: switch (written out, not read from :class:`~leoc.sb3.DDPGConfig`): ``leoc`` is these
 #: values and every other setting starts from them, so the published grid stays what this
 #: code runs when leoc's defaults change (issue 20 chooses new ones from this grid).
 LEOC_ABLATION_BASE: dict[str, Any] = {
@@ -267,7 +267,7 @@ SB3_SAC_CRITIC: dict[str, Any] = {
 #: SAC's defaults before issue 20 of the fields that changed since, for the SAC cells of the
 #: settings other than ``defaults`` and :data:`SAC_TUNING_SETTINGS`: leoc's step rules, the
 #: final actor on 5 evaluation episodes and SB3's critics (SAC's other hyperparameters,
-#: :data:`~leoc.ddpg.SAC_DEFAULTS`, did not change).
+#: :data:`~leoc.sb3.SAC_DEFAULTS`, did not change).
 SAC_ABLATION_BASE: dict[str, Any] = {
     "step_rules": {},
     "model_selection": "final",
@@ -315,7 +315,7 @@ TEST_SEED_OFFSET = 30_000
 RESULT_FILE = "result.json"
 #: The plan pinned by the first invocation on a folder.
 PLAN_FILE = "plan.json"
-#: Subfolder of a run folder holding :func:`~leoc.ddpg.train_ddpg`'s files.
+#: Subfolder of a run folder holding :func:`~leoc.sb3.train_ddpg`'s files.
 TRAIN_DIR = "train"
 # Wall time of one run [s] per 1000 steps, from results/paper's DDPG runs (leoc.experiments.
 # profiles.PAPER_RUN_SECONDS over the paper's budgets); the ETA's prior before runs finish.
@@ -335,7 +335,7 @@ PLAN_FIELDS = ("system", "algo", "hybrid", "relevance", "total_steps", "eval_int
 def setting_overrides(
     setting: str, system: str, hybrid: bool, budget: int | None = None, algo: str = "ddpg"
 ) -> dict[str, Any]:
-    """The :class:`~leoc.ddpg.DDPGConfig` overrides of ``setting`` on ``system``:
+    """The :class:`~leoc.sb3.DDPGConfig` overrides of ``setting`` on ``system``:
     :data:`LEOC_ABLATION_BASE` with what the setting switches (see the module table).
 
     Parameters
@@ -350,7 +350,7 @@ def setting_overrides(
     budget : int, optional
         The run's environment steps (the authors' setup sets ``total_steps`` to it).
     algo : {"ddpg", "td3", "sac"}
-        The learner: SAC keeps its own defaults (:data:`~leoc.ddpg.SAC_DEFAULTS`) and
+        The learner: SAC keeps its own defaults (:data:`~leoc.sb3.SAC_DEFAULTS`) and
         takes :data:`SAC_ABLATION_BASE` as its base.
 
     Returns
@@ -358,7 +358,7 @@ def setting_overrides(
     dict
         A fresh dict; :data:`LEOC_ABLATION_BASE` itself for ``leoc`` and for a setting that
         changes nothing on ``system`` (:data:`SAC_ABLATION_BASE` for SAC); empty for
-        ``defaults``, which runs :meth:`~leoc.ddpg.DDPGConfig.for_system` as it is.
+        ``defaults``, which runs :meth:`~leoc.sb3.DDPGConfig.for_system` as it is.
     """
     if setting not in ALL_SETTINGS:
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
@@ -535,7 +535,7 @@ class AblationPlan:
     test_episodes : int
         Held-out swing-up episodes per evaluation (:data:`TEST_EPISODES`).
     overrides : mapping
-        :class:`~leoc.ddpg.DDPGConfig` fields set in every cell (e.g. small networks for a
+        :class:`~leoc.sb3.DDPGConfig` fields set in every cell (e.g. small networks for a
         smoke run); none may be a field that a setting switches or that
         :data:`PLAN_FIELDS` names.
     """
@@ -580,8 +580,8 @@ class AblationPlan:
         )
 
     def config_overrides(self, spec: AblationSpec) -> dict[str, Any]:
-        """Keyword overrides of ``spec``'s :class:`~leoc.ddpg.DDPGConfig` (for
-        :func:`~leoc.ddpg.train_ddpg`): the setting's, then the plan's."""
+        """Keyword overrides of ``spec``'s :class:`~leoc.sb3.DDPGConfig` (for
+        :func:`~leoc.sb3.train_ddpg`): the setting's, then the plan's."""
         budget = self.budget_for(spec.system)
         return {
             **setting_overrides(spec.setting, spec.system, spec.hybrid, budget, spec.algo),
@@ -591,7 +591,7 @@ class AblationPlan:
         }
 
     def config(self, spec: AblationSpec) -> DDPGConfig:
-        """The :class:`~leoc.ddpg.DDPGConfig` of ``spec``."""
+        """The :class:`~leoc.sb3.DDPGConfig` of ``spec``."""
         overrides = self.config_overrides(spec)
         hybrid = spec.controller_spec.hybrid
         return DDPGConfig.for_system(spec.system, spec.algo, hybrid=hybrid, **overrides)
@@ -609,7 +609,7 @@ class AblationPlan:
 
 
 def switched_fields() -> set[str]:
-    """Every :class:`~leoc.ddpg.DDPGConfig` field some setting sets to a value other than
+    """Every :class:`~leoc.sb3.DDPGConfig` field some setting sets to a value other than
     leoc's default, on some system of :data:`ABLATION_SYSTEMS` and controller."""
     fields = {"step_rules"}
     for system in ABLATION_SYSTEMS:
@@ -702,8 +702,8 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
     """Train one run of the grid and return its record (the sweep writes it to
     :data:`RESULT_FILE`).
 
-    Trains with :func:`~leoc.ddpg.train_ddpg` into ``RUN/train`` (progress lines to
-    ``RUN/train.log``), with a :class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback` on
+    Trains with :func:`~leoc.sb3.train_ddpg` into ``RUN/train`` (progress lines to
+    ``RUN/train.log``), with a :class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback` on
     leoc's system at the trainer's evaluation steps.
 
     Returns
@@ -718,9 +718,9 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
     """
     import torch
 
-    from leoc.ddpg.callbacks import HeldOutEvaluationCallback
-    from leoc.ddpg.train import train_ddpg
     from leoc.experiments.reproduce import WORKER_THREADS, versions
+    from leoc.sb3.callbacks import HeldOutEvaluationCallback
+    from leoc.sb3.train import train_ddpg
     from leoc.systems import make_system
 
     run_dir = default_run_dir(out_dir, spec)
@@ -824,12 +824,12 @@ def delivered_steps(
     """Step of the evaluation whose actor a run of budget ``budget`` delivers.
 
     ``"final"``: ``budget`` itself. ``"best_last_third"``: among the evaluations at steps
-    ``s`` with :func:`~leoc.ddpg.callbacks.last_third_start` ``(budget, learning_starts) < s
+    ``s`` with :func:`~leoc.sb3.callbacks.last_third_start` ``(budget, learning_starts) < s
     <= budget``, the one with the strictly highest selection return (the earliest on ties), as
-    :class:`~leoc.ddpg.LearningCurveCallback` selects; ``budget`` when the window holds none.
+    :class:`~leoc.sb3.LearningCurveCallback` selects; ``budget`` when the window holds none.
     ``"best_held"``: among all evaluations up to ``budget``, the one whose selection episodes
     held in the largest share, the highest selection return among those (the earliest on
-    ties); :func:`~leoc.ddpg.callbacks.selection_key` is the rule of both.
+    ties); :func:`~leoc.sb3.callbacks.selection_key` is the rule of both.
 
     Parameters
     ----------

@@ -24,7 +24,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.ddpg.config import MODEL_SELECTIONS, PAPER_TOTAL_STEPS
 from leoc.experiments.ablation import (
     ABLATION_SYSTEMS,
     ALL_SETTINGS,
@@ -41,6 +40,7 @@ from leoc.experiments.profiles import CONTROLLER_LABELS
 from leoc.experiments.stats import CONFIDENCE, wilson_interval
 from leoc.io import read_json_object, write_csv_atomic, write_json_atomic, write_text_atomic
 from leoc.names import controller_framework
+from leoc.sb3.config import MODEL_SELECTIONS, PAPER_TOTAL_STEPS
 
 #: Files :func:`publish_ablation` writes (the text ones are compared byte for byte by the tests).
 TABLE_FILES = ("ablation.md", "success_vs_budget.csv", "ablation.json")
@@ -263,7 +263,7 @@ def reselection_rows(
     """Success counts of each model selection rule re-applied to each cell's runs, at
     ``budgets[system]`` (the headline budget): one dict per cell with ``system``,
     ``controller``, ``setting``, ``budget``, ``own_rule``, ``seeds``, ``reached`` and one count
-    per rule of ``leoc.ddpg.config.MODEL_SELECTIONS``."""
+    per rule of ``leoc.sb3.config.MODEL_SELECTIONS``."""
     rows = []
     for (system, controller, setting), runs in group_records(records).items():
         budget = budgets[system]

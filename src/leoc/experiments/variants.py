@@ -44,10 +44,10 @@ from typing import Any
 
 from torch import nn
 
-from leoc.ddpg.config import authors_ddpg_overrides
 from leoc.evaluation.rollout import RESPONSE_STEPS
 from leoc.names import FRAMEWORKS
 from leoc.pilco.config import authors_pilco_overrides
+from leoc.sb3.config import authors_ddpg_overrides
 from leoc.systems import StepRules, System, make_system
 from leoc.systems.base import DEFAULT_RULES
 
@@ -81,7 +81,7 @@ class Variant:
     response_steps : mapping of system name -> int
         Length of the impulse and step records; a system not listed gets 200.
     ddpg, sac, pilco : callable or None
-        ``settings(system, hybrid, budget) -> dict`` of :class:`~leoc.ddpg.DDPGConfig` (DDPG,
+        ``settings(system, hybrid, budget) -> dict`` of :class:`~leoc.sb3.DDPGConfig` (DDPG,
         SAC) or :class:`~leoc.pilco.PilcoConfig` fields this variant sets (None: none);
         ``budget`` is the run's training budget (DDPG/SAC steps, PILCO iterations) where a
         profile sets one, else None (the variant's own). The variant's ``lqr_method`` and step

@@ -19,7 +19,7 @@ SELECTION_RULES = {
     "highest mean return among those",
     "best_last_third": "the evaluation of highest mean return in the last third of training",
 }
-"""What each recorded ``model_selection`` rule returns (:mod:`leoc.ddpg.callbacks`); PILCO's
+"""What each recorded ``model_selection`` rule returns (:mod:`leoc.sb3.callbacks`); PILCO's
 selecting rule records its own sentence."""
 NOT_RECORDED = "not recorded"
 

@@ -15,7 +15,7 @@ observations (B, D) to physical actions (B, F). :func:`physical_policy` builds i
 The MLP weights and :math:`\lambda` are the actor's, converted to float64; the result agrees
 with the SB3 actor's deterministic action to float32 precision (for the SAC hybrid, whose
 squashed mean is :math:`\tanh\operatorname{atanh}` of the clipped blend, also to
-:math:`\epsilon h` where the clip acts, :mod:`leoc.ddpg.sac`).
+:math:`\epsilon h` where the clip acts, :mod:`leoc.sb3.sac`).
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
-from leoc.ddpg.policies import HybridActorMixin, action_box
-from leoc.ddpg.sac import SquashedMean
 from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance
+from leoc.sb3.common import HybridActorMixin, action_box
+from leoc.sb3.sac import SquashedMean
 
 __all__ = ["AffineOutput", "PhysicalPolicy", "physical_policy"]
 
@@ -109,7 +109,7 @@ class PhysicalPolicy(nn.Module):
 
 def physical_policy(actor: Actor | SACActor | TD3Policy | SACPolicy) -> PhysicalPolicy:
     """float64 physical-units copy of an SB3 DDPG/TD3 or SAC actor, baseline or hybrid
-    (:class:`~leoc.ddpg.HybridActor`, :class:`~leoc.ddpg.HybridSACActor`): its deterministic
+    (:class:`~leoc.sb3.HybridActor`, :class:`~leoc.sb3.HybridSACActor`): its deterministic
     action.
 
     Parameters

@@ -6,7 +6,7 @@ The curve is return against *interaction time*: environment steps and simulated 
 deterministic swing-up episodes on the pure step function, from the same seeded starts at every
 evaluation, so points are comparable and PILCO's curves are measured the same way.
 
-Model selection (``MODEL_SELECTIONS`` of :mod:`leoc.ddpg.config`): ``"final"`` (leoc's,
+Model selection (``MODEL_SELECTIONS`` of :mod:`leoc.sb3.config`): ``"final"`` (leoc's,
 :mod:`leoc.training`) keeps the actor at the end of training; ``"best_last_third"`` restores, at the
 end of training, the actor of the best evaluation (strictly highest mean return, the earliest on
 ties) among those after :func:`last_third_start`, as nrjc/LEOC's ``dao/trainer.py`` does
@@ -30,9 +30,9 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from leoc.ddpg.config import MODEL_SELECTIONS
-from leoc.ddpg.physical import PhysicalPolicy, physical_policy
 from leoc.progress import evaluation_text, is_terminal, steps_line
+from leoc.sb3.config import MODEL_SELECTIONS
+from leoc.sb3.physical import PhysicalPolicy, physical_policy
 from leoc.training import Evaluation, curve_row, evaluate_episodes
 
 __all__ = [
@@ -247,7 +247,7 @@ class LearningCurveCallback(BaseCallback):
             self._print_line()
         return result
 
-    #: Attributes a checkpoint keeps (:mod:`leoc.ddpg.checkpoint`): the curve, the best
+    #: Attributes a checkpoint keeps (:mod:`leoc.sb3.checkpoint`): the curve, the best
     #: return, the model selection's candidate, the step last evaluated and its result.
     CHECKPOINTED = (
         "curve",
@@ -294,7 +294,7 @@ class HeldOutEvaluationCallback(BaseCallback):
     measure the actor at each step without the optimism of a selection on them (the
     ablation's success test, :mod:`leoc.experiments.ablation`).
 
-    Pass it to :func:`leoc.ddpg.train_ddpg` in ``callbacks``: it runs before the learning-curve
+    Pass it to :func:`leoc.sb3.train_ddpg` in ``callbacks``: it runs before the learning-curve
     callback, so at the end of training it sees the final actor, before ``"best_last_third"``
     restores the selected one.
 

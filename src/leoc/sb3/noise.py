@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from stable_baselines3.common.noise import ActionNoise
 
-from leoc.ddpg.policies import action_box
+from leoc.sb3.common import action_box
 
 if TYPE_CHECKING:
-    from leoc.ddpg.config import DDPGConfig
+    from leoc.sb3.config import DDPGConfig
 
 __all__ = ["NOISE_SEED_OFFSET", "SeededOUNoise", "exploration_noise"]
 

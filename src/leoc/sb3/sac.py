@@ -1,7 +1,7 @@
 r"""The LEOC hybrid for Stable-Baselines3's SAC: the squashed mean is the hybrid of DDPG/TD3.
 
 Letters: B batch, D observation dimension, F action dimension. Units as in
-:mod:`leoc.ddpg.policies`: SB3 acts in normalised units :math:`\tilde u \in [-1, 1]^F`,
+:mod:`leoc.sb3.common`: SB3 acts in normalised units :math:`\tilde u \in [-1, 1]^F`,
 :math:`u = c + h \odot \tilde u`.
 
 SAC's policy (Haarnoja et al., 2018) is a squashed Gaussian: in normalised units
@@ -19,8 +19,8 @@ action is the squashed mean :math:`\tanh\mu(x)`. SB3's mean head is unbounded; c
     \beta(x) = r(x)\, \tilde G(x) + (1 - r(x))\, \tanh M(x),
 
 with :math:`\tilde G = (W x + b - c) / h` the LQR in normalised units and :math:`r` the paper's
-or the ROA relevance, exactly as in :class:`~leoc.ddpg.HybridActor` (the blend, its relevance and
-its saved arguments are :class:`~leoc.ddpg.policies.HybridActorMixin`'s, shared with DDPG/TD3).
+or the ROA relevance, exactly as in :class:`~leoc.sb3.HybridActor` (the blend, its relevance and
+its saved arguments are :class:`~leoc.sb3.common.HybridActorMixin`'s, shared with DDPG/TD3).
 The squash undoes the atanh, so the deterministic action is the DDPG/TD3 hybrid's,
 
 .. math::
@@ -75,7 +75,7 @@ Why not blend in the pre-tanh space, :math:`\mu = r \operatorname{atanh}\tilde G
 It has the same identities at :math:`a`, but its deterministic action
 :math:`\tanh(r \operatorname{atanh}\tilde G + (1 - r) M)` is not :math:`r G + (1 - r) H` away
 from :math:`a`; the form above is the LEOC hybrid everywhere, the same function class as the
-DDPG/TD3 hybrid, so one float64 evaluation (:func:`leoc.ddpg.physical_policy`), one relevance
+DDPG/TD3 hybrid, so one float64 evaluation (:func:`leoc.sb3.physical_policy`), one relevance
 trace and one set of hybrid claims serve all three learners.
 
 References
@@ -99,15 +99,16 @@ from stable_baselines3.sac.policies import LOG_STD_MAX, LOG_STD_MIN, SACPolicy
 from stable_baselines3.sac.policies import Actor as SACActor
 from torch import Tensor, nn
 
-from leoc.ddpg.algorithms import ActorRateAndWarmupMixin, critic_loss_fn
-from leoc.ddpg.noise import exploration_noise
-from leoc.ddpg.policies import (
+from leoc.policies.spec import HybridDesign, HybridSpec
+from leoc.sb3.common import (
+    ActorRateAndWarmupMixin,
     HybridActorMixin,
     NetworkOptionsMixin,
+    critic_loss_fn,
     hybrid_arguments,
     hybrid_policy_kwargs,
 )
-from leoc.policies.spec import HybridDesign, HybridSpec
+from leoc.sb3.noise import exploration_noise
 
 __all__ = [
     "HybridSACActor",
@@ -185,7 +186,7 @@ class HybridSACActor(HybridActorMixin, SACActor):
     (:func:`squashed_blend_mean`), log-std SB3's head on the same hidden layers (clamped to
     SB3's ``[LOG_STD_MIN, LOG_STD_MAX]``). Deterministic action
     :math:`\tanh\mu = \operatorname{clip}(r \tilde G + (1 - r) \tilde H)`, the
-    :class:`~leoc.ddpg.HybridActor`'s; sampled action :math:`\tanh(\mu + \sigma \xi)`,
+    :class:`~leoc.sb3.HybridActor`'s; sampled action :math:`\tanh(\mu + \sigma \xi)`,
     :math:`\xi \sim \mathcal N(0, I)`. Shapes: observation (B, D) float32 -> normalised action
     (B, F).
 
@@ -198,7 +199,7 @@ class HybridSACActor(HybridActorMixin, SACActor):
         Must be False: gSDE clips SAC's mean to ``+/- clip_mean``, which would move
         :math:`\mu(a)` off :math:`\operatorname{atanh}\tilde G(a)`.
     hybrid_spec, hybrid_design
-        The hybrid, as for :class:`~leoc.ddpg.HybridActor`.
+        The hybrid, as for :class:`~leoc.sb3.HybridActor`.
 
     Attributes
     ----------
@@ -289,7 +290,7 @@ def _check_no_sde(use_sde: object) -> None:
 
 class LeocSACPolicy(NetworkOptionsMixin, SACPolicy):
     """SB3's SAC policy with the critic layout and the networks' initialisation as options
-    (:class:`~leoc.ddpg.policies.NetworkOptionsMixin`, as for DDPG/TD3): at their defaults
+    (:class:`~leoc.sb3.common.NetworkOptionsMixin`, as for DDPG/TD3): at their defaults
     it is SB3's ``SACPolicy`` itself (same modules, same random draws, same numbers).
 
     Parameters
@@ -297,7 +298,7 @@ class LeocSACPolicy(NetworkOptionsMixin, SACPolicy):
     observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
         As for :class:`stable_baselines3.sac.policies.SACPolicy`.
     critic_action_layer, critic_action_units, hidden_init, last_layer_init
-        As :class:`~leoc.ddpg.policies.NetworkOptionsMixin` describes them. The actor's
+        As :class:`~leoc.sb3.common.NetworkOptionsMixin` describes them. The actor's
         initialised layers are its hidden layers and mean head (the squashed mean
         :class:`SquashedMean`, the hybrid's nonlinear part); the log-std head keeps SB3's.
     """
@@ -321,8 +322,8 @@ class HybridSACPolicy(LeocSACPolicy):
     options, :class:`LeocSACPolicy`'s).
 
     Use it as ``SAC(HybridSACPolicy, env, policy_kwargs=hybrid_policy_kwargs(system))``
-    (:func:`leoc.ddpg.hybrid_policy_kwargs`, the same helper as for DDPG/TD3) or through
-    :func:`leoc.ddpg.train_ddpg` with ``algo="sac", hybrid=True``.
+    (:func:`leoc.sb3.hybrid_policy_kwargs`, the same helper as for DDPG/TD3) or through
+    :func:`leoc.sb3.train_ddpg` with ``algo="sac", hybrid=True``.
 
     Parameters
     ----------
@@ -383,10 +384,10 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
     actor_learning_rate : float, optional
         The actor optimiser's step size (None: ``learning_rate``, SB3's behaviour).
     warmup : {"uniform", "policy"}
-        How the first ``learning_starts`` steps act (:mod:`leoc.ddpg.algorithms`).
+        How the first ``learning_starts`` steps act (:mod:`leoc.sb3.common`).
     target_update_interval : int
         Gradient updates between two soft target updates of the critics (default 1: every
-        update, SAC's usual setting), as for :class:`~leoc.ddpg.LeocDDPG`. SB3's SAC counts it
+        update, SAC's usual setting), as for :class:`~leoc.sb3.LeocDDPG`. SB3's SAC counts it
         over the gradient steps of *one* ``train`` call, so with ``train_freq=1,
         gradient_steps=1`` it would update the targets every step whatever its value; here
         it counts SB3's ``_n_updates`` across calls.
@@ -394,9 +395,9 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
         The critics' TD loss: ``"mse"`` is SB3's update itself; ``"huber"`` runs
         :meth:`_train_step`, the same update with
         :math:`\tfrac12 \sum_k \mathrm{huber}(Q_k(s, a), y)` (delta 1, as DDPG's
-        ``critic_loss``, :func:`leoc.ddpg.algorithms.critic_loss_fn`): a TD error beyond 1
+        ``critic_loss``, :func:`leoc.sb3.common.critic_loss_fn`): a TD error beyond 1
         pulls with a constant gradient instead of one proportional to the error. leoc's
-        defaults take it (:data:`~leoc.ddpg.SAC_DEFAULTS`): with the squared error SAC did not
+        defaults take it (:data:`~leoc.sb3.SAC_DEFAULTS`): with the squared error SAC did not
         learn the cart-pole swing-up (the DDPG guide, "SAC's critic loss").
     """
 
@@ -498,7 +499,7 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
 
 
 def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
-    """The :class:`LeocSAC` model of a :class:`~leoc.ddpg.DDPGConfig` with ``algo="sac"``.
+    """The :class:`LeocSAC` model of a :class:`~leoc.sb3.DDPGConfig` with ``algo="sac"``.
 
     Baseline: SB3's ``SACPolicy`` with ``actor_hidden``/``critic_hidden`` MLPs. Hybrid:
     :class:`HybridSACPolicy` with the system's LQR design (``lqr_method``) and the config's

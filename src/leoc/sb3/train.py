@@ -26,29 +26,30 @@ import io
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger
 
-from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import LearningCurveCallback, selection_start
-from leoc.ddpg.checkpoint import (
+from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
+from leoc.names import ControllerName
+from leoc.policies.spec import HybridSpec, legacy_hybrid_config
+from leoc.sb3.callbacks import LearningCurveCallback, selection_start
+from leoc.sb3.checkpoint import (
     CHECKPOINT_FILE,
     CHECKPOINT_INTERVAL_STEPS,
     CheckpointCallback,
     load_checkpoint,
 )
-from leoc.ddpg.config import DDPGConfig
-from leoc.ddpg.noise import exploration_noise
-from leoc.ddpg.physical import physical_policy
-from leoc.ddpg.policies import HybridTD3Policy, LeocTD3Policy, hybrid_policy_kwargs
-from leoc.ddpg.sac import LeocSAC, build_sac_model
-from leoc.io import read_json_object, write_bytes_atomic, write_text_atomic
-from leoc.names import ControllerName
-from leoc.policies.spec import HybridSpec, legacy_hybrid_config
+from leoc.sb3.common import hybrid_policy_kwargs
+from leoc.sb3.config import DDPGConfig
+from leoc.sb3.ddpg import HybridDDPGPolicy, LeocDDPG
+from leoc.sb3.noise import exploration_noise
+from leoc.sb3.physical import physical_policy
+from leoc.sb3.sac import HybridSACPolicy, LeocSAC, LeocSACPolicy, build_sac_model
+from leoc.sb3.td3 import HybridTD3Policy, LeocTD3, LeocTD3Policy
 from leoc.systems.base import System
 from leoc.training import (
     CONFIG_FILE,
@@ -79,6 +80,22 @@ MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
 #: What a run writes beside its models (:func:`leoc.training.write_curve`).
 RUN_OUTPUTS = (CURVE_JSON, CURVE_CSV, CURVE_PNG)
 ALGO_CLASSES = {"ddpg": LeocDDPG, "td3": LeocTD3, "sac": LeocSAC}
+
+
+class PolicyClasses(NamedTuple):
+    """The SB3 policy classes an algorithm's runs are built with (:func:`build_model`)."""
+
+    baseline: type
+    hybrid: type
+
+
+#: Each algorithm's policy classes, given to SB3 when a saved model is loaded
+#: (:func:`load_ddpg_model`).
+POLICY_CLASSES = {
+    "ddpg": PolicyClasses(LeocTD3Policy, HybridDDPGPolicy),
+    "td3": PolicyClasses(LeocTD3Policy, HybridTD3Policy),
+    "sac": PolicyClasses(LeocSACPolicy, HybridSACPolicy),
+}
 DDPGResult = TrainResult  # the one trainer result (leoc.training)
 
 
@@ -89,7 +106,7 @@ def _atomic_save_model(model: Any, path: Path) -> None:
 
 
 def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
-    """The SB3 model (:class:`LeocDDPG`, :class:`LeocTD3` or :class:`~leoc.ddpg.LeocSAC`) of
+    """The SB3 model (:class:`LeocDDPG`, :class:`LeocTD3` or :class:`~leoc.sb3.LeocSAC`) of
     ``config`` on ``env`` (a :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is
     the one designed for)."""
     if config.algo == "sac":
@@ -174,12 +191,12 @@ def train_ddpg(
         A system name, or the system itself (built once by the caller; it steps under the
         config's ``step_rules``).
     algo : {"ddpg", "td3", "sac"}
-        SAC's settings start from :data:`~leoc.ddpg.SAC_DEFAULTS`; its budgets are
+        SAC's settings start from :data:`~leoc.sb3.SAC_DEFAULTS`; its budgets are
         DDPG's.
     hybrid : HybridSpec, bool or None
         The LEOC hybrid actor (LQR blended with the MLP) that this
         :class:`~leoc.policies.HybridSpec` describes (``True``: the default spec) instead of
-        the plain MLP (for SAC: the hybrid squashed mean, :mod:`leoc.ddpg.sac`).
+        the plain MLP (for SAC: the hybrid squashed mean, :mod:`leoc.sb3.sac`).
     seed : int
         The only seed: SB3 (torch, numpy, random, action space; SAC's Gaussian samples),
         training env, exploration noise (``seed + 20000``, DDPG/TD3) and evaluation starts
@@ -188,17 +205,17 @@ def train_ddpg(
         Output folder; default ``runs/SYSTEM/CONTROLLER/seedN``
         (:func:`leoc.training.run_folder`, CONTROLLER e.g. ``td3_hybrid_roa``).
     total_steps : int, optional
-        Environment steps; default per system (:data:`~leoc.ddpg.TOTAL_STEPS_BY_SYSTEM`: 10k
+        Environment steps; default per system (:data:`~leoc.sb3.TOTAL_STEPS_BY_SYSTEM`: 10k
         for the pendulum, 21k for the cart-pole, 20k for the mountain car).
     progress : bool or "lines"
         True: a progress bar; ``"lines"``: a plain line now and then (steps done / total,
         steps per second, the last evaluation's return; for logs, ``leoc reproduce``); False:
         nothing.
     callbacks : sequence of stable_baselines3.common.callbacks.BaseCallback
-        Further SB3 callbacks (e.g. :class:`~leoc.ddpg.callbacks.HeldOutEvaluationCallback`).
+        Further SB3 callbacks (e.g. :class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback`).
         They run before the learning-curve callback, so at the end of training they see the
         final actor, before model selection restores the selected one. Those with a
-        ``checkpoint_state`` (:class:`~leoc.ddpg.checkpoint.CheckpointedState`) resume with
+        ``checkpoint_state`` (:class:`~leoc.sb3.checkpoint.CheckpointedState`) resume with
         the run.
     overwrite : bool
         ``run_dir`` holding a run of another configuration is refused (ValueError naming the
@@ -207,7 +224,7 @@ def train_ddpg(
         uninterrupted one), or, when complete, returned as it is without training (with
         ``callbacks`` given, trained again, since they must watch it: the same result).
     checkpoint_interval : int
-        Environment steps between checkpoints (:mod:`leoc.ddpg.checkpoint`).
+        Environment steps between checkpoints (:mod:`leoc.sb3.checkpoint`).
     **overrides
         Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...)
         or :class:`~leoc.policies.HybridSpec` field (changing ``hybrid``).
@@ -371,12 +388,36 @@ def load_ddpg_model(run_dir: str | Path, which: str = "final") -> Any:
     if not path.is_file():
         raise FileNotFoundError(f"controller: {path} is missing")
     try:
-        return algo_class.load(path, device="cpu")
+        return _load_zip(algo_class, path, _policy_class(config))
     except Exception as error:  # a truncated or garbled zip: name it
         raise ValueError(
             f"controller: {path} could not be read as an SB3 model "
             f"({type(error).__name__}: {error})"
         ) from error
+
+
+def _policy_class(config: dict[str, Any]) -> type:
+    """The policy class of a run's models, read from its saved ``config`` (``algo``; ``hybrid``:
+    a spec dict or None, or a bool in configs saved before :class:`~leoc.policies.HybridSpec`)."""
+    classes = POLICY_CLASSES.get(config.get("algo", "ddpg"), POLICY_CLASSES["ddpg"])
+    hybrid = legacy_hybrid_config(config).get("hybrid") is not None
+    return classes.hybrid if hybrid else classes.baseline
+
+
+def _load_zip(algo_class: Any, path: Path, policy_class: type) -> Any:
+    """SB3's ``load`` of ``path``, its policy class given rather than unpickled.
+
+    A zip names its policy class and its exploration noise by module path; those of a model
+    saved before ``leoc.ddpg`` became :mod:`leoc.sb3` name a module that is gone. The policy
+    class comes from the run's config; such a model's exploration noise, not needed to act, is
+    left out (``action_noise`` None: set one before training it further).
+    """
+    objects: dict[str, Any] = {"policy_class": policy_class}
+    try:
+        return algo_class.load(path, device="cpu", custom_objects=objects)
+    except ModuleNotFoundError:
+        objects["action_noise"] = None
+        return algo_class.load(path, device="cpu", custom_objects=objects)
 
 
 def load_ddpg_controller(run_dir: str | Path, which: str = "final") -> torch.nn.Module:

@@ -1,9 +1,23 @@
-r"""LEOC hybrid actor and policy classes for Stable-Baselines3's DDPG and TD3.
+r"""What leoc's adapters of Stable-Baselines3's DDPG, TD3 and SAC share.
+
+This module adapts no single SB3 algorithm: it holds what :mod:`leoc.sb3.td3`,
+:mod:`leoc.sb3.ddpg` and :mod:`leoc.sb3.sac` (one module per SB3 algorithm) build on,
+
+* the LEOC blend for SB3's off-policy actors, :class:`HybridActorMixin` (mixed into
+  :class:`~leoc.sb3.td3.HybridActor` and :class:`~leoc.sb3.sac.HybridSACActor`), its
+  constructor keywords (:func:`hybrid_arguments`, :func:`hybrid_policy_kwargs`) and the action
+  box (:func:`action_box`);
+* the critic layout and the networks' initialisation as options of SB3's twin-critic policies
+  (:class:`NetworkOptionsMixin`, :class:`SplitCritic`, :func:`initialise_mlp`);
+* the actor's learning rate and warm-up for SB3's off-policy algorithms
+  (:class:`ActorRateAndWarmupMixin`), the paper's update settings for SB3's TD3 family
+  (``_PaperSettingsMixin``) and the critic loss (:func:`critic_loss_fn`).
 
 Letters: B batch, D observation dimension, F action dimension.
 
-Inside SB3 an off-policy actor outputs the *normalised* action :math:`\tilde u \in [-1, 1]^F`,
-mapped to the physical action by the affine map of the action box :math:`[u_{low}, u_{high}]`,
+**The hybrid actor.** Inside SB3 an off-policy actor outputs the *normalised* action
+:math:`\tilde u \in [-1, 1]^F`, mapped to the physical action by the affine map of the action
+box :math:`[u_{low}, u_{high}]`,
 
 .. math::
 
@@ -47,10 +61,41 @@ observation layout are constructor data (saved with the model); the width is a p
 the actor loss trains and the soft update averages. On the flat top ``lerp(H, G, 1)`` returns
 :math:`\tilde G` bit for bit, so the actor is the (clipped) LQR there.
 
+**The paper's settings.** Appendix C of Zhang & Capel (2021) uses different Adam step sizes
+for the actor (5e-4) and the critic (1e-3), and soft target updates (factor 0.05) every 5
+gradient updates. SB3 uses one ``learning_rate`` for both optimisers and updates the targets
+after every (actor) update. :class:`~leoc.sb3.ddpg.LeocDDPG` and :class:`~leoc.sb3.td3.LeocTD3`
+add exactly these two options and otherwise *are* SB3's algorithms (the training loop is SB3's
+own ``train``):
+
+* ``actor_learning_rate``: the actor optimiser's step size (``learning_rate`` stays the
+  critic's); ``None`` keeps SB3's behaviour. A learning-rate schedule scales both alike.
+* ``target_update_interval``: soft target updates happen on every ``target_update_interval``-th
+  of SB3's target-update opportunities (every update for DDPG, every ``policy_delay``-th for
+  TD3); in between the Polyak coefficient is set to zero (``polyak`` keeps the nominal one).
+
+Two further options follow nrjc/LEOC's TF-Agents DDPG (``DDPG/ddpg.py``, ``dao/trainer.py``);
+their defaults keep SB3's behaviour bit for bit:
+
+* ``warmup``: ``"uniform"`` (SB3) acts uniformly at random for the first ``learning_starts``
+  steps; ``"policy"`` acts with the noisy collect policy from the first step (TF-Agents'
+  ``initial_collect_driver`` runs ``agent.collect_policy``). Either way no gradient update
+  happens before ``learning_starts`` steps, then one per step (``train_freq=1``).
+* ``critic_loss``: ``"mse"`` (SB3: the mean squared TD error) or ``"huber"``,
+  the mean Huber loss with delta 1 of TF-Agents' ``td_errors_loss_fn=huber_loss``
+  (``tf.compat.v1.losses.huber_loss``: :math:`\tfrac12 e^2` for :math:`|e| \le 1`,
+  :math:`|e| - \tfrac12` beyond). With ``"huber"`` the update is :meth:`_train_step`, a
+  re-implementation of SB3's TD3 update with only the loss changed (with ``"mse"`` it gives
+  SB3's numbers bit for bit; a test checks it).
+* ``target_action_clip``: True (SB3) clips the target actor's action to [-1, 1] in the TD
+  target; False uses it as it comes, as TF-Agents' DDPG does (``critic_loss`` feeds
+  ``target_actor_network``'s output to the target critic unclipped). False also runs
+  :meth:`_train_step`.
+
 References
 ----------
 Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
-Classical Control Theory", L4DC 2021, eq. 4-5.
+Classical Control Theory", L4DC 2021, eq. 4-5 and appendix C.
 T. P. Lillicrap et al., "Continuous control with deep reinforcement learning", ICLR 2016.
 """
 
@@ -62,28 +107,30 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3.common.policies import BaseModel
 from stable_baselines3.common.preprocessing import get_action_dim
 from stable_baselines3.common.torch_layers import create_mlp
-from stable_baselines3.td3.policies import Actor, TD3Policy
+from stable_baselines3.common.utils import polyak_update, update_learning_rate
 from torch import Tensor, nn
 
-from leoc.ddpg.config import CRITIC_ACTION_UNITS, HIDDEN_INITS
 from leoc.policies import HybridPolicy
 from leoc.policies.spec import HybridDesign, HybridSpec, build_hybrid, hybrid_design
+from leoc.sb3.config import CRITIC_ACTION_UNITS, CRITIC_LOSSES, HIDDEN_INITS, WARMUPS
 
 __all__ = [
     "CRITIC_ACTION_UNITS",
+    "CRITIC_LOSSES",
     "HIDDEN_INITS",
-    "HybridActor",
+    "HUBER_DELTA",
+    "WARMUPS",
+    "ActorRateAndWarmupMixin",
     "HybridActorMixin",
-    "HybridDDPGPolicy",
-    "HybridTD3Policy",
-    "LeocTD3Policy",
     "NetworkOptionsMixin",
     "SplitCritic",
     "action_box",
+    "critic_loss_fn",
     "hybrid_arguments",
     "hybrid_policy_kwargs",
     "initialise_mlp",
@@ -91,6 +138,9 @@ __all__ = [
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
 ACTION_DTYPE = torch.float32  # SB3 actors and replay data are float32
+NO_TARGET_UPDATE = 0.0  # Polyak coefficient that leaves the targets unchanged
+FULL_PROGRESS = 1.0  # SB3's "progress remaining" at the start of training
+HUBER_DELTA = 1.0  # tf.compat.v1.losses.huber_loss's default delta (TF-Agents' DDPG)
 
 
 def action_box(action_space: spaces.Box) -> tuple[np.ndarray, np.ndarray]:
@@ -120,8 +170,8 @@ class HybridActorMixin:
     :math:`\tilde G(x) = (W x + b - c) / h`, the relevance (the paper's, its precision
     parametrisation, or the ROA relevance) and the blend :class:`~leoc.policies.HybridPolicy`
     (clip saturation to :math:`[-1, 1]`). See the module docstring for the units and the
-    identities; :class:`HybridActor` (DDPG/TD3) and :class:`leoc.ddpg.sac.HybridSACActor` (SAC)
-    differ only in what they do with the blend.
+    identities; :class:`~leoc.sb3.td3.HybridActor` (DDPG/TD3) and
+    :class:`~leoc.sb3.sac.HybridSACActor` (SAC) differ only in what they do with the blend.
 
     Attributes
     ----------
@@ -129,7 +179,7 @@ class HybridActorMixin:
         The blend in normalised units; its ``nonlinear`` is :math:`\tilde H`.
     physical_gain, physical_bias, operating_obs : Tensor
         float64 buffers with ``W``, ``b`` and ``a`` in physical units (for exact float64
-        evaluation, see :func:`leoc.ddpg.physical_policy`).
+        evaluation, see :func:`leoc.sb3.physical_policy`).
     hybrid_spec : HybridSpec
         The choices that made the hybrid (relevance design, its parameters, what is learned).
     hybrid_design : HybridDesign
@@ -210,102 +260,6 @@ class HybridActorMixin:
         """Relevance :math:`r(x)` of the linear part, shape (B, 1)."""
         features = self.extract_features(obs, self.features_extractor)  # type: ignore[attr-defined]
         return self.hybrid.relevance(features)
-
-
-class HybridActor(HybridActorMixin, Actor):
-    r"""SB3 TD3/DDPG actor whose output is the LEOC blend of an LQR controller and SB3's MLP.
-
-    Output (normalised units, see the module docstring):
-    :math:`\operatorname{clip}_{[-1,1]}(r \tilde G + (1 - r) \tanh(\mathrm{MLP}))`.
-    Shapes: observation (B, D) float32 -> normalised action (B, F).
-
-    Parameters
-    ----------
-    observation_space, action_space, net_arch, features_extractor, features_dim,
-    activation_fn, normalize_images
-        As for SB3's :class:`stable_baselines3.td3.policies.Actor`. The observation must be a
-        flat box (the features are the observation itself) so that ``a`` and ``W`` act on it.
-    hybrid_spec : HybridSpec or dict
-        The hybrid's choices (:class:`~leoc.policies.HybridSpec`: relevance design and its
-        parameters, what the actor loss trains). Its relevance reads the raw observation, so it
-        is the same function in normalised and physical units.
-    hybrid_design : HybridDesign or dict
-        ``W``, ``b`` (physical units), the operating point ``a`` in observation coordinates and
-        the relevance design's data (:func:`leoc.policies.hybrid_design`).
-    clip_output : bool
-        Whether the actor clips its blend to [-1, 1] (default). False: the blend is returned
-        unbounded, as TF-Agents' actor network returns ``scale_to_spec(r g + (1 - r) h)``
-        (nrjc/LEOC ``DDPG/ddpg.py``), so the actor loss sees the critic beyond the box; the
-        executed action is clipped all the same (SB3's collection, :func:`physical_policy`).
-
-    Attributes
-    ----------
-    hybrid : HybridPolicy
-        The blend in normalised units; its ``nonlinear`` is SB3's MLP (ending in tanh).
-    physical_gain, physical_bias, operating_obs : Tensor
-        float64 buffers with ``W``, ``b`` and ``a`` in physical units (for exact float64
-        evaluation, see :func:`leoc.ddpg.physical_policy`).
-    """
-
-    physical_gain: Tensor
-    physical_bias: Tensor
-    operating_obs: Tensor
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        net_arch: list[int],
-        features_extractor: nn.Module,
-        features_dim: int,
-        activation_fn: type[nn.Module] = nn.ReLU,
-        normalize_images: bool = True,
-        *,
-        hybrid_spec: HybridSpec | dict[str, Any],
-        hybrid_design: HybridDesign | dict[str, Any],
-        clip_output: bool = True,
-    ) -> None:
-        super().__init__(
-            observation_space,
-            action_space,
-            net_arch,
-            features_extractor,
-            features_dim,
-            activation_fn,
-            normalize_images,
-        )
-        mlp = self.mu
-        del self.mu  # the MLP lives on as hybrid.nonlinear (one copy in the state_dict)
-        self._init_hybrid(mlp, features_dim, hybrid_spec, hybrid_design)
-        self.clip_output = bool(clip_output)
-
-    @property
-    def nonlinear(self) -> nn.Module:
-        """SB3's MLP, :math:`\\tilde H = \\tanh(\\mathrm{MLP})`, in normalised units."""
-        return self.hybrid.nonlinear
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(self.hybrid_constructor_parameters(), clip_output=self.clip_output)
-        return data
-
-    def forward(self, obs: Tensor) -> Tensor:
-        r"""Normalised action :math:`\operatorname{clip}_{[-1,1]}(r \tilde G + (1-r) \tilde H)`.
-
-        The same function as ``self.hybrid(features)`` (:class:`~leoc.policies.HybridPolicy`
-        with ``saturation="clip"``), evaluated with fused kernels because SB3 calls it for
-        every environment step (batch 1) and three times per gradient step, where per-op
-        overhead dominates: ``addmm`` for :math:`\tilde G`, one matrix-vector product for
-        :math:`d = (x - a)^2 \cdot \lambda^{-1}`, and ``lerp(H, G, r)``, which PyTorch
-        evaluates as :math:`G - (G - H)(1 - r)` for :math:`r \ge 1/2`, so it returns
-        :math:`\tilde G(a)` exactly at :math:`r(a) = 1`.
-        """
-        features = self.extract_features(obs, self.features_extractor)
-        relevance, linear = self.fused_relevance_and_linear(features)
-        blend = torch.lerp(self.hybrid.nonlinear(features), linear, relevance)
-        if not self.clip_output:
-            return blend
-        return torch.clamp(blend, -NORMALISED_LIMIT, NORMALISED_LIMIT)
 
 
 def initialise_mlp(module: nn.Module, hidden_init: str, last_layer_init: float | None) -> None:
@@ -518,32 +472,6 @@ class NetworkOptionsMixin:
         return data
 
 
-class LeocTD3Policy(NetworkOptionsMixin, TD3Policy):
-    r"""SB3's TD3/DDPG policy with the critic layout and network initialisation as options.
-
-    With every option at its default this *is* SB3's ``TD3Policy`` (same modules, same random
-    draws, same numbers).
-
-    Parameters
-    ----------
-    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
-        As for :class:`stable_baselines3.td3.policies.TD3Policy`.
-    critic_action_layer, critic_action_units, hidden_init, last_layer_init
-        As :class:`NetworkOptionsMixin` describes them; the actor's initialised layers are
-        its MLP (the hybrid's nonlinear part).
-    """
-
-    def _new_actor(self, features_extractor: nn.Module | None = None) -> Actor:
-        return super().make_actor(features_extractor)
-
-    def make_actor(self, features_extractor: nn.Module | None = None) -> Actor:
-        """The actor (SB3's, or the hybrid in subclasses), initialised as ``network_options``
-        says; SB3 calls this for the actor and its target."""
-        actor = self._new_actor(features_extractor)
-        self._initialise(actor.nonlinear if isinstance(actor, HybridActor) else actor.mu)
-        return actor
-
-
 #: Constructor keywords of the hybrid actors before :class:`~leoc.policies.HybridSpec` (models
 #: saved by leoc 0.1 until November 2026), read by :func:`hybrid_arguments` so they still load.
 LEGACY_HYBRID_KEYWORDS = (
@@ -613,60 +541,13 @@ def hybrid_arguments(policy_kwargs: dict[str, Any]) -> dict[str, Any]:
     if missing:
         raise ValueError(
             f"policy_kwargs: a hybrid policy needs {', '.join(missing)} "
-            "(leoc.ddpg.hybrid_policy_kwargs builds them from a system); found none"
+            "(leoc.sb3.hybrid_policy_kwargs builds them from a system); found none"
         )
     spec, design = policy_kwargs.pop("hybrid_spec"), policy_kwargs.pop("hybrid_design")
     return {
         "hybrid_spec": spec.to_dict() if isinstance(spec, HybridSpec) else dict(spec),
         "hybrid_design": design.to_dict() if isinstance(design, HybridDesign) else dict(design),
     }
-
-
-class HybridTD3Policy(LeocTD3Policy):
-    """SB3 TD3/DDPG policy whose actor and target actor are :class:`HybridActor`.
-
-    Use it as ``DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs(system))`` or
-    with ``TD3``. The critics are SB3's (or :class:`SplitCritic`, see :class:`LeocTD3Policy`);
-    only the actor changes.
-
-    Parameters
-    ----------
-    observation_space, action_space, lr_schedule, net_arch, activation_fn, ...
-        As for :class:`stable_baselines3.td3.policies.TD3Policy`.
-    critic_action_layer, critic_action_units, hidden_init, last_layer_init
-        See :class:`LeocTD3Policy`.
-    hybrid_spec, hybrid_design, clip_output
-        Passed to :class:`HybridActor` (see there); :func:`hybrid_policy_kwargs` builds them
-        from a system's LQR design (and, for the ROA relevance, its certificate).
-    """
-
-    actor: HybridActor
-    actor_target: HybridActor
-
-    def __init__(
-        self,
-        observation_space: spaces.Space,
-        action_space: spaces.Box,
-        lr_schedule: Any,
-        *args: Any,
-        clip_output: bool = True,
-        **kwargs: Any,
-    ) -> None:
-        self.hybrid_kwargs = {**hybrid_arguments(kwargs), "clip_output": bool(clip_output)}
-        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
-
-    def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
-        actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
-        return HybridActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(self.hybrid_kwargs)
-        return data
-
-
-HybridDDPGPolicy = HybridTD3Policy
-"""SB3's DDPG uses TD3's policy classes (with one critic); the hybrid policy is shared too."""
 
 
 def hybrid_policy_kwargs(
@@ -676,8 +557,8 @@ def hybrid_policy_kwargs(
     clip_output: bool = True,
     **extra: Any,
 ) -> dict[str, Any]:
-    r"""``policy_kwargs`` of :class:`HybridTD3Policy` (and :class:`~leoc.ddpg.HybridSACPolicy`)
-    from a system's LQR design.
+    r"""``policy_kwargs`` of :class:`~leoc.sb3.td3.HybridTD3Policy` (and
+    :class:`~leoc.sb3.sac.HybridSACPolicy`) from a system's LQR design.
 
     Parameters
     ----------
@@ -690,7 +571,7 @@ def hybrid_policy_kwargs(
     lqr_method : {"discrete", "continuous", "authors"}
         LQR design method.
     clip_output : bool
-        See :class:`HybridActor`.
+        See :class:`~leoc.sb3.td3.HybridActor`.
     **extra
         Further policy kwargs (``net_arch``, ...). Keywords that name a
         :class:`~leoc.policies.HybridSpec` field (``relevance="roa"``, ``learn_lambda=False``)
@@ -710,3 +591,157 @@ def hybrid_policy_kwargs(
         "clip_output": clip_output,
         **extra,
     }
+
+
+def critic_loss_fn(name: str) -> Any:
+    """The elementwise-mean TD loss ``loss(q, target)`` called ``name`` (see the module)."""
+    if name not in CRITIC_LOSSES:
+        raise ValueError(f"critic_loss: expected one of {CRITIC_LOSSES}, found {name!r}")
+    if name == "huber":
+        return lambda q, target: F.huber_loss(q, target, delta=HUBER_DELTA)
+    return F.mse_loss
+
+
+class ActorRateAndWarmupMixin:
+    """``actor_learning_rate`` and ``warmup`` for any SB3 off-policy algorithm with an actor.
+
+    Shared by :class:`~leoc.sb3.ddpg.LeocDDPG`, :class:`~leoc.sb3.td3.LeocTD3` and
+    :class:`~leoc.sb3.sac.LeocSAC`; see the module docstring for the two options. The class
+    that mixes it in sets both attributes (through :meth:`_init_actor_rate_and_warmup`) before
+    SB3 uses them.
+    """
+
+    actor_learning_rate: float | None
+    warmup: str
+
+    def _init_actor_rate_and_warmup(self, actor_learning_rate: float | None, warmup: str) -> None:
+        """Validate and set the two options (ValueError naming the argument)."""
+        if warmup not in WARMUPS:
+            raise ValueError(f"warmup: expected one of {WARMUPS}, found {warmup!r}")
+        if actor_learning_rate is not None and not actor_learning_rate > 0:
+            raise ValueError(f"actor_learning_rate: expected > 0, found {actor_learning_rate}")
+        self.warmup = warmup
+        self.actor_learning_rate = actor_learning_rate
+
+    def _update_learning_rate(
+        self, optimizers: list[torch.optim.Optimizer] | torch.optim.Optimizer
+    ) -> None:
+        super()._update_learning_rate(optimizers)  # type: ignore[misc]
+        if getattr(self, "actor_learning_rate", None) is None:
+            return
+        schedule = self.lr_schedule  # type: ignore[attr-defined]
+        ratio = schedule(self._current_progress_remaining) / schedule(FULL_PROGRESS)  # type: ignore[attr-defined]
+        update_learning_rate(self.actor.optimizer, self.actor_learning_rate * ratio)  # type: ignore[attr-defined,operator]
+
+    def _sample_action(
+        self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # warmup="policy": the noisy policy acts from the first step (no uniform phase); the
+        # updates still wait for learning_starts (SB3's learn loop checks it on its own).
+        starts = 0 if getattr(self, "warmup", "uniform") == "policy" else learning_starts
+        return super()._sample_action(starts, action_noise, n_envs)  # type: ignore[misc]
+
+
+class _PaperSettingsMixin(ActorRateAndWarmupMixin):
+    """Separate actor learning rate and target update interval for SB3's TD3 family."""
+
+    target_update_interval: int
+    polyak: float
+
+    def __init__(
+        self,
+        *args: Any,
+        actor_learning_rate: float | None = None,
+        target_update_interval: int = 1,
+        warmup: str = "uniform",
+        critic_loss: str = "mse",
+        target_action_clip: bool = True,
+        **kwargs: Any,
+    ) -> None:
+        if warmup not in WARMUPS:
+            raise ValueError(f"warmup: expected one of {WARMUPS}, found {warmup!r}")
+        critic_loss_fn(critic_loss)  # validates the name
+        self.warmup = warmup
+        self.critic_loss = critic_loss
+        self.target_action_clip = bool(target_action_clip)
+        super().__init__(*args, **kwargs)  # the SB3 algorithm after this mixin in the MRO
+        self._init_paper_settings(actor_learning_rate, target_update_interval)
+
+    def _init_paper_settings(
+        self, actor_learning_rate: float | None, target_update_interval: int
+    ) -> None:
+        self._init_actor_rate_and_warmup(actor_learning_rate, self.warmup)
+        if isinstance(target_update_interval, bool) or not (
+            isinstance(target_update_interval, int) and target_update_interval >= 1
+        ):
+            raise ValueError(
+                f"target_update_interval: expected an int >= 1, found {target_update_interval!r}"
+            )
+        self.target_update_interval = target_update_interval
+        self.polyak = float(self.tau)  # type: ignore[attr-defined]
+
+    def _train_calls(self, gradient_steps: int, batch_size: int) -> None:
+        """SB3's own update (MSE loss, clipped target actions), else :meth:`_train_step`."""
+        own = getattr(self, "critic_loss", "mse") != "mse" or not getattr(
+            self, "target_action_clip", True
+        )
+        if not own:
+            super().train(gradient_steps, batch_size)  # type: ignore[misc]
+            return
+        self.policy.set_training_mode(True)  # type: ignore[attr-defined]
+        self._update_learning_rate([self.actor.optimizer, self.critic.optimizer])  # type: ignore[attr-defined]
+        for _ in range(gradient_steps):
+            self._train_step(batch_size, critic_loss_fn(self.critic_loss))
+
+    def _train_step(self, batch_size: int, loss_fn: Any) -> None:
+        r"""One TD3/DDPG gradient step as SB3's ``TD3.train``, with the critic loss ``loss_fn``.
+
+        Target: :math:`y = r + (1 - done)\,\gamma \min_k Q'_k(s', \operatorname{clip}(
+        \mu'(s') + \epsilon))` (no clip with ``target_action_clip=False``), :math:`\epsilon`
+        clipped Gaussian smoothing noise (zero std for
+        DDPG); critic loss :math:`\sum_k \mathrm{loss}(Q_k(s, a), y)`; every ``policy_delay``
+        updates the actor loss :math:`-\mathrm{mean}\, Q_1(s, \mu(s))` and the soft target
+        updates with coefficient ``tau``.
+        """
+        self._n_updates += 1  # type: ignore[has-type]
+        data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[attr-defined]
+        discounts = data.discounts if data.discounts is not None else self.gamma  # type: ignore[attr-defined]
+        with torch.no_grad():
+            noise = data.actions.clone().data.normal_(0, self.target_policy_noise)  # type: ignore[attr-defined]
+            noise = noise.clamp(-self.target_noise_clip, self.target_noise_clip)  # type: ignore[attr-defined]
+            next_actions = self.actor_target(data.next_observations) + noise  # type: ignore[attr-defined]
+            if self.target_action_clip:
+                next_actions = next_actions.clamp(-NORMALISED_LIMIT, NORMALISED_LIMIT)
+            next_q = torch.cat(self.critic_target(data.next_observations, next_actions), dim=1)  # type: ignore[attr-defined]
+            next_q, _ = torch.min(next_q, dim=1, keepdim=True)
+            target_q = data.rewards + (1 - data.dones) * discounts * next_q
+        current_q = self.critic(data.observations, data.actions)  # type: ignore[attr-defined]
+        critic_loss = sum(loss_fn(q, target_q) for q in current_q)
+        self.critic.optimizer.zero_grad()  # type: ignore[attr-defined]
+        critic_loss.backward()  # type: ignore[union-attr]
+        self.critic.optimizer.step()  # type: ignore[attr-defined]
+        if self._n_updates % self.policy_delay == 0:  # type: ignore[attr-defined]
+            actor = self.actor  # type: ignore[attr-defined]
+            actor_loss = -self.critic.q1_forward(data.observations, actor(data.observations)).mean()  # type: ignore[attr-defined]
+            actor.optimizer.zero_grad()
+            actor_loss.backward()
+            actor.optimizer.step()
+            polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)  # type: ignore[attr-defined]
+            polyak_update(actor.parameters(), self.actor_target.parameters(), self.tau)  # type: ignore[attr-defined]
+            polyak_update(self.critic_batch_norm_stats, self.critic_batch_norm_stats_target, 1.0)  # type: ignore[attr-defined]
+            polyak_update(self.actor_batch_norm_stats, self.actor_batch_norm_stats_target, 1.0)  # type: ignore[attr-defined]
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        if self.target_update_interval == 1:
+            self._train_calls(gradient_steps, batch_size)
+            return
+        delay = int(getattr(self, "policy_delay", 1))
+        for _ in range(gradient_steps):
+            # SB3 counts the update first, then updates actor and targets when it divides by
+            # policy_delay; we keep every target_update_interval-th of those opportunities.
+            update = self._n_updates + 1  # type: ignore[attr-defined]
+            opportunity = update % delay == 0
+            due = opportunity and (update // delay) % self.target_update_interval == 0
+            self.tau = self.polyak if due else NO_TARGET_UPDATE
+            self._train_calls(1, batch_size)
+        self.tau = self.polyak

@@ -117,7 +117,7 @@ SAC_DEFAULTS: dict[str, Any] = {
 #: its action bounded by the squash, its twin critics always TD3's): a SAC config must leave
 #: them at their defaults. SAC does use the critics' loss, layout and initialisation
 #: (``critic_loss``, ``critic_action_layer``, ``critic_action_units``, ``hidden_init``,
-#: ``last_layer_init``; :class:`~leoc.ddpg.sac.LeocSAC`, :class:`~leoc.ddpg.sac.LeocSACPolicy`),
+#: ``last_layer_init``; :class:`~leoc.sb3.sac.LeocSAC`, :class:`~leoc.sb3.sac.LeocSACPolicy`),
 #: and the OU exploration fields with ``sac_action_noise`` (:data:`OU_FIELDS`).
 TD3_FAMILY_FIELDS = (
     "td3_policy_delay",
@@ -248,7 +248,7 @@ class DDPGConfig:
         System name (``pendulum``, ``cartpole``, ``mountaincar``).
     algo : {"ddpg", "td3", "sac"}
         Stable-Baselines3 algorithm. DDPG is SB3's TD3 with ``policy_delay=1``, no target
-        policy smoothing and a single critic. SAC (:mod:`leoc.ddpg.sac`) explores with its own
+        policy smoothing and a single critic. SAC (:mod:`leoc.sb3.sac`) explores with its own
         entropy-regularised Gaussian: the fields of :data:`TD3_FAMILY_FIELDS` must keep their
         defaults, and :meth:`for_system` applies :data:`SAC_DEFAULTS`.
     hybrid : HybridSpec or None
@@ -547,7 +547,7 @@ class DDPGConfig:
 
     def network_kwargs(self) -> dict[str, Any]:
         """The critic layout and the networks' initialisation of this config, as keywords of
-        the policies (:class:`~leoc.ddpg.policies.NetworkOptionsMixin`: DDPG, TD3 and SAC)."""
+        the policies (:class:`~leoc.sb3.common.NetworkOptionsMixin`: DDPG, TD3 and SAC)."""
         return {
             "critic_action_layer": self.critic_action_layer,
             "critic_action_units": self.critic_action_units,

@@ -1,22 +1,35 @@
-"""Stable-Baselines3 integration: LEOC hybrid actor/policies for DDPG, TD3 and SAC, training glue.
+"""Stable-Baselines3 integration: the LEOC hybrid in SB3's DDPG, TD3 and SAC, and training glue.
+
+One module per SB3 algorithm, each adapting SB3 only: :mod:`leoc.sb3.td3` (the hybrid actor
+:class:`HybridActor`, :class:`LeocTD3Policy`, :class:`HybridTD3Policy`, :class:`LeocTD3`),
+:mod:`leoc.sb3.ddpg` (:class:`LeocDDPG`; SB3's DDPG uses TD3's policies,
+:class:`HybridDDPGPolicy` is :class:`HybridTD3Policy`) and :mod:`leoc.sb3.sac`
+(:class:`HybridSACPolicy`, :class:`LeocSAC`), on what they share in :mod:`leoc.sb3.common`
+(the blend, the network options, the paper's update settings). Beside them: the configuration
+(:mod:`leoc.sb3.config`), training and loading (:mod:`leoc.sb3.train`), its callbacks,
+checkpoints and exploration noise, and the float64 physical-units policy
+(:mod:`leoc.sb3.physical`).
 
 Use the hybrid in plain SB3::
 
     from stable_baselines3 import DDPG
-    from leoc.ddpg import HybridTD3Policy, hybrid_policy_kwargs
+    from leoc.sb3 import HybridTD3Policy, hybrid_policy_kwargs
     model = DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs("pendulum"))
 
 or train with leoc's settings (the paper's, and the choices that make DDPG learn) through
 :func:`train_ddpg` (``leoc train SYSTEM --algo ddpg --hybrid``). SAC's hybrid is
 :class:`HybridSACPolicy` (``SAC(HybridSACPolicy, env, policy_kwargs=...)``, or ``leoc train
-SYSTEM --algo sac --hybrid``): its squashed mean is the same hybrid (:mod:`leoc.ddpg.sac`).
+SYSTEM --algo sac --hybrid``): its squashed mean is the same hybrid (:mod:`leoc.sb3.sac`).
 The authors' TF-Agents settings (nrjc/LEOC) are :data:`AUTHORS_DDPG` and
 :func:`authors_ddpg_overrides`, overrides of :class:`DDPGConfig` fields.
+
+This package was ``leoc.ddpg`` until issue 39; :func:`load_ddpg_model` still loads the models
+saved then.
 """
 
-from leoc.ddpg.algorithms import LeocDDPG, LeocTD3
-from leoc.ddpg.callbacks import HeldOutEvaluationCallback, LearningCurveCallback
-from leoc.ddpg.config import (
+from leoc.sb3.callbacks import HeldOutEvaluationCallback, LearningCurveCallback
+from leoc.sb3.common import SplitCritic, action_box, hybrid_policy_kwargs
+from leoc.sb3.config import (
     ALGOS,
     AUTHORS_DDPG,
     EVAL_INTERVAL_BY_SYSTEM,
@@ -27,19 +40,12 @@ from leoc.ddpg.config import (
     DDPGConfig,
     authors_ddpg_overrides,
 )
-from leoc.ddpg.noise import SeededOUNoise
-from leoc.ddpg.physical import AffineOutput, PhysicalPolicy, physical_policy
-from leoc.ddpg.policies import (
-    HybridActor,
-    HybridDDPGPolicy,
-    HybridTD3Policy,
-    LeocTD3Policy,
-    SplitCritic,
-    action_box,
-    hybrid_policy_kwargs,
-)
-from leoc.ddpg.sac import HybridSACActor, HybridSACPolicy, LeocSAC, LeocSACPolicy, SquashedMean
-from leoc.ddpg.train import (
+from leoc.sb3.ddpg import HybridDDPGPolicy, LeocDDPG
+from leoc.sb3.noise import SeededOUNoise
+from leoc.sb3.physical import AffineOutput, PhysicalPolicy, physical_policy
+from leoc.sb3.sac import HybridSACActor, HybridSACPolicy, LeocSAC, LeocSACPolicy, SquashedMean
+from leoc.sb3.td3 import HybridActor, HybridTD3Policy, LeocTD3, LeocTD3Policy
+from leoc.sb3.train import (
     DDPGResult,
     build_model,
     held_and_reached,

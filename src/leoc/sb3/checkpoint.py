@@ -164,8 +164,9 @@ class CheckpointCallback(BaseCallback):
 
 def load_checkpoint(path: Path, label: str = "ddpg") -> TrainingCheckpoint | None:
     """The checkpoint at ``path``, or None if there is none. A file that cannot be read (it is
-    written atomically, so only a damaged disk or a hand edit makes one) is set aside with a
-    printed line, and the run starts afresh, as PILCO's does."""
+    written atomically, so only a damaged disk or a hand edit makes one, or a leoc whose classes
+    have moved since: a run interrupted before ``leoc.ddpg`` became :mod:`leoc.sb3`) is set aside
+    with a printed line, and the run starts afresh, as PILCO's does."""
     path = Path(path)
     if not path.is_file():
         return None
@@ -175,8 +176,10 @@ def load_checkpoint(path: Path, label: str = "ddpg") -> TrainingCheckpoint | Non
             raise ValueError(f"format {state.get('format')!r}, expected {CHECKPOINT_FORMAT}")
     except Exception as error:
         aside = set_aside(path)
+        moved = isinstance(error, ImportError)  # a class of a module that has moved since
+        what = "checkpoint of an older leoc" if moved else "damaged checkpoint"
         print(
-            f"[{label}] damaged checkpoint {path} ({type(error).__name__}: {error}); set aside "
+            f"[{label}] {what} {path} ({type(error).__name__}: {error}); set aside "
             f"as {aside.name}, starting the run afresh",
             flush=True,
         )
