@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 from leoc.names import LINEAR, ControllerName, parse_controller
 
 if TYPE_CHECKING:
-    from torch import nn
+    import torch
 
     from leoc.policies.spec import HybridSpec
     from leoc.systems.base import System
@@ -129,7 +129,7 @@ class Learner(Protocol):
         another is refused unless ``overwrite``."""
         ...
 
-    def load(self, run_dir: Path) -> nn.Module:
+    def load(self, run_dir: Path) -> torch.nn.Module:
         """The trained controller of a run folder, at its control period (physical units)."""
         ...
 
@@ -177,7 +177,7 @@ class SB3Learner:
             **settings,
         )
 
-    def load(self, run_dir: Path) -> nn.Module:
+    def load(self, run_dir: Path) -> torch.nn.Module:
         from leoc.sb3.train import load_ddpg_controller
 
         return load_ddpg_controller(run_dir)
@@ -218,7 +218,7 @@ class PilcoLearner:
             **settings,
         )
 
-    def load(self, run_dir: Path) -> nn.Module:
+    def load(self, run_dir: Path) -> torch.nn.Module:
         from leoc.pilco.checkpoint import load_pilco_controller
 
         return load_pilco_controller(run_dir)

@@ -244,6 +244,24 @@ def simulated_system(target: Target, variant):
     return trained_plant(target.controller)
 
 
+def _json_report(
+    args: argparse.Namespace, target: Target, system: Any, result: Any, period: int
+) -> dict[str, Any]:
+    """What ``--json`` prints: the test, its plant and rules, metrics and record."""
+    return {
+        "system": target.system,
+        "controller": target.controller,
+        "test": args.test,
+        "variant": args.variant,
+        "step_rules": dataclasses.asdict(system.rules),
+        "metrics_set": args.metrics,
+        "action_repeat": period,
+        "metrics": result.metrics._asdict(),
+        "deviation": result.deviation.tolist(),
+        "total_reward": result.trajectory.total_reward,
+    }
+
+
 def run(args: argparse.Namespace) -> int:
     from leoc.evaluation.rollout import control_period, response_test
     from leoc.experiments.variants import get_variant
@@ -270,22 +288,7 @@ def run(args: argparse.Namespace) -> int:
         video = write_video(system, controller, args.video, args.steps, label)
         print(f"animation written to {video}", file=sys.stderr if args.json else sys.stdout)
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "system": target.system,
-                    "controller": target.controller,
-                    "test": args.test,
-                    "variant": args.variant,
-                    "step_rules": dataclasses.asdict(system.rules),
-                    "metrics_set": args.metrics,
-                    "action_repeat": period,
-                    "metrics": result.metrics._asdict(),
-                    "deviation": result.deviation.tolist(),
-                    "total_reward": result.trajectory.total_reward,
-                }
-            )
-        )
+        print(json.dumps(_json_report(args, target, system, result, period)))
         return 0
     _print_metrics(args, target, system, result, period)
     if args.plot:

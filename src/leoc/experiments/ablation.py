@@ -703,8 +703,8 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
     :data:`RESULT_FILE`).
 
     Trains with :func:`~leoc.sb3.train_ddpg` into ``RUN/train`` (progress lines to
-    ``RUN/train.log``), with a :class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback` on
-    leoc's system at the trainer's evaluation steps.
+    ``RUN/train.log``), a :class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback` on leoc's
+    system testing at the trainer's evaluation steps.
 
     Returns
     -------
@@ -728,11 +728,8 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
     torch.set_num_threads(WORKER_THREADS)
     config = plan.config(spec)
     test_system = make_system(spec.system)  # leoc's rules: the same test for every setting
-    held_out = HeldOutEvaluationCallback(
-        test_system,
-        held_out_starts(test_system, spec.seed, plan.test_episodes),
-        config.eval_interval,
-    )
+    starts = held_out_starts(test_system, spec.seed, plan.test_episodes)
+    held_out = HeldOutEvaluationCallback(test_system, starts, config.eval_interval)
     started = time.perf_counter()
     with (
         open(run_dir / LOG_FILE, "a", buffering=1) as log,

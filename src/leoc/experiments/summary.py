@@ -1,6 +1,6 @@
 """What worked and what failed: the report's summary and the lines ``leoc reproduce`` prints.
 
-Each check of the report (:func:`leoc.experiments.report.write_report`) is stored in
+Each check of the report (``leoc.experiments.report.write_report``) is stored in
 ``results.json``'s ``checks`` as a :class:`CheckSummary`: how many cases it checked, its
 threshold and its failures, each with its size in the check's unit, biggest first. From them
 the report's summary says in at most ``SUMMARY_MAX_LINES`` lines what worked and what failed,

@@ -278,7 +278,7 @@ class RelevanceDesign:
     Attributes
     ----------
     name : str
-        Its :attr:`HybridSpec.relevance` value.
+        Its ``HybridSpec.relevance`` value.
     """
 
     name: ClassVar[str] = ""
@@ -388,7 +388,7 @@ class ROARelevanceDesign(RelevanceDesign):
 RELEVANCE_DESIGNS: dict[str, RelevanceDesign] = {
     design.name: design for design in (PaperRelevanceDesign(), ROARelevanceDesign())
 }
-"""Every relevance design by name (:attr:`HybridSpec.relevance`)."""
+"""Every relevance design by name (``HybridSpec.relevance``)."""
 
 
 def hybrid_design(

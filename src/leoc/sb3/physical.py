@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import Any
 
 import numpy as np
 import torch
@@ -107,6 +108,27 @@ class PhysicalPolicy(nn.Module):
         return self.hybrid.relevance(x)
 
 
+def _frozen_relevance64(actor: HybridActorMixin) -> dict[str, Any]:
+    """Keywords of :class:`~leoc.policies.HybridPolicy` for a float64, frozen copy of the
+    actor's learned relevance."""
+    module = actor.hybrid.relevance_module
+    if module is None:
+        return {"lambda_init": actor.hybrid.lambda_.detach().cpu().to(DTYPE), "learn_lambda": False}
+    if isinstance(module, PrecisionRelevance):
+        # float64 copy of the learned precision S, frozen (any sign: the authors' S is
+        # unconstrained, so it is copied, not rebuilt through the positive constructor)
+        copy64 = PrecisionRelevance(actor.operating_obs.detach().cpu(), 1.0, False, DTYPE)
+        copy64.precision.copy_(module.precision.detach().cpu().to(DTYPE))
+        return {"relevance": copy64}
+    # Any other design is rebuilt in float64 from the actor's float64 design data (the ROA
+    # relevance's P, rho_in) with its learned band width, frozen. float32 sigmoid can round w up
+    # to w_max itself; the float64 rebuild needs w < w_max.
+    width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
+    frozen = actor.hybrid_spec.replace(width_init=width, learn_width=False)
+    data = actor.hybrid_design.relevance_data
+    return frozen.design.build(frozen, data, actor.operating_obs.cpu().numpy(), DTYPE)
+
+
 def physical_policy(actor: Actor | SACActor | TD3Policy | SACPolicy) -> PhysicalPolicy:
     """float64 physical-units copy of an SB3 DDPG/TD3 or SAC actor, baseline or hybrid
     (:class:`~leoc.sb3.HybridActor`, :class:`~leoc.sb3.HybridSACActor`): its deterministic
@@ -143,26 +165,7 @@ def physical_policy(actor: Actor | SACActor | TD3Policy | SACPolicy) -> Physical
     high = np.asarray(actor.action_space.high, dtype=np.float64).reshape(-1)
     if isinstance(actor, HybridActorMixin):
         mlp = copy.deepcopy(actor.hybrid.nonlinear).to(device="cpu", dtype=DTYPE)
-        module = actor.hybrid.relevance_module
-        if module is None:
-            relevance: dict[str, object] = {
-                "lambda_init": actor.hybrid.lambda_.detach().cpu().to(DTYPE),
-                "learn_lambda": False,
-            }
-        elif isinstance(module, PrecisionRelevance):
-            # float64 copy of the learned precision S, frozen (any sign: the authors' S is
-            # unconstrained, so it is copied, not rebuilt through the positive constructor)
-            copy64 = PrecisionRelevance(actor.operating_obs.detach().cpu(), 1.0, False, DTYPE)
-            copy64.precision.copy_(module.precision.detach().cpu().to(DTYPE))
-            relevance = {"relevance": copy64}
-        else:
-            # Rebuilt in float64 from the actor's float64 constructor data (P, rho_in), with the
-            # actor's learned band width, frozen.
-            # float32 sigmoid can round w up to w_max itself; the float64 rebuild needs w < w_max
-            width = min(float(module.width.detach()), math.nextafter(module.max_width, 0.0))
-            frozen = actor.hybrid_spec.replace(width_init=width, learn_width=False)
-            data = actor.hybrid_design.relevance_data
-            relevance = frozen.design.build(frozen, data, actor.operating_obs.cpu().numpy(), DTYPE)
+        relevance = _frozen_relevance64(actor)
         hybrid = HybridPolicy(
             LinearController(actor.physical_gain.detach().cpu(), actor.physical_bias.cpu()),
             AffineOutput(mlp, centre, half),

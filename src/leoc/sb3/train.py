@@ -188,99 +188,107 @@ def train_ddpg(
     Parameters
     ----------
     system : str or leoc.systems.System
-        A system name, or the system itself (built once by the caller; it steps under the
-        config's ``step_rules``).
+        A name, or the system (built once by the caller; it steps under the config's rules).
     algo : {"ddpg", "td3", "sac"}
-        SAC's settings start from :data:`~leoc.sb3.SAC_DEFAULTS`; its budgets are
-        DDPG's.
+        SAC starts from :data:`~leoc.sb3.SAC_DEFAULTS` at DDPG's budgets.
     hybrid : HybridSpec, bool or None
-        The LEOC hybrid actor (LQR blended with the MLP) that this
-        :class:`~leoc.policies.HybridSpec` describes (``True``: the default spec) instead of
-        the plain MLP (for SAC: the hybrid squashed mean, :mod:`leoc.sb3.sac`).
+        The hybrid actor this :class:`~leoc.policies.HybridSpec` describes (``True``: the
+        default) instead of the plain MLP (for SAC: the hybrid squashed mean).
     seed : int
-        The only seed: SB3 (torch, numpy, random, action space; SAC's Gaussian samples),
-        training env, exploration noise (``seed + 20000``, DDPG/TD3) and evaluation starts
-        (``seed + 10000 + k``).
-    run_dir : str or Path, optional
-        Output folder; default ``runs/SYSTEM/CONTROLLER/seedN``
-        (:func:`leoc.training.run_folder`, CONTROLLER e.g. ``td3_hybrid_roa``).
-    total_steps : int, optional
-        Environment steps; default per system (:data:`~leoc.sb3.TOTAL_STEPS_BY_SYSTEM`: 10k
-        for the pendulum, 21k for the cart-pole, 20k for the mountain car).
+        The only seed: SB3 (torch, numpy, random), the envs, the exploration noise
+        (``seed + 20000``) and the evaluation starts (``seed + 10000 + k``).
+    run_dir, total_steps : optional
+        Default ``runs/SYSTEM/CONTROLLER/seedN`` (:func:`leoc.training.run_folder`) and the
+        system's budget (:data:`~leoc.sb3.TOTAL_STEPS_BY_SYSTEM`).
     progress : bool or "lines"
-        True: a progress bar; ``"lines"``: a plain line now and then (steps done / total,
-        steps per second, the last evaluation's return; for logs, ``leoc reproduce``); False:
-        nothing.
+        A progress bar, a plain line now and then (for logs), or nothing (False).
     callbacks : sequence of stable_baselines3.common.callbacks.BaseCallback
-        Further SB3 callbacks (e.g. :class:`~leoc.sb3.callbacks.HeldOutEvaluationCallback`).
-        They run before the learning-curve callback, so at the end of training they see the
-        final actor, before model selection restores the selected one. Those with a
-        ``checkpoint_state`` (:class:`~leoc.sb3.checkpoint.CheckpointedState`) resume with
-        the run.
+        Run before the learning-curve callback (at the end they see the final actor, before
+        model selection); those with a ``checkpoint_state`` resume with the run.
     overwrite : bool
-        ``run_dir`` holding a run of another configuration is refused (ValueError naming the
-        settings that differ) unless True, which trains afresh there. A folder holding the
-        same run is resumed from its checkpoint (exactly: the resumed run equals the
-        uninterrupted one), or, when complete, returned as it is without training (with
-        ``callbacks`` given, trained again, since they must watch it: the same result).
-    checkpoint_interval : int
-        Environment steps between checkpoints (:mod:`leoc.sb3.checkpoint`).
+        A run folder of another configuration is refused (naming the settings that differ)
+        unless True. The same run resumes exactly from its checkpoint (every
+        ``checkpoint_interval`` steps), or, complete, is returned without training.
     **overrides
-        Any :class:`DDPGConfig` field (``actor_learning_rate=1e-4``, ``eval_interval=500``...)
-        or :class:`~leoc.policies.HybridSpec` field (changing ``hybrid``).
-
-    Returns
-    -------
-    DDPGResult
+        Any :class:`DDPGConfig` or :class:`~leoc.policies.HybridSpec` field.
 
     Raises
     ------
     ValueError
         On an unknown ``algo`` or system, or a setting ``algo`` does not use (naming it).
     """
-    from leoc.systems import StepRules, make_system
-
     name = system if isinstance(system, str) else system.name
     if total_steps is not None:
         overrides["total_steps"] = total_steps
     config = DDPGConfig.for_system(name, algo, hybrid=hybrid, **overrides)
-    relevance = None if config.hybrid is None else config.hybrid.relevance
-    controller = ControllerName(algo, relevance).name
-    run_path = Path(run_dir or run_folder(DEFAULT_RUN_ROOT, name, controller, seed))
     config_dict = {**config.as_dict(), "seed": seed}
-    resumed = None
-    if same_run(run_path, config_dict, overwrite, normalise=legacy_hybrid_config):
-        resumed = load_checkpoint(run_path / CHECKPOINT_FILE, label=algo)
-        # a finished run is returned as it is, unless callbacks must watch it train (they would
-        # see nothing): then it trains again, to the same result (runs are deterministic)
-        reusable = resumed is None and not callbacks
-        done = _completed_result(run_path, config_dict, algo) if reusable else None
-        if done is not None:
-            if progress:
-                print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
-            return done
-    # the edge: the system, resolved once, stepping under the config's rules
-    plant = make_system(name) if isinstance(system, str) else system
-    plant = plant.with_rules(StepRules(**config.step_rules))
-    model = _start_model(config, config_dict, seed, plant, run_path, resumed, progress)
-    return _learn(
-        model, config, config_dict, seed, plant, run_path, resumed, progress, callbacks,
-        checkpoint_interval,
-    )  # fmt: skip
+    run_path = _run_path(config, run_dir, seed)
+    resumed, done = _earlier_run(run_path, config_dict, overwrite, bool(callbacks), progress)
+    if done is not None:
+        return done
+    run = _Run(config, config_dict, seed, _plant(system, config), run_path, resumed, progress)
+    return _learn(run, _start_model(run), callbacks, checkpoint_interval)
 
 
-def _start_model(
-    config: DDPGConfig,
-    config_dict: dict[str, Any],
-    seed: int,
-    plant: System,
+class _Run(NamedTuple):
+    """One training run: its config (and as saved, with the seed), seed, plant, folder, the
+    checkpoint it resumes (None: a fresh run) and how it shows progress."""
+
+    config: DDPGConfig
+    config_dict: dict[str, Any]
+    seed: int
+    plant: System
+    run_path: Path
+    resumed: Any
+    progress: bool | str
+
+
+def _run_path(config: DDPGConfig, run_dir: str | Path | None, seed: int) -> Path:
+    """``run_dir``, or the default ``runs/SYSTEM/CONTROLLER/seedN`` of ``config``."""
+    if run_dir is not None:
+        return Path(run_dir)
+    relevance = None if config.hybrid is None else config.hybrid.relevance
+    controller = ControllerName(config.algo, relevance).name
+    return run_folder(DEFAULT_RUN_ROOT, config.system, controller, seed)
+
+
+def _plant(system: str | System, config: DDPGConfig) -> System:
+    """The edge: the system (built here from a name, else the caller's), stepping under the
+    config's rules."""
+    from leoc.systems import StepRules, make_system
+
+    plant = make_system(system) if isinstance(system, str) else system
+    return plant.with_rules(StepRules(**config.step_rules))
+
+
+def _earlier_run(
     run_path: Path,
-    resumed: Any,
+    config_dict: dict[str, Any],
+    overwrite: bool,
+    watched: bool,
     progress: bool | str,
-) -> Any:
+) -> tuple[Any, DDPGResult | None]:
+    """What ``run_path`` holds of this run: its checkpoint (or None), and its result when it is
+    complete (a finished run is returned as it is, unless callbacks must watch it train: then
+    it trains again, to the same result, runs being deterministic)."""
+    algo = config_dict["algo"]
+    if not same_run(run_path, config_dict, overwrite, normalise=legacy_hybrid_config):
+        return None, None
+    resumed = load_checkpoint(run_path / CHECKPOINT_FILE, label=algo)
+    done = (
+        None if resumed is not None or watched else _completed_result(run_path, config_dict, algo)
+    )
+    if done is not None and progress:
+        print(f"[{algo}] {run_path} holds this run, complete: nothing to train", flush=True)
+    return resumed, done
+
+
+def _start_model(run: _Run) -> Any:
     """The model to train: the checkpoint's (``resumed``), or a fresh one, written in a
     cleared run folder with its ``config.json``."""
     from leoc.systems import make_env
+
+    config, config_dict, seed, plant, run_path, resumed, progress = run
 
     algo = config.algo
     if resumed is not None:
@@ -304,19 +312,11 @@ def _start_model(
 
 
 def _learn(
-    model: Any,
-    config: DDPGConfig,
-    config_dict: dict[str, Any],
-    seed: int,
-    plant: System,
-    run_path: Path,
-    resumed: Any,
-    progress: bool | str,
-    callbacks: Sequence[BaseCallback],
-    checkpoint_interval: int,
+    run: _Run, model: Any, callbacks: Sequence[BaseCallback], checkpoint_interval: int
 ) -> DDPGResult:
     """Train ``model`` to ``config.total_steps`` with the learning-curve and checkpoint
     callbacks, then save the controller and the curve (the run is complete)."""
+    config, config_dict, seed, plant, run_path, resumed, progress = run
     algo = config.algo
     env = model.get_env() if resumed is not None else model.env
     # SB3 would otherwise create an SB3-<date> folder in the system temp folder for its logger

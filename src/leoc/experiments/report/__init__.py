@@ -7,7 +7,7 @@ Outputs in the reproduce folder: ``results.json`` (every aggregated number), ``r
 
 Each section of ``report.md`` is a module of this package (``header``, ``overview``,
 ``definitions``, ``appendix``, ``responses``, ``robustness``, ``swing_up``, ``roa``, ``claims``,
-``seeds``, ``figures``) with the interface of :class:`~leoc.experiments.report.base.Section`:
+``seeds``, ``figures``) with the interface of ``leoc.experiments.report.base.Section``:
 what it computes from the runs, what it checks, what it renders. ``build`` assembles them in
 the order of its ``SECTIONS``. This package re-exports the names other code uses.
 """
