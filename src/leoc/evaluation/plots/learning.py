@@ -18,7 +18,7 @@ from leoc.evaluation.plots.common import (
     new_figure,
     save_figure,
 )
-from leoc.names import FRAMEWORKS
+from leoc.names import FRAMEWORKS, controller_framework
 
 PAPER_FRAMEWORKS = ("ddpg", "pilco")  # rows drawn even without curves (the paper's figure 6)
 KINDS = ("baseline", "hybrid")
@@ -82,7 +82,9 @@ def draw_learning_curves(
     """The figure of :func:`plot_learning_curves` (not saved)."""
     labels = dict(labels or {})
     systems = list(curves)
-    drawn = {key.split("_")[0] for by_controller in curves.values() for key in by_controller}
+    drawn = {
+        controller_framework(key) for by_controller in curves.values() for key in by_controller
+    }
     frameworks = [name for name in FRAMEWORKS if name in PAPER_FRAMEWORKS or name in drawn]
     figure, axes = new_figure(len(frameworks), max(1, len(systems)), (4.2, 3.0))
     seeds_by_kind: dict[str, set[int]] = {}

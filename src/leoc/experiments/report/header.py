@@ -12,6 +12,7 @@ from leoc.experiments.layout import Evaluations
 from leoc.experiments.profiles import LINEAR_CONTROLLERS
 from leoc.experiments.report.base import Report, Section, missing_runs
 from leoc.experiments.summary import wall_time_text
+from leoc.names import controller_framework
 
 SELECTION_RULES = {
     "final": "the final controller (at the end of its training budget)",
@@ -122,7 +123,7 @@ def model_selection_text(evaluations: Evaluations) -> str:
             if controller in LINEAR_CONTROLLERS:
                 continue
             for run in runs:
-                groups[(controller.split("_")[0].upper(), recorded_selection(run))] += 1
+                groups[(controller_framework(controller).upper(), recorded_selection(run))] += 1
     if not groups:
         return "Model selection: none (linear controllers only: designed, not trained)."
     parts = [
@@ -146,7 +147,7 @@ def model_selection_text(evaluations: Evaluations) -> str:
 
 
 def _has_sac(evaluations: Evaluations) -> bool:
-    return any(c.startswith("sac_") for by_c in evaluations.values() for c in by_c)
+    return any(controller_framework(c) == "sac" for by_c in evaluations.values() for c in by_c)
 
 
 def _dt_hybrids(evaluations: Evaluations) -> str:

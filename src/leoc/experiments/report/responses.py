@@ -26,6 +26,7 @@ from leoc.experiments.report.base import (
     pm,
 )
 from leoc.experiments.summary import Failure
+from leoc.names import controller_framework
 from leoc.systems import make_system
 
 # A hybrid "differs from its linear reference" when a metric differs by more than this fraction
@@ -160,7 +161,7 @@ def _response_failures(rows: Rows) -> tuple[int, list[Failure]]:
     index = {(r["system"], r["test"], r["controller"]): r for r in rows}
     checked, failures = 0, []
     for (system, test, controller), row in index.items():
-        framework = controller.split("_")[0]
+        framework = controller_framework(controller)
         if controller in LINEAR_CONTROLLERS or "_hybrid" not in controller:
             continue
         reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))

@@ -23,6 +23,7 @@ from leoc.experiments.report.base import (
 )
 from leoc.experiments.stats import percent
 from leoc.experiments.summary import Failure
+from leoc.names import parse_controller
 
 ROA_HEADERS = (
     "system",
@@ -76,7 +77,7 @@ def _roa_failures(rows: Rows) -> tuple[int, list[Failure]]:
     checked = [
         row
         for row in rows
-        if "_hybrid" in row["controller"] and row["certified_set_held"] is not None
+        if parse_controller(row["controller"]).hybrid and row["certified_set_held"] is not None
     ]
     return len(checked), [
         Failure(

@@ -26,6 +26,7 @@ from leoc.experiments.report.base import (
 from leoc.experiments.report.responses import RELATIVE_TOLERANCE
 from leoc.experiments.stats import percent
 from leoc.experiments.summary import Failure
+from leoc.names import controller_framework
 from leoc.systems import make_system, system_names
 
 
@@ -75,7 +76,7 @@ def _robustness_failures(rows: Rows) -> tuple[int, list[Failure]]:
     for (system, controller, parameter, scale), row in sorted(index.items()):
         if "_hybrid" not in controller:
             continue
-        reference_name = LINEAR_REFERENCE[controller.split("_")[0]]
+        reference_name = LINEAR_REFERENCE[controller_framework(controller)]
         reference = index.get((system, reference_name, parameter, scale))
         if reference is None:
             continue
