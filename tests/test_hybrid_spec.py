@@ -741,3 +741,33 @@ def test_a_field_of_the_other_design_is_checked_too(fields):
     name = [key for key in fields if key != "relevance"][0]
     with pytest.raises(ValueError, match=rf"^{name}: expected"):
         with_hybrid_overrides(None, dict(fields))  # "a bad value is an error for every run"
+
+
+def test_a_run_folder_saved_before_the_spec_is_still_the_same_run(tmp_path):
+    """A config.json written before HybridSpec (``hybrid`` a bool, the hybrid's fields flat
+    beside it) is the same run as today's config of those settings, so the run resumes; a
+    different setting is still refused, naming it."""
+    from leoc.sb3 import DDPGConfig
+    from leoc.training import CONFIG_FILE, same_run
+
+    today = DDPGConfig.for_system("pendulum", hybrid=True, relevance="roa", rho_in_fraction=0.5)
+    saved = {key: value for key, value in today.as_dict().items() if key != "hybrid"}
+    saved.update(
+        hybrid=True,
+        lambda_init=1.0,
+        learn_lambda=True,
+        relevance_parametrisation="log_lambda",
+        relevance="roa",
+        roa_rho_fraction=0.5,
+        roa_width=1.0,
+        learn_width=True,
+        seed=3,
+    )
+    (tmp_path / CONFIG_FILE).write_text(json.dumps(saved), encoding="utf-8")
+    config = {**today.as_dict(), "seed": 3}
+    with pytest.raises(ValueError, match="another configuration"):
+        same_run(tmp_path, config)  # read as it is written, the layouts differ
+    assert same_run(tmp_path, config, normalise=legacy_hybrid_config)
+    other = {**config, "hybrid": HybridSpec(relevance="roa").to_dict()}
+    with pytest.raises(ValueError, match="hybrid:"):
+        same_run(tmp_path, other, normalise=legacy_hybrid_config)
