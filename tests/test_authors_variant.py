@@ -327,3 +327,24 @@ def test_smoke_profile_runs_the_whole_pipeline_on_the_authors_variant(tmp_path) 
 
 
 AUTHORS_EXIT = -100.0
+
+
+@pytest.mark.parametrize("controller", ["pilco_hybrid_roa", "ddpg_hybrid_roa", "sac_hybrid_roa"])
+def test_the_authors_variant_trains_the_controllers_own_relevance(controller) -> None:
+    """The authors' settings refine a hybrid (their Lambda, their LQR) but never switch its
+    relevance design: pilco_hybrid_roa under their variant is an ROA hybrid (it was trained
+    with the paper's relevance once, when their PILCO overrides named it)."""
+    from leoc.experiments.profiles import get_profile
+    from leoc.learners import ControllerSpec, get_learner
+    from leoc.pilco.config import PilcoConfig
+    from leoc.sb3 import DDPGConfig
+
+    spec = ControllerSpec.from_name(controller)
+    for profile in ("quick", "paper"):
+        settings = get_profile(profile).training_settings(AUTHORS, spec, "pendulum")
+        if spec.learner == "pilco":
+            config = PilcoConfig.for_system("pendulum", hybrid=spec.hybrid, **settings)
+        else:
+            algo = get_learner(spec.learner).name
+            config = DDPGConfig.for_system("pendulum", algo, hybrid=spec.hybrid, **settings)
+        assert config.hybrid.relevance == "roa", (controller, profile)

@@ -123,10 +123,12 @@ class Profile:
             budget = self.iterations_for(system) if iterations else self.steps_for(system)
         overrides = self.pilco_overrides if iterations else self.ddpg_overrides
         hybrid = controller.hybrid is not None
-        return {
-            **variant.training_settings(learner.settings_of, system, hybrid, budget),
-            **overrides,
-        }
+        settings = {**variant.training_settings(learner.settings_of, system, hybrid, budget)}
+        settings.update(overrides)
+        # the relevance design is the controller's own (its name says which): a variant's or a
+        # profile's settings refine the hybrid's parameters, never switch its design
+        settings.pop("relevance", None)
+        return settings
 
 
 # Measured run costs [s], the ETA's expected costs (leoc.experiments.eta): the median over seeds

@@ -435,6 +435,5 @@ def authors_pilco_overrides(system: str, hybrid: bool, budget: int | None = None
             lqr_method=AUTHORS_LQR_METHOD,
             hybrid_method=AUTHORS_HYBRID_METHOD,
             lambda_init=AUTHORS_LAMBDA_INIT,
-            relevance="paper",
         )
     return overrides
