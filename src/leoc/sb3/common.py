@@ -127,6 +127,7 @@ __all__ = [
     "WARMUPS",
     "ActorRateAndWarmupMixin",
     "HybridActorMixin",
+    "HybridPolicyMixin",
     "NetworkOptionsMixin",
     "SplitCritic",
     "action_box",
@@ -134,6 +135,7 @@ __all__ = [
     "hybrid_arguments",
     "hybrid_policy_kwargs",
     "initialise_mlp",
+    "policy_of",
 ]
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
@@ -745,3 +747,44 @@ class _PaperSettingsMixin(ActorRateAndWarmupMixin):
             self.tau = self.polyak if due else NO_TARGET_UPDATE
             self._train_calls(1, batch_size)
         self.tau = self.polyak
+
+
+def policy_of(config: Any, env: Any, baseline: type, hybrid: type) -> tuple[type, dict[str, Any]]:
+    """The SB3 policy class of a :class:`~leoc.sb3.DDPGConfig` and its ``policy_kwargs``:
+    ``baseline`` with the config's networks, or, for a hybrid config, ``hybrid`` with the
+    hybrid's keywords from the LQR of ``env``'s system (:func:`hybrid_policy_kwargs`)."""
+    policy_kwargs: dict[str, Any] = {
+        "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
+        **config.network_kwargs(),
+    }
+    if not config.hybrid:
+        return baseline, policy_kwargs
+    system = env.unwrapped.system
+    keywords = hybrid_policy_kwargs(
+        system,
+        config.hybrid,
+        config.lqr_method,
+        clip_output=config.actor_output_clip,  # True for SAC (a TD3-family field)
+        **policy_kwargs,
+    )
+    return hybrid, keywords
+
+
+class HybridPolicyMixin:
+    """What a hybrid SB3 policy adds to its algorithm's policy: its actor is
+    ``hybrid_actor_class`` built with ``hybrid_kwargs`` (the hybrid's keywords, which SB3 saves
+    with the model). Mixed in before the policy class; the subclass sets both."""
+
+    hybrid_actor_class: type
+    hybrid_kwargs: dict[str, Any]
+    actor_kwargs: dict[str, Any]
+    device: Any
+
+    def _new_actor(self, features_extractor: nn.Module | None = None) -> nn.Module:
+        actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)  # type: ignore[attr-defined]
+        return self.hybrid_actor_class(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()  # type: ignore[misc]
+        data.update(self.hybrid_kwargs)
+        return data

@@ -103,10 +103,11 @@ from leoc.policies.spec import HybridDesign, HybridSpec
 from leoc.sb3.common import (
     ActorRateAndWarmupMixin,
     HybridActorMixin,
+    HybridPolicyMixin,
     NetworkOptionsMixin,
     critic_loss_fn,
     hybrid_arguments,
-    hybrid_policy_kwargs,
+    policy_of,
 )
 from leoc.sb3.noise import exploration_noise
 
@@ -317,7 +318,7 @@ class LeocSACPolicy(NetworkOptionsMixin, SACPolicy):
         return actor
 
 
-class HybridSACPolicy(LeocSACPolicy):
+class HybridSACPolicy(HybridPolicyMixin, LeocSACPolicy):
     """SB3 SAC policy whose actor is :class:`HybridSACActor` (the critics, and the network
     options, :class:`LeocSACPolicy`'s).
 
@@ -342,6 +343,7 @@ class HybridSACPolicy(LeocSACPolicy):
     """
 
     actor: HybridSACActor
+    hybrid_actor_class = HybridSACActor  # built once: SAC has no target actor
 
     def __init__(
         self,
@@ -360,16 +362,6 @@ class HybridSACPolicy(LeocSACPolicy):
         _check_no_sde(kwargs.get("use_sde", False))
         self.hybrid_kwargs = hybrid_arguments(kwargs)
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
-
-    def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridSACActor:
-        """The hybrid actor (SB3 calls ``make_actor`` once; SAC has no target actor)."""
-        actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
-        return HybridSACActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(self.hybrid_kwargs)
-        return data
 
 
 class LeocSAC(ActorRateAndWarmupMixin, SAC):
@@ -506,17 +498,8 @@ def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
     relevance (paper or ROA). ``seed`` seeds SB3 (torch, numpy, random, action space): SAC's
     Gaussian samples come from torch's generator, so the run repeats exactly.
     """
-    system = env.unwrapped.system
-    policy_kwargs: dict[str, Any] = {
-        "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
-        **config.network_kwargs(),
-    }
-    policy: Any = LeocSACPolicy  # SB3's SACPolicy when the network options are its defaults
-    if config.hybrid:
-        policy = HybridSACPolicy
-        policy_kwargs = hybrid_policy_kwargs(
-            system, config.hybrid, config.lqr_method, **policy_kwargs
-        )
+    # LeocSACPolicy is SB3's SACPolicy when the network options are at their defaults
+    policy, policy_kwargs = policy_of(config, env, LeocSACPolicy, HybridSACPolicy)
     return LeocSAC(
         policy,
         env,

@@ -34,6 +34,7 @@ from leoc.policies.spec import HybridDesign, HybridSpec
 from leoc.sb3.common import (
     NORMALISED_LIMIT,
     HybridActorMixin,
+    HybridPolicyMixin,
     NetworkOptionsMixin,
     _PaperSettingsMixin,
     hybrid_arguments,
@@ -164,7 +165,7 @@ class LeocTD3Policy(NetworkOptionsMixin, TD3Policy):
         return actor
 
 
-class HybridTD3Policy(LeocTD3Policy):
+class HybridTD3Policy(HybridPolicyMixin, LeocTD3Policy):
     """SB3 TD3/DDPG policy whose actor and target actor are :class:`HybridActor`.
 
     Use it as ``DDPG(HybridTD3Policy, env, policy_kwargs=hybrid_policy_kwargs(system))`` or
@@ -183,6 +184,7 @@ class HybridTD3Policy(LeocTD3Policy):
     """
 
     actor: HybridActor
+    hybrid_actor_class = HybridActor
     actor_target: HybridActor
 
     def __init__(
@@ -196,15 +198,6 @@ class HybridTD3Policy(LeocTD3Policy):
     ) -> None:
         self.hybrid_kwargs = {**hybrid_arguments(kwargs), "clip_output": bool(clip_output)}
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
-
-    def _new_actor(self, features_extractor: nn.Module | None = None) -> HybridActor:
-        actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)
-        return HybridActor(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
-
-    def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(self.hybrid_kwargs)
-        return data
 
 
 class LeocTD3(_PaperSettingsMixin, TD3):

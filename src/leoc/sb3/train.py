@@ -43,7 +43,7 @@ from leoc.sb3.checkpoint import (
     CheckpointCallback,
     load_checkpoint,
 )
-from leoc.sb3.common import hybrid_policy_kwargs
+from leoc.sb3.common import policy_of
 from leoc.sb3.config import DDPGConfig
 from leoc.sb3.ddpg import HybridDDPGPolicy, LeocDDPG
 from leoc.sb3.noise import exploration_noise
@@ -111,21 +111,8 @@ def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
     the one designed for)."""
     if config.algo == "sac":
         return build_sac_model(config, seed, env)
-    system = env.unwrapped.system
-    policy_kwargs: dict[str, Any] = {
-        "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
-        **config.network_kwargs(),
-    }
-    policy: Any = LeocTD3Policy  # SB3's TD3Policy when those options are at their defaults
-    if config.hybrid:
-        policy = HybridTD3Policy
-        policy_kwargs = hybrid_policy_kwargs(
-            system,
-            config.hybrid,
-            config.lqr_method,
-            clip_output=config.actor_output_clip,
-            **policy_kwargs,
-        )
+    # LeocTD3Policy is SB3's TD3Policy when the network options are at their defaults
+    policy, policy_kwargs = policy_of(config, env, LeocTD3Policy, HybridTD3Policy)
     common: dict[str, Any] = {
         "learning_rate": config.critic_learning_rate,
         "actor_learning_rate": config.actor_learning_rate,
