@@ -457,6 +457,9 @@ EXPECTED_SPEC = {
     "rho_in_fraction": 0.5,
     "width_init": 0.3,
     "learn_width": False,
+    # fields added after these configs were saved: their defaults
+    "r_min": None,
+    "relevance_lr_scale": 1.0,
 }
 
 

@@ -97,6 +97,13 @@ class HybridSpec:
         ROA relevance: the initial band width :math:`w > 0` over which :math:`r` falls to 0.
     learn_width : bool
         ROA relevance: whether training changes the band width.
+    r_min : float in (0, 1), optional
+        Paper relevance (``log_lambda``): a floor on :math:`\Lambda` such that
+        :math:`r \ge r_{min}` on the LQR's proved region of attraction :math:`\{V \le \rho\}`
+        (:class:`~leoc.policies.FlooredRelevance`); None (default): no floor.
+    relevance_lr_scale : float
+        The relevance's parameters train in their own optimiser group, at the actor's learning
+        rate times this (> 0; default 1: one group, as before). Stable-Baselines3 learners only.
 
     Raises
     ------
@@ -111,6 +118,8 @@ class HybridSpec:
     rho_in_fraction: float = 1.0
     width_init: float = DEFAULT_ROA_WIDTH
     learn_width: bool = True
+    r_min: float | None = None
+    relevance_lr_scale: float = 1.0
 
     def __post_init__(self) -> None:
         if self.relevance not in RELEVANCE_DESIGNS:
@@ -124,6 +133,11 @@ class HybridSpec:
             _positive(self.lambda_init, "lambda_init")
         for name in ("learn_lambda", "learn_width"):
             _flag(getattr(self, name), name)
+        _positive(self.relevance_lr_scale, "relevance_lr_scale")
+        if self.r_min is not None:
+            value = self.r_min
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1:
+                raise ValueError(f"r_min: expected None or a number in (0, 1), found {value!r}")
         # every design's fields are checked, whichever design is chosen: a spec saved with a
         # bad value for another design would fail only once someone switched to it
         for design in RELEVANCE_DESIGNS.values():
@@ -207,8 +221,11 @@ LEGACY_FIELD_NAMES = {"roa_rho_fraction": "rho_in_fraction", "roa_width": "width
 def legacy_hybrid_config(data: Mapping[str, Any]) -> dict[str, Any]:
     """A learner's saved config in today's form: one saved before :class:`HybridSpec` (``hybrid``
     a bool, the hybrid's fields beside it) gets its ``hybrid`` spec dict (None for a baseline)
-    and loses those fields; any other config is returned as it is (a copy)."""
+    and loses those fields; a spec dict saved before a field existed gets that field's default;
+    any other config is returned as it is (a copy)."""
     out = dict(data)
+    if isinstance(out.get("hybrid"), Mapping):  # fields added since take their defaults
+        out["hybrid"] = HybridSpec.from_dict(out["hybrid"]).to_dict()
     if not isinstance(out.get("hybrid"), bool):
         return out
     fields = {}
