@@ -197,7 +197,10 @@ def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
 
     assert names.ABLATION_ALL_SETTINGS == ablation.ALL_SETTINGS
     assert names.ABLATION_SETTINGS == ablation.SETTINGS
-    assert names.ABLATION_CONTROLLERS + names.ABLATION_SAC_CONTROLLERS == ablation.GRID_CONTROLLERS
+    assert (
+        names.ABLATION_CONTROLLERS + names.ABLATION_SAC_CONTROLLERS + names.ABLATION_TD3_CONTROLLERS
+        == ablation.GRID_CONTROLLERS
+    )
     assert names.ABLATION_SYSTEM_NAMES == ablation.ABLATION_SYSTEMS
     assert names.BACKEND_NAMES == sweep.BACKENDS
     assert names.METRIC_SET_NAMES == tuple(METRIC_SETS)

@@ -137,9 +137,10 @@ VARIANT_NAMES = ("leoc", "authors")
 """Implementations (``leoc.experiments.variants``): leoc's defaults, or the authors' choices."""
 METRIC_SET_NAMES = ("leoc", "authors")
 """Response metric sets (``leoc.evaluation.metric_sets``)."""
-RELEVANCE_NAMES = ("paper", "roa")
+RELEVANCE_NAMES = ("paper", "roa", "lyapunov")
 """Relevance functions of a hybrid (``leoc.policies.relevance.RELEVANCE_KINDS``): the paper's
-r(x) = (1 + d)^-2, or the ROA relevance, exactly 1 on the LQR's certified region."""
+r(x) = (1 + d)^-2, the ROA relevance, exactly 1 on the LQR's certified region, or the paper's
+form with the LQR's Lyapunov function as its distance."""
 LQR_METHODS = ("discrete", "continuous", "authors")
 """LQR designs of ``leoc.control.design_lqr``."""
 BACKEND_NAMES = ("local", "ray")
@@ -152,6 +153,8 @@ ABLATION_CONTROLLERS = ("ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa")
 """The DDPG controllers of the ablation's default grid."""
 ABLATION_SAC_CONTROLLERS = ("sac_baseline", "sac_hybrid", "sac_hybrid_roa")
 """The SAC controllers the ablation also runs (not in the default grid)."""
+ABLATION_TD3_CONTROLLERS = ("td3_baseline", "td3_hybrid", "td3_hybrid_roa")
+"""The TD3 controllers the ablation also runs (not in the default grid)."""
 ABLATION_SETTINGS = (
     "leoc",
     "authors",
@@ -182,6 +185,14 @@ ABLATION_ALL_SETTINGS = (
     "sac_huber",
     "sac_critic",
     "sac_ou",
+    "relevance_precision",
+    "relevance_frozen",
+    "relevance_init_10",
+    "relevance_lr_0.1",
+    "relevance_lr_0.01",
+    "relevance_floor_0.99",
+    "relevance_floor_0.9",
+    "relevance_lyapunov",
 )
 """Every setting the ablation runs (``leoc.experiments.ablation.ALL_SETTINGS``, same order)."""
 ABLATION_TEST_EPISODES = 5

@@ -23,6 +23,7 @@ from leoc.names import (
     ABLATION_SAC_CONTROLLERS,
     ABLATION_SETTINGS,
     ABLATION_SYSTEM_NAMES,
+    ABLATION_TD3_CONTROLLERS,
     ABLATION_TEST_EPISODES,
 )
 
@@ -92,11 +93,11 @@ def _add_grid_arguments(ablation: argparse.ArgumentParser) -> None:
     ablation.add_argument(
         "--controllers",
         nargs="+",
-        choices=ABLATION_CONTROLLERS + ABLATION_SAC_CONTROLLERS,
+        choices=ABLATION_CONTROLLERS + ABLATION_SAC_CONTROLLERS + ABLATION_TD3_CONTROLLERS,
         default=list(ABLATION_CONTROLLERS),
         metavar="CONTROLLER",
         help=f"controllers (default: {' '.join(ABLATION_CONTROLLERS)}; also "
-        f"{', '.join(ABLATION_SAC_CONTROLLERS)})",
+        f"{', '.join(ABLATION_SAC_CONTROLLERS + ABLATION_TD3_CONTROLLERS)})",
     )
     ablation.add_argument(
         "--settings",

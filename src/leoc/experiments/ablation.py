@@ -197,14 +197,41 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         {"sac_action_noise": True},
     ),
 }
+#: How the paper's relevance is learned (issue 40), one choice switched from leoc's defaults
+#: each (like ``defaults``, on the running code's defaults, so a cell differs from
+#: ``defaults`` in that choice only), for the hybrids with the paper's relevance of DDPG, TD3
+#: and SAC: name -> (label, :class:`~leoc.policies.HybridSpec` fields).
+RELEVANCE_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "relevance_precision": (
+        "authors' precision parametrisation (S = Lambda^-1, unconstrained)",
+        {"relevance_parametrisation": "precision"},
+    ),
+    "relevance_frozen": ("Lambda frozen at its initial 1", {"learn_lambda": False}),
+    "relevance_init_10": ("initial Lambda 10 (learned)", {"lambda_init": 10.0}),
+    "relevance_lr_0.1": ("Lambda's learning rate 0.1 x the actor's", {"relevance_lr_scale": 0.1}),
+    "relevance_lr_0.01": (
+        "Lambda's learning rate 0.01 x the actor's",
+        {"relevance_lr_scale": 0.01},
+    ),
+    "relevance_floor_0.99": (
+        "Lambda floored: r >= 0.99 on the LQR's proved set",
+        {"r_min": 0.99},
+    ),
+    "relevance_floor_0.9": ("Lambda floored: r >= 0.9 on the LQR's proved set", {"r_min": 0.9}),
+    "relevance_lyapunov": (
+        "distance = LQR's Lyapunov function V / (lambda rho), lambda learned",
+        {"relevance": "lyapunov"},
+    ),
+}
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,
-#: today's defaults and SAC's settings.
+#: today's defaults, SAC's settings and the relevance's.
 ALL_SETTINGS = (
     SETTINGS
     + COMBINED_SETTINGS
     + HORIZON_EXIT_SETTINGS
     + (DEFAULTS_SETTING,)
     + tuple(SAC_TUNING_SETTINGS)
+    + tuple(RELEVANCE_SETTINGS)
 )
 #: The authors' DDPG fields each single-factor setting switches on (values: ``AUTHORS_DDPG``).
 SINGLE_FACTOR_FIELDS: dict[str, tuple[str, ...]] = {
@@ -292,15 +319,27 @@ SETTING_LABELS = {
     "all_horizon_exit": "+ all five, exit charged for a whole episode (reward on next state)",
     DEFAULTS_SETTING: "leoc's defaults since issue 20",
     **{name: label for name, (label, _) in SAC_TUNING_SETTINGS.items()},
+    **{name: label for name, (label, _) in RELEVANCE_SETTINGS.items()},
 }
 #: The DDPG controllers of the grid (``leoc reproduce`` names).
 ABLATION_CONTROLLERS = names.ABLATION_CONTROLLERS
 #: The SAC controllers the harness also runs (not in the default grid).
 SAC_CONTROLLERS = names.ABLATION_SAC_CONTROLLERS
+#: The TD3 controllers the harness also runs (not in the default grid).
+TD3_CONTROLLERS = names.ABLATION_TD3_CONTROLLERS
 #: Every controller the harness runs, in table order.
-GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS
+GRID_CONTROLLERS = ABLATION_CONTROLLERS + SAC_CONTROLLERS + TD3_CONTROLLERS
 #: The settings that apply to SAC: the others switch DDPG/TD3 fields SAC does not have.
-SAC_SETTINGS = ("leoc", "exit_penalty", DEFAULTS_SETTING, *SAC_TUNING_SETTINGS)
+SAC_SETTINGS = (
+    "leoc",
+    "exit_penalty",
+    DEFAULTS_SETTING,
+    *SAC_TUNING_SETTINGS,
+    *RELEVANCE_SETTINGS,
+)
+#: The settings that apply to TD3: today's defaults and the relevance's (the DDPG settings
+#: describe the DDPG defaults of issue 20, which TD3 never had).
+TD3_SETTINGS = (DEFAULTS_SETTING, *RELEVANCE_SETTINGS)
 #: The systems of the grid: the two that fail, then the pendulum as the control.
 ABLATION_SYSTEMS = names.ABLATION_SYSTEM_NAMES
 #: Seeds per setting when none are given: 5 for leoc's defaults and the authors' setup.
@@ -364,6 +403,8 @@ def setting_overrides(
         raise ValueError(f"setting: expected one of {ALL_SETTINGS}, found {setting!r}")
     if setting == DEFAULTS_SETTING:
         return {}
+    if setting in RELEVANCE_SETTINGS:
+        return copy.deepcopy(RELEVANCE_SETTINGS[setting][1])
     if setting in SAC_TUNING_SETTINGS:
         return {**SB3_SAC_CRITIC, **copy.deepcopy(SAC_TUNING_SETTINGS[setting][1])}
     base = LEOC_ABLATION_BASE if algo != "sac" else SAC_ABLATION_BASE
@@ -413,8 +454,13 @@ def setting_applies(setting: str, system: str, controller: str = "ddpg_baseline"
     """Whether ``setting`` differs from leoc's defaults on ``system`` (``leoc`` and
     ``defaults`` always apply) and exists for ``controller``'s algorithm (SAC:
     :data:`SAC_SETTINGS`); a setting that does not is left out of the grid there."""
-    if controller_framework(controller) == "sac" and setting not in SAC_SETTINGS:
+    framework = controller_framework(controller)
+    if (framework == "sac" and setting not in SAC_SETTINGS) or (
+        framework == "td3" and setting not in TD3_SETTINGS
+    ):
         return False
+    if setting in RELEVANCE_SETTINGS:  # the paper relevance's hybrids only
+        return names.parse_controller(controller).relevance == "paper"
     if setting in SAC_TUNING_SETTINGS:  # SAC's settings: not DDPG settings
         return controller_framework(controller) == "sac"
     if setting.startswith("all_but_"):  # a copy of all_factors where the factor changes nothing
@@ -457,7 +503,7 @@ class AblationSpec(NamedTuple):
 
     @property
     def algo(self) -> str:
-        """The learner: ``"ddpg"`` or ``"sac"``."""
+        """The learner: ``"ddpg"``, ``"td3"`` or ``"sac"``."""
         return controller_framework(self.controller)
 
     @property
@@ -751,10 +797,28 @@ def run_cell(spec: AblationSpec, plan: AblationPlan, out_dir: Path) -> dict[str,
     record = _record(spec, plan, config, _evaluations(result.curve, held_out.rows))
     return {
         **record,
+        "lqr_agreement": delivered_lqr_agreement(run_dir, test_system, spec.hybrid),
         "selected_steps": result.summary.get("selected_steps"),
         "wall_seconds": time.perf_counter() - started,
         "versions": versions(),
     }
+
+
+def delivered_lqr_agreement(run_dir: Path, system: Any, hybrid: bool) -> dict[str, Any] | None:
+    """:func:`~leoc.evaluation.lqr_agreement.lqr_agreement` of the controller the run delivers
+    at its full budget (the trainer's saved model) against the LQR designed for its control
+    period, on ``system``; None for a baseline."""
+    if not hybrid:
+        return None
+    from leoc.control import design_lqr
+    from leoc.evaluation.lqr_agreement import lqr_agreement
+    from leoc.evaluation.rollout import control_period
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.policies import lqr_controller
+
+    controller = load_trained_controller(run_dir / TRAIN_DIR)
+    design = design_lqr(system, action_repeat=control_period(controller))
+    return lqr_agreement(system, controller, lqr_controller(design))
 
 
 def _record(
@@ -907,9 +971,9 @@ def expected_seconds(plan: AblationPlan) -> Callable[[AblationSpec], float]:
         budget = plan.budget_for(spec.system)
         factor = 1.0
         measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{spec.controller}")
-        if measured is None and spec.algo == "sac":
-            factor = SAC_COST_FACTOR
-            ddpg = spec.controller.replace("sac_", "ddpg_", 1)
+        if measured is None and spec.algo in ("sac", "td3"):
+            factor = SAC_COST_FACTOR if spec.algo == "sac" else 1.0
+            ddpg = spec.controller.replace(f"{spec.algo}_", "ddpg_", 1)
             measured = PAPER_RUN_SECONDS.get(f"{spec.system}/{ddpg}")
         steps = TOTAL_STEPS_BY_SYSTEM.get(spec.system)
         if measured is None or steps is None:
