@@ -503,7 +503,9 @@ def write_tables(
     command: str | None = None,
 ) -> Path:
     """Write :data:`TABLE_FILES` and the figure into ``dest`` from ``records`` (``command``:
-    the folder's recorded invocation, quoted in the markdown); returns the markdown's path."""
+    the folder's recorded invocation, quoted in the markdown), and the relevance report
+    (:mod:`leoc.experiments.relevance_report`) when hybrid records carry ``lqr_agreement``;
+    returns the markdown's path."""
     from leoc.evaluation.plots.ablation import plot_success_vs_budget
 
     out = Path(dest)
@@ -546,6 +548,9 @@ def write_tables(
         CONTROLLER_LABELS,
         figure_caption(rates),
     )
+    from leoc.experiments.relevance_report import write_relevance_report
+
+    write_relevance_report(out, records, command)
     return markdown
 
 
