@@ -38,6 +38,7 @@ __all__ = [
     "evaluate_action_repeat",
     "evaluate_controller",
     "evaluate_hybrid_claims",
+    "evaluate_lqr_agreement",
     "evaluate_relevance",
     "evaluate_responses",
     "evaluate_robustness",
@@ -229,6 +230,20 @@ def evaluate_relevance(context: EvaluationContext) -> dict[str, list[Any]] | Non
     return None if trace is None else {k: v.tolist() for k, v in trace._asdict().items()}
 
 
+def evaluate_lqr_agreement(context: EvaluationContext) -> dict[str, Any] | None:
+    """:func:`leoc.evaluation.lqr_agreement.lqr_agreement` against the shared LQR: does the
+    hybrid keep its LQR's impulse and step responses, and what its relevance learned (None for
+    non-hybrids)."""
+    from leoc.evaluation.lqr_agreement import lqr_agreement
+    from leoc.policies import lqr_controller
+    from leoc.systems.rollout import relevance_function
+
+    if relevance_function(context.controller) is None:
+        return None
+    lqr = lqr_controller(context.lqr.design)
+    return lqr_agreement(context.system, context.controller, lqr)
+
+
 #: The evaluations of :func:`evaluate_controller`, in the order of ``evaluation.json``'s keys.
 EVALUATORS: tuple[Evaluator, ...] = (
     Evaluator("action_repeat", evaluate_action_repeat),
@@ -238,6 +253,7 @@ EVALUATORS: tuple[Evaluator, ...] = (
     Evaluator("robustness", evaluate_robustness),
     Evaluator("swing_up", evaluate_swing_up),
     Evaluator("relevance", evaluate_relevance),
+    Evaluator("lqr_agreement", evaluate_lqr_agreement),
 )
 
 
