@@ -2,9 +2,9 @@ r"""Relevance functions of the LEOC hybrid: how much the linear part governs at 
 
 Letters: D observation dimension, S state dimension; ``...`` any leading batch shape.
 
-Two relevance modules map an observation batch (..., D) to :math:`r(x) \in [0, 1]`, shape
+The relevance modules map an observation batch (..., D) to :math:`r(x) \in [0, 1]`, shape
 (..., 1); :class:`~leoc.policies.HybridPolicy` blends
-:math:`\pi = \operatorname{sat}(r G + (1 - r) H)` with either.
+:math:`\pi = \operatorname{sat}(r G + (1 - r) H)` with any of them.
 
 **The paper's relevance** (Zhang & Capel 2021, eq. 5), :class:`PaperRelevance`:
 
@@ -17,6 +17,24 @@ equal to 1 only at the operating point :math:`a` (in observation coordinates), w
 :math:`\pi(a) = G(a)` and :math:`\partial \pi / \partial x (a) = W`, nothing more: anywhere
 else the learned part leaks in, and training can shrink :math:`\lambda` until even a small
 disturbance leaves the region the linear part governs.
+
+**The floored paper relevance**, :class:`FlooredRelevance`: the same :math:`r = (1 + d)^{-2}`
+with :math:`\lambda` bounded below by a floor :math:`f` (:func:`relevance_floor`) such that
+:math:`r \ge r_{min}` on the LQR's proved region of attraction
+:math:`\Omega = \{x : z^\top P z \le \rho\}` (:math:`z` the state deviation, as below),
+whatever :math:`\lambda \ge f` training reaches. :math:`r \ge r_{min}` iff
+:math:`d \le d_{max} = r_{min}^{-1/2} - 1`. Each observation entry is bounded by its state
+deviation: a plain entry :math:`j` of state :math:`s` gives :math:`z_s^2 / \lambda_j`; an angle
+:math:`s` seen as :math:`(\cos\theta, \sin\theta)` in columns :math:`c, k` gives
+:math:`(\cos\theta - \cos a_s)^2 / \lambda_c + (\sin\theta - \sin a_s)^2 / \lambda_k \le
+\max(\lambda_c^{-1}, \lambda_k^{-1}) \, 4 \sin^2(\delta / 2) \le
+\max(\lambda_c^{-1}, \lambda_k^{-1}) \, z_s^2` (:math:`\delta = z_s`, any representative). So
+:math:`d \le z^\top \mathcal{W} z`, :math:`\mathcal{W} = \operatorname{diag}(w_s)`, whose maximum
+on :math:`\Omega` is :math:`\rho \, \lambda_{max}(\mathcal{W} P^{-1})`, monotone in the
+diagonal :math:`\mathcal{W} \ge 0`. The floor takes the shape
+:math:`w_s \propto 1 / (P^{-1})_{ss}` and scales it to reach :math:`d_{max}`. The weights are
+held as :math:`\lambda_j = f_j (1 + e^{q_j})`, :math:`q` learnable, so :math:`\lambda > f`
+always and :math:`r(a) = 1` exactly.
 
 **The ROA relevance**, :class:`ROARelevance`: flat (exactly 1) on a certified sublevel set of
 the LQR's Lyapunov function and falling smoothly to 0 outside it,
@@ -69,6 +87,32 @@ its discrete analogue; a continuous :math:`V` strictly decreasing on the compact
 whatever :math:`H` and :math:`w` are learned. With a disturbance (the impulse test) the same
 holds once the disturbance has stopped, for every state it leaves inside :math:`\Omega_{in}`.
 
+**The Lyapunov relevance**, :class:`LyapunovRelevance`: the paper's shape with the LQR's own
+Lyapunov function as the distance,
+
+.. math::
+
+    r(x) = \frac{1}{(1 + d(x))^2}, \qquad d(x) = \frac{\tilde V(x)}{\lambda \rho}, \qquad
+    \tilde V = y^\top P y + \sum_{s \text{ angle}} P_{ss} (1 - \cos\delta_s)^2,
+
+with :math:`\lambda = \exp(\text{log\_lambda})` one learnable scalar and :math:`P, \rho` the
+LQR's Lyapunov matrix and proved level (:math:`d = 1 / \lambda` where :math:`\tilde V = \rho`,
+close to the proved set's boundary :math:`V = \rho` when that set is small).
+:math:`y_s = x_j - a_j` for a plain entry; for an angle
+:math:`y_s = \sin\delta_s = (\sin\theta - \sin a_s) \cos a_s - (\cos\theta - \cos a_s) \sin a_s`
+and :math:`1 - \cos\delta_s = ((\cos\theta - \cos a_s)^2 + (\sin\theta - \sin a_s)^2) / 2`,
+:math:`\cos a_s, \sin a_s` read from the operating observation. Why not :math:`V(z)` itself:
+the wrapped deviation jumps at :math:`\delta = \pm\pi`, and :math:`P`'s cross terms
+(:math:`2 P_{sk} z_s z_k`) change sign with it, so :math:`d` would jump there. :math:`\tilde V`
+is a polynomial in the observation, hence smooth on the whole observation manifold; it equals
+:math:`V` to second order at :math:`a` (:math:`\sin\delta = \delta + O(\delta^3)`,
+:math:`(1 - \cos\delta)^2 = O(\delta^4)`: the same Hessian :math:`2P`); it is positive away from
+:math:`a` (:math:`y = 0` only at :math:`\delta_s \in \{0, \pi\}`, where the last term is
+:math:`4 P_{ss} > 0`). At :math:`x = a` every difference is an exact 0, so :math:`r(a) = 1`
+exactly and :math:`\nabla r(a) = 0`. The relevance is 1 only at :math:`a`: unlike the ROA
+relevance it has no flat top, but its level sets follow the LQR's certified ellipsoids near
+:math:`a`.
+
 References
 ----------
 Y. Zhang and F. Capel, "LEOC: A Principled Method in Integrating Reinforcement Learning and
@@ -96,13 +140,17 @@ from ._checks import as_float_tensor, check_finite, check_last_dim, check_shape
 
 __all__ = [
     "DEFAULT_ROA_WIDTH",
+    "FLOOR_MARGIN",
     "RELEVANCE_KINDS",
+    "FlooredRelevance",
+    "LyapunovRelevance",
     "ObservationDeviation",
     "PaperRelevance",
     "PrecisionRelevance",
     "RELEVANCE_PARAMETRISATIONS",
     "ROARelevance",
     "paper_relevance",
+    "relevance_floor",
 ]
 
 #: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
@@ -119,6 +167,10 @@ DEFAULT_ROA_WIDTH = 1.0
 # both ends.
 _SMOOTHERSTEP = (10.0, -15.0, 6.0)
 SYMMETRY_RTOL = 1e-9  # |P - P^T| allowed, relative to max |P_ij|
+FLOOR_MARGIN = 1e-9
+"""Relative margin of :func:`relevance_floor` over the exact bound, so that float64 rounding of
+:math:`d` never puts :math:`r` below :math:`r_{min}` at the floor itself."""
+UNIT_CIRCLE_ATOL = 1e-6  # |cos^2 a + sin^2 a - 1| allowed in an operating observation
 
 
 def paper_relevance(x: Tensor, operating_point: Tensor, log_lambda: Tensor) -> Tensor:
@@ -336,6 +388,31 @@ class ObservationDeviation(nn.Module):
         return torch.stack(entries, dim=-1)
 
 
+def lyapunov_matrix(P: object, size: int | None = None) -> Tensor:
+    """``P`` as a float64 tensor (S, S), ``S = size`` (default: any square matrix), checked
+    finite, symmetric (to :data:`SYMMETRY_RTOL`) and positive definite."""
+    matrix = as_float_tensor(P, "P", torch.float64)
+    if size is None:
+        if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1] or matrix.shape[0] < 1:
+            raise ValueError(
+                f"P: expected a square matrix (S, S), found shape {tuple(matrix.shape)}"
+            )
+        size = matrix.shape[0]
+    check_shape(matrix, "P", (size, size), "(S, S)")
+    check_finite(matrix, "P")
+    matrix_np = matrix.numpy()
+    if not np.allclose(
+        matrix_np, matrix_np.T, rtol=0.0, atol=SYMMETRY_RTOL * np.abs(matrix_np).max()
+    ):
+        raise ValueError(f"P must be symmetric, found {matrix_np.tolist()}")
+    if float(np.linalg.eigvalsh(matrix_np)[0]) <= 0.0:
+        raise ValueError(
+            f"P must be positive definite, found eigenvalues "
+            f"{np.linalg.eigvalsh(matrix_np).tolist()}"
+        )
+    return matrix
+
+
 def chart_width_limit(P: np.ndarray, angle_indices: Sequence[int], rho_in: float) -> float:
     r"""Largest band width :math:`w_{max}` that keeps the band inside the angle chart.
 
@@ -401,19 +478,8 @@ class ROARelevance(nn.Module):
             raise TypeError(f"learn_width must be a bool, found {type(learn_width).__name__}")
         self.deviation = ObservationDeviation(obs_layout, operating_state, dtype)
         size = self.deviation.state_dim
-        matrix = as_float_tensor(P, "P", torch.float64)
-        check_shape(matrix, "P", (size, size), "(S, S)")
-        check_finite(matrix, "P")
+        matrix = lyapunov_matrix(P, size)
         matrix_np = matrix.numpy()
-        if not np.allclose(
-            matrix_np, matrix_np.T, rtol=0.0, atol=SYMMETRY_RTOL * np.abs(matrix_np).max()
-        ):
-            raise ValueError(f"P must be symmetric, found {matrix_np.tolist()}")
-        if float(np.linalg.eigvalsh(matrix_np)[0]) <= 0.0:
-            raise ValueError(
-                f"P must be positive definite, found eigenvalues "
-                f"{np.linalg.eigvalsh(matrix_np).tolist()}"
-            )
         for name, value in (("rho_in", rho_in), ("width_init", width_init)):
             if not isinstance(value, (int, float, np.floating)) or not 0.0 < value < math.inf:
                 raise ValueError(f"{name} must be a positive finite number, found {value!r}")
@@ -466,3 +532,246 @@ class ROARelevance(nn.Module):
             f"state_dim={self.deviation.state_dim}, rho_in={float(self.rho_in):.6g}, "
             f"max_width={self.max_width:.6g}, learn_width={learned}"
         )
+
+
+def _positive_number(value: object, name: str) -> float:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.floating))
+        or not 0.0 < value < math.inf
+    ):
+        raise ValueError(f"{name}: expected a positive finite number, found {value!r}")
+    return float(value)
+
+
+def relevance_floor(obs_layout: Sequence[Any], P: object, rho: float, r_min: float) -> np.ndarray:
+    r"""Floor :math:`f` (D,) on the paper relevance's :math:`\lambda`: every :math:`\lambda \ge f`
+    gives :math:`r \ge r_{min}` on :math:`\Omega = \{x : z^\top P z \le \rho\}`.
+
+    Derivation. :math:`r = (1 + d)^{-2} \ge r_{min}` iff :math:`d \le d_{max} =
+    r_{min}^{-1/2} - 1`. A plain entry :math:`j` of state :math:`s` adds :math:`z_s^2 /
+    \lambda_j`; an angle :math:`s` in columns :math:`c, k` adds :math:`(\cos\theta - \cos a)^2 /
+    \lambda_c + (\sin\theta - \sin a)^2 / \lambda_k \le \max(\lambda_c^{-1}, \lambda_k^{-1})
+    \cdot 4 \sin^2(\delta / 2) \le \max(\lambda_c^{-1}, \lambda_k^{-1}) z_s^2`. Hence
+    :math:`d \le z^\top \mathcal{W} z`, :math:`\mathcal{W} = \operatorname{diag}(w_s)`, and with
+    :math:`z = \sqrt\rho P^{-1/2} u`, :math:`|u| \le 1`: :math:`\max_\Omega z^\top \mathcal{W} z
+    = \rho \lambda_{max}(P^{-1/2} \mathcal{W} P^{-1/2}) = \rho \lambda_{max}(\mathcal{W}
+    P^{-1})`. The floor takes :math:`w_s = t / (P^{-1})_{ss}` with :math:`t = d_{max} / (\rho
+    \lambda_{max}(\operatorname{diag}(1 / (P^{-1})_{ss}) P^{-1}))` (so that maximum is
+    :math:`d_{max}`) and :math:`f_j = 1 / w_s` for every entry of state :math:`s` (an angle's
+    cos and sin share it). Any :math:`\lambda \ge f` gives a diagonal :math:`\mathcal{W}` no
+    larger, and :math:`\lambda_{max}(\mathcal{W} P^{-1})` is monotone in it (Loewner order), so
+    :math:`d \le d_{max}` on all of :math:`\Omega`. The bound is tight without angles (at the
+    top generalised eigenvector on the boundary); :math:`f` carries a relative margin
+    :data:`FLOOR_MARGIN` for rounding.
+
+    Parameters
+    ----------
+    obs_layout : sequence of (kind, state_index)
+        ``System.observation.to_list()``.
+    P : array-like, shape (S, S)
+        The LQR's Lyapunov matrix (symmetric positive definite).
+    rho : float
+        The proved level (> 0).
+    r_min : float in (0, 1)
+
+    Returns
+    -------
+    numpy.ndarray, shape (D,)
+    """
+    matrix = lyapunov_matrix(P).numpy()
+    size = matrix.shape[0]
+    rho = _positive_number(rho, "rho")
+    if isinstance(r_min, bool) or not isinstance(r_min, (int, float)) or not 0.0 < r_min < 1.0:
+        raise ValueError(f"r_min: expected a number in (0, 1), found {r_min!r}")
+    inverse = np.linalg.inv(matrix)
+    spread = np.diag(inverse).copy()  # (P^-1)_ss
+    # diag(1/c) P^-1 is similar to the symmetric diag(c)^-1/2 P^-1 diag(c)^-1/2
+    peak = float(np.linalg.eigvalsh(inverse / np.sqrt(np.outer(spread, spread)))[-1])
+    d_max = float(r_min) ** -0.5 - 1.0
+    per_state = (1.0 + FLOOR_MARGIN) * spread * rho * peak / d_max  # 1 / w_s
+    floor = np.empty(as_observation_map(obs_layout, size).obs_dim)
+    for kind, index, column, sin_column in _layout_plan(obs_layout, size):
+        floor[column] = per_state[index]
+        if kind == "angle":
+            floor[sin_column] = per_state[index]
+    return floor
+
+
+class FlooredRelevance(nn.Module):
+    r"""The paper's relevance with :math:`\lambda` held above a floor :math:`f`.
+
+    .. math::
+
+        r(x) = \frac{1}{(1 + d(x))^2}, \qquad d(x) = \sum_{j=1}^{D} \frac{(x_j - a_j)^2}
+        {\lambda_j}, \qquad \lambda_j = f_j (1 + e^{q_j}),
+
+    :math:`q` (``log_excess``) learnable: whatever training does, :math:`\lambda > f`, so with the
+    floor of :func:`relevance_floor` :math:`r \ge r_{min}` on the LQR's proved set (module
+    docstring). :math:`d(a) = 0` exactly, so :math:`r(a) = 1`.
+
+    Parameters
+    ----------
+    operating_point : array-like, shape (D,)
+        :math:`a` in observation coordinates (buffer ``operating_point``).
+    floor : array-like, shape (D,)
+        :math:`f > 0` (buffer ``floor``).
+    lambda_init : float or array-like (D,)
+        Initial :math:`\lambda > 0`, raised to :math:`\max(\lambda_{init}, 2 f)` entrywise.
+    learn_lambda : bool
+        ``log_excess`` (D,) is an ``nn.Parameter`` if True, else a buffer.
+    dtype : torch.dtype
+    """
+
+    operating_point: Tensor
+    floor: Tensor
+    log_excess: Tensor
+
+    def __init__(
+        self,
+        operating_point: object,
+        floor: object,
+        lambda_init: float | object = 1.0,
+        learn_lambda: bool = True,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__()
+        from ._checks import check_positive, positive_scalar_or_vector
+
+        if not isinstance(learn_lambda, bool):
+            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        point = as_float_tensor(operating_point, "operating_point", torch.float64)
+        if point.ndim != 1:
+            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
+        check_finite(point, "operating_point")
+        size = point.shape[0]
+        lower = as_float_tensor(floor, "floor", torch.float64)
+        check_shape(lower, "floor", (size,), "(D,)")
+        check_positive(lower, "floor")
+        start = positive_scalar_or_vector(lambda_init, "lambda_init", size, "D", torch.float64)
+        start = torch.maximum(start.expand(size), 2.0 * lower)
+        excess = torch.log(start / lower - 1.0).to(dtype)
+        self.register_buffer("operating_point", point.to(dtype))
+        self.register_buffer("floor", lower.to(dtype))
+        if learn_lambda:
+            self.log_excess = nn.Parameter(excess)
+        else:
+            self.register_buffer("log_excess", excess)
+
+    @property
+    def lambda_(self) -> Tensor:
+        r""":math:`\lambda = f (1 + e^{q})`, shape (D,)."""
+        return self.floor * (1.0 + torch.exp(self.log_excess))
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Relevance (..., 1) of observations ``x`` (..., D)."""
+        check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
+        distance = ((x - self.operating_point).square() / self.lambda_).sum(dim=-1, keepdim=True)
+        return (1.0 + distance).square().reciprocal()
+
+    def extra_repr(self) -> str:
+        learned = isinstance(self.log_excess, nn.Parameter)
+        return f"D={self.operating_point.shape[0]}, learn_lambda={learned}"
+
+
+class LyapunovRelevance(nn.Module):
+    r"""Relevance :math:`r = (1 + \tilde V / (\lambda \rho))^{-2}` with the LQR's Lyapunov
+    function, written smoothly on the observation manifold, as the distance.
+
+    :math:`\tilde V = y^\top P y + \sum_{s \text{ angle}} P_{ss} (1 - \cos\delta_s)^2`, :math:`y`
+    the plain deviations and, for angles, :math:`\sin\delta_s`; see the module docstring for the
+    formula and why. Shapes: observation (..., D) -> relevance (..., 1).
+
+    Parameters
+    ----------
+    obs_layout : sequence of (kind, state_index)
+        ``System.observation.to_list()``.
+    operating_point : array-like, shape (D,)
+        :math:`a` in observation coordinates (an angle's :math:`(\cos a_s, \sin a_s)` on the
+        unit circle).
+    P : array-like, shape (S, S)
+        Symmetric positive definite Lyapunov matrix of the LQR at the hybrid's period.
+    rho : float
+        The LQR's proved level (> 0).
+    lambda_init : float
+        Initial scale :math:`\lambda > 0` (one number).
+    learn_lambda : bool
+        ``log_lambda`` (a scalar) is an ``nn.Parameter`` if True, else a buffer.
+    dtype : torch.dtype
+    """
+
+    operating_point: Tensor
+    lyapunov_matrix: Tensor
+    rho: Tensor
+    log_lambda: Tensor
+
+    def __init__(
+        self,
+        obs_layout: Sequence[Any],
+        operating_point: object,
+        P: object,
+        rho: float,
+        lambda_init: float = 1.0,
+        learn_lambda: bool = True,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        super().__init__()
+        if not isinstance(learn_lambda, bool):
+            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        matrix = lyapunov_matrix(P)
+        point = as_float_tensor(operating_point, "operating_point", torch.float64)
+        obs_map = as_observation_map(obs_layout, matrix.shape[0])
+        self.plan = _layout_plan(obs_map, matrix.shape[0])
+        check_shape(point, "operating_point", (obs_map.obs_dim,), "(D,) from obs_layout")
+        check_finite(point, "operating_point")
+        for kind, _, column, sin_column in self.plan:
+            radius = float(point[column] ** 2 + point[sin_column] ** 2) if kind == "angle" else 1.0
+            if abs(radius - 1.0) > UNIT_CIRCLE_ATOL:
+                raise ValueError(
+                    f"operating_point: expected (cos a, sin a) on the unit circle in columns "
+                    f"{column}, {sin_column}, found cos^2 + sin^2 = {radius!r}"
+                )
+        log_lambda = torch.tensor(
+            math.log(_positive_number(lambda_init, "lambda_init")), dtype=torch.float64
+        )
+        self.register_buffer("operating_point", point.to(dtype))
+        self.register_buffer("lyapunov_matrix", matrix.to(dtype))
+        self.register_buffer("rho", torch.tensor(_positive_number(rho, "rho"), dtype=dtype))
+        if learn_lambda:
+            self.log_lambda = nn.Parameter(log_lambda.to(dtype))
+        else:
+            self.register_buffer("log_lambda", log_lambda.to(dtype))
+
+    @property
+    def lambda_(self) -> Tensor:
+        r""":math:`\lambda = \exp(\text{log\_lambda})` (scalar tensor)."""
+        return torch.exp(self.log_lambda)
+
+    def lyapunov(self, x: Tensor) -> Tensor:
+        r""":math:`\tilde V(x)` of observations (..., D) -> (..., 1) (see the module docstring)."""
+        check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
+        deviation = x - self.operating_point
+        entries, extra = [], []
+        for kind, index, column, sin_column in self.plan:
+            if kind == "plain":
+                entries.append(deviation[..., column])
+                continue
+            d_cos, d_sin = deviation[..., column], deviation[..., sin_column]
+            cos_a, sin_a = self.operating_point[column], self.operating_point[sin_column]
+            entries.append(d_sin * cos_a - d_cos * sin_a)  # sin(delta)
+            one_minus_cos = 0.5 * (d_cos.square() + d_sin.square())
+            extra.append(self.lyapunov_matrix[index, index] * one_minus_cos.square())
+        y = torch.stack(entries, dim=-1)
+        value = ((y @ self.lyapunov_matrix) * y).sum(dim=-1)
+        for term in extra:
+            value = value + term
+        return value.unsqueeze(-1)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Relevance (..., 1) of observations ``x`` (..., D)."""
+        distance = self.lyapunov(x) / (self.lambda_ * self.rho)
+        return (1.0 + distance).square().reciprocal()
+
+    def extra_repr(self) -> str:
+        learned = isinstance(self.log_lambda, nn.Parameter)
+        return f"state_dim={len(self.plan)}, rho={float(self.rho):.6g}, learn_lambda={learned}"

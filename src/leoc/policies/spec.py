@@ -9,7 +9,9 @@ Three pieces, in the order a run uses them:
    :math:`G(o) = W o + b` in physical units, the operating point :math:`a` in observation
    coordinates and the relevance design's own data (for the ROA relevance: the observation
    layout, the operating state, the Lyapunov matrix :math:`P` and the flat top's level
-   :math:`\rho_{in}` from the LQR's certificate). Plain numbers, so a learner that rebuilds its
+   :math:`\rho_{in}` from the LQR's certificate; for the Lyapunov relevance: the layout,
+   :math:`P` and the proved level :math:`\rho`; for the paper relevance with ``r_min``: the
+   floor on :math:`\Lambda`). Plain numbers, so a learner that rebuilds its
    networks from saved keywords (Stable-Baselines3) rebuilds the same hybrid without the system.
    :func:`hybrid_design` resolves it from a system, an LQR design and a spec.
 3. :func:`build_hybrid`: the :class:`~leoc.policies.HybridPolicy` of a spec, a design and a
@@ -17,8 +19,10 @@ Three pieces, in the order a run uses them:
    DDPG/TD3 and SAC all build their hybrids here.
 
 A relevance design is one class with a ``name`` in :data:`RELEVANCE_DESIGNS` (``paper``: the
-paper's :math:`r = (1 + d)^{-2}`; ``roa``: exactly 1 on the LQR's certified region of
-attraction): it checks the spec fields it reads, resolves its data from the plant
+paper's :math:`r = (1 + d)^{-2}`, with ``r_min`` its :math:`\Lambda` floored so that
+:math:`r \ge r_{min}` on the LQR's proved region; ``roa``: exactly 1 on the LQR's certified
+region of attraction; ``lyapunov``: :math:`(1 + d)^{-2}` with the LQR's Lyapunov function as
+:math:`d`): it checks the spec fields it reads, resolves its data from the plant
 (:meth:`RelevanceDesign.resolve`) and builds its relevance (:meth:`RelevanceDesign.build`).
 Adding a design is one such class, one entry in :data:`RELEVANCE_DESIGNS` and, when it has a
 parameter of its own, one :class:`HybridSpec` field.
@@ -40,14 +44,18 @@ from .linear import LinearController
 from .relevance import (
     DEFAULT_ROA_WIDTH,
     RELEVANCE_PARAMETRISATIONS,
+    FlooredRelevance,
+    LyapunovRelevance,
     PrecisionRelevance,
     ROARelevance,
+    relevance_floor,
 )
 
 __all__ = [
     "RELEVANCE_DESIGNS",
     "HybridDesign",
     "HybridSpec",
+    "LyapunovRelevanceDesign",
     "PaperRelevanceDesign",
     "ROARelevanceDesign",
     "RelevanceDesign",
@@ -80,16 +88,22 @@ class HybridSpec:
     ----------
     relevance : str
         Name of the relevance design in :data:`RELEVANCE_DESIGNS`: ``"paper"`` (default,
-        :math:`r = (1 + d)^{-2}`, Zhang & Capel eq. 5) or ``"roa"`` (exactly 1 on the LQR's
-        certified region of attraction, :class:`~leoc.policies.ROARelevance`).
+        :math:`r = (1 + d)^{-2}`, Zhang & Capel eq. 5), ``"roa"`` (exactly 1 on the LQR's
+        certified region of attraction, :class:`~leoc.policies.ROARelevance`) or
+        ``"lyapunov"`` (:math:`r = (1 + \tilde V / (\lambda \rho))^{-2}`, the LQR's Lyapunov
+        function as the distance, :class:`~leoc.policies.LyapunovRelevance`).
     relevance_parametrisation : {"log_lambda", "precision"}
         How the paper's relevance holds its weights: :math:`\lambda = e^{\ell}` (positive,
         default) or the precision :math:`S = \Lambda^{-1}` itself, unconstrained
         (:class:`~leoc.policies.PrecisionRelevance`, nrjc/LEOC's DDPG actor).
     lambda_init : float or tuple of float
-        Initial diagonal of :math:`\Lambda` (> 0; the paper: 1, the identity).
+        Initial diagonal of :math:`\Lambda` (> 0; the paper: 1, the identity); with ``r_min``
+        raised to twice the floor where below it. Lyapunov relevance: the initial scale
+        :math:`\lambda` of :math:`\tilde V / (\lambda \rho)`, one number (1: :math:`d = 1`
+        where :math:`\tilde V = \rho`, near the proved set's boundary).
     learn_lambda : bool
-        Whether training changes :math:`\Lambda` (or :math:`S`).
+        Whether training changes :math:`\Lambda` (or :math:`S`, or the Lyapunov relevance's
+        :math:`\lambda`).
     rho_in_fraction : float in (0, 1]
         ROA relevance: the flat top's level :math:`\rho_{in}` as a fraction of the certified
         :math:`\rho`.
@@ -100,7 +114,9 @@ class HybridSpec:
     r_min : float in (0, 1), optional
         Paper relevance (``log_lambda``): a floor on :math:`\Lambda` such that
         :math:`r \ge r_{min}` on the LQR's proved region of attraction :math:`\{V \le \rho\}`
-        (:class:`~leoc.policies.FlooredRelevance`); None (default): no floor.
+        (:class:`~leoc.policies.FlooredRelevance`, :func:`~leoc.policies.relevance_floor`);
+        None (default): no floor. Not with the ``precision`` parametrisation (no floor on an
+        unconstrained :math:`S`) nor the Lyapunov relevance; the ROA relevance ignores it.
     relevance_lr_scale : float
         The relevance's parameters train in their own optimiser group, at the actor's learning
         rate times this (> 0; default 1: one group, as before). Stable-Baselines3 learners only.
@@ -320,10 +336,27 @@ class RelevanceDesign:
         raise NotImplementedError
 
 
+def _matching_certificate(lqr_design: Any, certificate: Any) -> Any:
+    """The proved certificate of ``certificate()``, checked to be for ``lqr_design``'s
+    :math:`P` at its control period."""
+    proved = certificate()
+    if proved.action_repeat != lqr_design.action_repeat or not np.array_equal(
+        proved.P, lqr_design.P
+    ):
+        raise ValueError(
+            f"certificate: expected one for the design's P at action_repeat="
+            f"{lqr_design.action_repeat}, found action_repeat={proved.action_repeat} and a "
+            "different P"
+        )
+    return proved
+
+
 class PaperRelevanceDesign(RelevanceDesign):
     r"""The paper's :math:`r = (1 + d)^{-2}`, :math:`d = (x - a)^\top \Lambda^{-1} (x - a)`,
     with :math:`\Lambda` held as :math:`\log\lambda` (on the policy itself) or as the precision
-    :math:`S = \Lambda^{-1}` (:class:`~leoc.policies.PrecisionRelevance`)."""
+    :math:`S = \Lambda^{-1}` (:class:`~leoc.policies.PrecisionRelevance`); with ``r_min``,
+    :math:`\Lambda` above the floor of :func:`~leoc.policies.relevance_floor` on the LQR's proved
+    set (:class:`~leoc.policies.FlooredRelevance`)."""
 
     name: ClassVar[str] = "paper"
 
@@ -333,10 +366,39 @@ class PaperRelevanceDesign(RelevanceDesign):
                 f"relevance_parametrisation: expected one of {RELEVANCE_PARAMETRISATIONS}, "
                 f"found {spec.relevance_parametrisation!r}"
             )
+        if spec.r_min is not None and spec.relevance_parametrisation == "precision":
+            raise ValueError(
+                f"r_min: expected None with relevance_parametrisation='precision' (an "
+                f"unconstrained S has no floor), found {spec.r_min!r}"
+            )
+
+    def resolve(
+        self, spec: HybridSpec, system: Any, lqr_design: Any, certificate: Any
+    ) -> dict[str, Any]:
+        if spec.r_min is None:
+            return {}
+        proved = _matching_certificate(lqr_design, certificate)
+        if not proved.certified:
+            raise ValueError(
+                f"r_min: expected an LQR with a certified region of attraction to floor Lambda "
+                f"on, found none for {system.name} (rho = {proved.rho!r}); drop r_min"
+            )
+        layout = system.observation.to_list()
+        floor = relevance_floor(layout, proved.P, proved.rho, spec.r_min)
+        return {"lambda_floor": floor.tolist(), "rho": float(proved.rho), "r_min": spec.r_min}
 
     def build(
         self, spec: HybridSpec, data: Mapping[str, Any], operating_obs: np.ndarray, dtype: Any
     ) -> dict[str, Any]:
+        if "lambda_floor" in data:
+            floored = FlooredRelevance(
+                operating_obs,
+                data["lambda_floor"],
+                lambda_init=spec.lambda_init,
+                learn_lambda=spec.learn_lambda,
+                dtype=dtype,
+            )
+            return {"relevance": floored}
         if spec.relevance_parametrisation == "precision":
             precision = PrecisionRelevance(
                 operating_obs,
@@ -366,15 +428,7 @@ class ROARelevanceDesign(RelevanceDesign):
     def resolve(
         self, spec: HybridSpec, system: Any, lqr_design: Any, certificate: Any
     ) -> dict[str, Any]:
-        proved = certificate()
-        if proved.action_repeat != lqr_design.action_repeat or not np.array_equal(
-            proved.P, lqr_design.P
-        ):
-            raise ValueError(
-                f"certificate: expected one for the design's P at action_repeat="
-                f"{lqr_design.action_repeat}, found action_repeat={proved.action_repeat} and a "
-                "different P"
-            )
+        proved = _matching_certificate(lqr_design, certificate)
         if not proved.certified:
             raise ValueError(
                 f"relevance='roa': the LQR of {system.name} has no certified region of attraction "
@@ -402,8 +456,60 @@ class ROARelevanceDesign(RelevanceDesign):
         return {"relevance": relevance}
 
 
+class LyapunovRelevanceDesign(RelevanceDesign):
+    r""":math:`r = (1 + \tilde V / (\lambda \rho))^{-2}`: the LQR's Lyapunov function, written
+    smoothly on the observation manifold, as the distance, scaled by its proved level
+    :math:`\rho` and one learnable :math:`\lambda` (:class:`~leoc.policies.LyapunovRelevance`)."""
+
+    name: ClassVar[str] = "lyapunov"
+
+    def check(self, spec: HybridSpec) -> None:
+        if spec.relevance != self.name:
+            return
+        if isinstance(spec.lambda_init, tuple):
+            raise ValueError(
+                f"lambda_init: expected one positive number with relevance='lyapunov' (its "
+                f"lambda is a scalar), found {spec.lambda_init!r}"
+            )
+        if spec.r_min is not None:
+            raise ValueError(
+                f"r_min: expected None with relevance='lyapunov' (the floor is the paper "
+                f"relevance's), found {spec.r_min!r}"
+            )
+
+    def resolve(
+        self, spec: HybridSpec, system: Any, lqr_design: Any, certificate: Any
+    ) -> dict[str, Any]:
+        proved = _matching_certificate(lqr_design, certificate)
+        if not proved.certified:
+            raise ValueError(
+                f"relevance='lyapunov': the LQR of {system.name} has no certified region of "
+                f"attraction (rho = {proved.rho!r}) to scale V by; use relevance='paper'"
+            )
+        return {
+            "obs_layout": system.observation.to_list(),
+            "lyapunov_matrix": np.asarray(proved.P, dtype=np.float64).tolist(),
+            "rho": float(proved.rho),
+        }
+
+    def build(
+        self, spec: HybridSpec, data: Mapping[str, Any], operating_obs: np.ndarray, dtype: Any
+    ) -> dict[str, Any]:
+        relevance = LyapunovRelevance(
+            [tuple(entry) for entry in data["obs_layout"]],
+            operating_obs,
+            data["lyapunov_matrix"],
+            data["rho"],
+            lambda_init=spec.lambda_init,  # type: ignore[arg-type]  # a scalar: check()
+            learn_lambda=spec.learn_lambda,
+            dtype=dtype,
+        )
+        return {"relevance": relevance}
+
+
 RELEVANCE_DESIGNS: dict[str, RelevanceDesign] = {
-    design.name: design for design in (PaperRelevanceDesign(), ROARelevanceDesign())
+    design.name: design
+    for design in (PaperRelevanceDesign(), ROARelevanceDesign(), LyapunovRelevanceDesign())
 }
 """Every relevance design by name (``HybridSpec.relevance``)."""
 
