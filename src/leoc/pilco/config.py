@@ -191,12 +191,8 @@ class PilcoConfig:
         except TypeError as error:
             raise ValueError(f"step_rules: {error}") from error
         self.hybrid = as_hybrid_spec(self.hybrid)
-        if self.hybrid is not None and self.hybrid.relevance_parametrisation != "log_lambda":
-            raise ValueError(
-                "relevance_parametrisation: PILCO's hybrid holds the paper's relevance as "
-                f"log lambda; expected 'log_lambda', found "
-                f"{self.hybrid.relevance_parametrisation!r}"
-            )
+        if self.hybrid is not None:
+            _check_pilco_hybrid(self.hybrid)
         methods = typing.get_args(DesignMethod)
         if self.lqr_method not in methods:
             raise ValueError(f"lqr_method: expected one of {methods}, found {self.lqr_method!r}")
@@ -232,6 +228,32 @@ class PilcoConfig:
         data = legacy_hybrid_config(data)
         data["gp"] = GPSettings(**data["gp"])
         return cls(**data)
+
+
+def _check_pilco_hybrid(spec: HybridSpec) -> None:
+    """Refuse the :class:`~leoc.policies.HybridSpec` choices PILCO's hybrid does not implement
+    (ValueError naming the field): the precision parametrisation, a relevance learning-rate
+    scale (an SB3 optimiser group), the floor ``r_min`` and the Lyapunov relevance."""
+    if spec.relevance_parametrisation != "log_lambda":
+        raise ValueError(
+            "relevance_parametrisation: PILCO's hybrid holds the paper's relevance as "
+            f"log lambda; expected 'log_lambda', found {spec.relevance_parametrisation!r}"
+        )
+    if spec.relevance_lr_scale != 1:
+        raise ValueError(
+            "relevance_lr_scale: PILCO's L-BFGS optimises the controller's parameters as one "
+            f"vector (no optimiser groups); expected 1, found {spec.relevance_lr_scale!r}"
+        )
+    if spec.r_min is not None:
+        raise ValueError(
+            "r_min: PILCO's hybrid has no floor on its relevance's Lambda; expected None, "
+            f"found {spec.r_min!r}"
+        )
+    if spec.relevance == "lyapunov":
+        raise ValueError(
+            "relevance: PILCO's hybrid has the paper's or the ROA relevance; expected one of "
+            f"('paper', 'roa'), found {spec.relevance!r}"
+        )
 
 
 def _optional_floats(

@@ -74,6 +74,11 @@ own ``train``):
   of SB3's target-update opportunities (every update for DDPG, every ``policy_delay``-th for
   TD3); in between the Polyak coefficient is set to zero (``polyak`` keeps the nominal one).
 
+A hybrid's ``HybridSpec.relevance_lr_scale`` :math:`s` (DDPG, TD3 and SAC alike) puts the
+relevance's parameters (``log_lambda``, or the relevance module's) in a second group of the
+actor's Adam, which runs at the actor's rate times :math:`s` (the group key ``"lr_scale"``,
+applied after SB3 resets the rates on each ``train`` call); :math:`s = 1` is SB3's single group.
+
 Two further options follow nrjc/LEOC's TF-Agents DDPG (``DDPG/ddpg.py``, ``dao/trainer.py``);
 their defaults keep SB3's behaviour bit for bit:
 
@@ -124,6 +129,7 @@ __all__ = [
     "CRITIC_LOSSES",
     "HIDDEN_INITS",
     "HUBER_DELTA",
+    "LR_SCALE_KEY",
     "WARMUPS",
     "ActorRateAndWarmupMixin",
     "HybridActorMixin",
@@ -136,6 +142,9 @@ __all__ = [
     "hybrid_policy_kwargs",
     "initialise_mlp",
     "policy_of",
+    "relevance_param_groups",
+    "relevance_parameters",
+    "scale_group_rates",
 ]
 
 NORMALISED_LIMIT = 1.0  # SB3's off-policy actors act in [-1, 1]
@@ -143,6 +152,9 @@ ACTION_DTYPE = torch.float32  # SB3 actors and replay data are float32
 NO_TARGET_UPDATE = 0.0  # Polyak coefficient that leaves the targets unchanged
 FULL_PROGRESS = 1.0  # SB3's "progress remaining" at the start of training
 HUBER_DELTA = 1.0  # tf.compat.v1.losses.huber_loss's default delta (TF-Agents' DDPG)
+#: Key of an optimiser parameter group whose rate is SB3's times its value (the hybrid's
+#: relevance group, :func:`relevance_param_groups`).
+LR_SCALE_KEY = "lr_scale"
 
 
 def action_box(action_space: spaces.Box) -> tuple[np.ndarray, np.ndarray]:
@@ -604,6 +616,44 @@ def critic_loss_fn(name: str) -> Any:
     return F.mse_loss
 
 
+def relevance_parameters(hybrid: HybridPolicy) -> list[nn.Parameter]:
+    """The relevance's parameters: the paper relevance's ``log_lambda`` when it is learned
+    (a Parameter on the :class:`~leoc.policies.HybridPolicy` itself), else those of its
+    ``relevance_module`` (none for a frozen paper relevance)."""
+    if hybrid.relevance_module is not None:
+        return list(hybrid.relevance_module.parameters())
+    log_lambda = hybrid.log_lambda
+    return [log_lambda] if isinstance(log_lambda, nn.Parameter) else []
+
+
+def relevance_param_groups(actor: nn.Module, learning_rate: float) -> list[dict[str, Any]] | None:
+    """The hybrid actor's optimiser groups for its spec's ``relevance_lr_scale`` ``s``:
+    everything but the relevance (at ``learning_rate``), then the relevance's parameters (at
+    ``learning_rate * s``, the group key :data:`LR_SCALE_KEY` holding ``s``). None, SB3's single
+    group, when ``s == 1`` or the relevance has no parameters."""
+    scale = float(actor.hybrid_spec.relevance_lr_scale)  # type: ignore[union-attr]
+    own = relevance_parameters(actor.hybrid)  # type: ignore[arg-type]
+    if scale == 1.0 or not own:
+        return None
+    own_ids = {id(parameter) for parameter in own}
+    rest = [parameter for parameter in actor.parameters() if id(parameter) not in own_ids]
+    return [
+        {"params": rest},
+        {"params": own, "lr": learning_rate * scale, LR_SCALE_KEY: scale},
+    ]
+
+
+def scale_group_rates(optimizers: Sequence[torch.optim.Optimizer]) -> None:
+    """Multiply the learning rate of every parameter group that has :data:`LR_SCALE_KEY` by it
+    (once per optimiser, however often it is listed); to follow SB3's resetting every group to
+    one rate."""
+    unique = {id(optimizer): optimizer for optimizer in optimizers}
+    for optimizer in unique.values():
+        for group in optimizer.param_groups:
+            if LR_SCALE_KEY in group:
+                group["lr"] = group["lr"] * group[LR_SCALE_KEY]
+
+
 class ActorRateAndWarmupMixin:
     """``actor_learning_rate`` and ``warmup`` for any SB3 off-policy algorithm with an actor.
 
@@ -628,12 +678,17 @@ class ActorRateAndWarmupMixin:
     def _update_learning_rate(
         self, optimizers: list[torch.optim.Optimizer] | torch.optim.Optimizer
     ) -> None:
+        """SB3's (every group of ``optimizers`` at the schedule's rate), then the actor's own
+        rate (``actor_learning_rate``), then each group's ``lr_scale`` (the hybrid's relevance
+        group, :func:`relevance_param_groups`) applied to the rate just set."""
         super()._update_learning_rate(optimizers)  # type: ignore[misc]
-        if getattr(self, "actor_learning_rate", None) is None:
-            return
-        schedule = self.lr_schedule  # type: ignore[attr-defined]
-        ratio = schedule(self._current_progress_remaining) / schedule(FULL_PROGRESS)  # type: ignore[attr-defined]
-        update_learning_rate(self.actor.optimizer, self.actor_learning_rate * ratio)  # type: ignore[attr-defined,operator]
+        reset = list(optimizers) if isinstance(optimizers, list) else [optimizers]
+        if getattr(self, "actor_learning_rate", None) is not None:
+            schedule = self.lr_schedule  # type: ignore[attr-defined]
+            ratio = schedule(self._current_progress_remaining) / schedule(FULL_PROGRESS)  # type: ignore[attr-defined]
+            update_learning_rate(self.actor.optimizer, self.actor_learning_rate * ratio)  # type: ignore[attr-defined,operator]
+            reset.append(self.actor.optimizer)  # type: ignore[attr-defined]
+        scale_group_rates(reset)
 
     def _sample_action(
         self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
@@ -773,7 +828,14 @@ def policy_of(config: Any, env: Any, baseline: type, hybrid: type) -> tuple[type
 class HybridPolicyMixin:
     """What a hybrid SB3 policy adds to its algorithm's policy: its actor is
     ``hybrid_actor_class`` built with ``hybrid_kwargs`` (the hybrid's keywords, which SB3 saves
-    with the model). Mixed in before the policy class; the subclass sets both."""
+    with the model), and, for a spec with ``relevance_lr_scale != 1``, an actor optimiser with
+    the relevance in a group of its own (:func:`relevance_param_groups`). Mixed in before the
+    policy class; the subclass sets both.
+
+    SB3 sets every group of an optimiser to one rate on each ``train`` call; leoc's learners
+    (:class:`ActorRateAndWarmupMixin`: :class:`~leoc.sb3.LeocDDPG`, :class:`~leoc.sb3.LeocTD3`,
+    :class:`~leoc.sb3.LeocSAC`) then scale the relevance's group. Under SB3's own ``DDPG``,
+    ``TD3`` or ``SAC`` the group runs at the actor's rate from the first update on."""
 
     hybrid_actor_class: type
     hybrid_kwargs: dict[str, Any]
@@ -783,6 +845,19 @@ class HybridPolicyMixin:
     def _new_actor(self, features_extractor: nn.Module | None = None) -> nn.Module:
         actor_kwargs = self._update_features_extractor(self.actor_kwargs, features_extractor)  # type: ignore[attr-defined]
         return self.hybrid_actor_class(**actor_kwargs, **self.hybrid_kwargs).to(self.device)
+
+    def _build(self, lr_schedule: Any) -> None:
+        """SB3's networks and optimisers; then, for a spec with ``relevance_lr_scale != 1``,
+        the actor's optimiser rebuilt with the relevance's parameters in a group of their own
+        (:func:`relevance_param_groups`). Scale 1 leaves SB3's optimiser as it is."""
+        super()._build(lr_schedule)  # type: ignore[misc]
+        groups = relevance_param_groups(self.actor, lr_schedule(FULL_PROGRESS))  # type: ignore[attr-defined]
+        if groups is not None:
+            self.actor.optimizer = self.optimizer_class(  # type: ignore[attr-defined]
+                groups,
+                lr=lr_schedule(FULL_PROGRESS),
+                **self.optimizer_kwargs,  # type: ignore[attr-defined]
+            )
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()  # type: ignore[misc]
