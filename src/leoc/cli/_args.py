@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from leoc.names import BUILTIN_SYSTEM_NAMES
+from leoc.names import BUILTIN_SYSTEM_NAMES, RELEVANCE_NAMES
 
 SYSTEM_HELP = (
     f"system name: {', '.join(BUILTIN_SYSTEM_NAMES)}, or a system registered by a module "
@@ -83,3 +83,34 @@ def system_or_run_dir(text: str) -> str | Path:
         f"invalid choice: {text!r} (expected a run folder or one of "
         f"{', '.join(registered_names())})"
     )
+
+
+def registered_relevance_names() -> tuple[str, ...]:
+    """Every relevance design's name (``leoc.policies.RELEVANCE_DESIGNS``; imports torch: only
+    when needed)."""
+    from leoc.policies.spec import RELEVANCE_DESIGNS
+
+    return tuple(RELEVANCE_DESIGNS)
+
+
+def relevance_name(text: str) -> str:
+    """argparse type: a relevance design's name; the names of :data:`leoc.names.RELEVANCE_NAMES`
+    resolve without importing torch, others look ``leoc.policies.RELEVANCE_DESIGNS`` up (so a
+    design added there is a choice at once)."""
+    if text in RELEVANCE_NAMES or text in registered_relevance_names():
+        return text
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (expected one of {', '.join(registered_relevance_names())})"
+    )
+
+
+def numbers(text: str) -> float | tuple[float, ...]:
+    """argparse type: one number, or several separated by commas (a tuple); their range is
+    checked by whatever takes them (``HybridSpec``)."""
+    try:
+        values = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a number or comma-separated numbers, found {text!r}"
+        ) from None
+    return values[0] if len(values) == 1 else values

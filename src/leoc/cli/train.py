@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 from typing import Any
 
-from leoc.cli._args import SYSTEM_HELP, non_negative_int, positive_int, system_name
+from leoc.cli._args import (
+    SYSTEM_HELP,
+    non_negative_int,
+    numbers,
+    positive_int,
+    relevance_name,
+    system_name,
+)
 from leoc.names import (
     LEARNER_NAMES,
     PROFILE_NAMES,
@@ -18,6 +26,22 @@ from leoc.names import (
 ALGO_CHOICES = LEARNER_NAMES
 MODEL_FREE_ALGOS = ("ddpg", "td3", "sac")  # leoc.sb3.config.ALGOS, without importing SB3
 DEFAULT_RUNS_DIR = Path("runs")
+RELEVANCE_PARAMETRISATIONS = ("log_lambda", "precision")
+"""``leoc.policies.relevance.RELEVANCE_PARAMETRISATIONS`` without importing torch (the tests
+check that they agree)."""
+HYBRID_FLAGS = {
+    "relevance": "--relevance",
+    "relevance_parametrisation": "--relevance-parametrisation",
+    "lambda_init": "--lambda-init",
+    "learn_lambda": "--freeze-lambda",
+    "rho_in_fraction": "--rho-in-fraction",
+    "width_init": "--width-init",
+    "learn_width": "--freeze-width",
+    "r_min": "--r-min",
+    "relevance_lr_scale": "--relevance-lr-scale",
+}
+"""Each :class:`~leoc.policies.HybridSpec` field and the ``leoc train`` flag that sets it (a
+``--freeze-X`` flag sets ``learn_X`` to False); only with ``--hybrid``."""
 
 
 DESCRIPTION = (
@@ -40,12 +64,7 @@ def add_parser(commands: Any) -> None:
     train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
     train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
-    train.add_argument(
-        "--relevance",
-        choices=RELEVANCE_NAMES,
-        help="the hybrid's relevance: 'paper', r(x) = (1 + d)^-2 (default), or 'roa', exactly 1 "
-        "on the LQR's proved region of attraction; only with --hybrid",
-    )
+    add_relevance_arguments(train)
     train.add_argument(
         "--variant",
         choices=VARIANT_NAMES,
@@ -86,6 +105,126 @@ def add_parser(commands: Any) -> None:
     train.set_defaults(run=run)
 
 
+def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
+    """Add ``--relevance`` and the flags of its parameters (:data:`HYBRID_FLAGS`) to
+    ``train``."""
+    relevance = train.add_argument_group(
+        "relevance (only with --hybrid; each flag sets the HybridSpec field of its name, "
+        "checked by HybridSpec; default: the variant's setting, else HybridSpec's default)"
+    )
+    relevance.add_argument(
+        "--relevance",
+        type=relevance_name,
+        metavar="{" + ",".join(RELEVANCE_NAMES) + "}",
+        help="the relevance design: 'paper', r(x) = (1 + d)^-2 (default), 'roa', exactly 1 on the "
+        "LQR's proved region of attraction, 'lyapunov', the paper's form with the LQR's V as d, "
+        "or another of leoc.policies.RELEVANCE_DESIGNS",
+    )
+    relevance.add_argument(
+        "--lambda-init",
+        type=numbers,
+        metavar="FLOAT[,FLOAT...]",
+        help="paper relevance: initial diagonal of Lambda (> 0), one number or one per "
+        "observation entry; lyapunov relevance: its lambda, one number (default 1)",
+    )
+    relevance.add_argument(
+        "--freeze-lambda",
+        action="store_true",
+        default=None,
+        help="paper and lyapunov relevances: training keeps Lambda at --lambda-init "
+        "(learn_lambda=False)",
+    )
+    relevance.add_argument(
+        "--relevance-parametrisation",
+        choices=RELEVANCE_PARAMETRISATIONS,
+        help="paper relevance: Lambda held as log lambda, or as the precision S = Lambda^-1 "
+        "(unconstrained, nrjc/LEOC's DDPG actor); PILCO: log_lambda only",
+    )
+    relevance.add_argument(
+        "--r-min",
+        type=float,
+        metavar="FLOAT",
+        help="paper relevance: floor Lambda so that r is at least this on the LQR's proved "
+        "region of attraction, in (0, 1) (default: no floor)",
+    )
+    relevance.add_argument(
+        "--relevance-lr-scale",
+        type=float,
+        metavar="FLOAT",
+        help="the relevance's parameters train at the actor's learning rate times this (> 0, "
+        "default 1); DDPG/TD3/SAC",
+    )
+    add_roa_relevance_arguments(relevance)
+
+
+def add_roa_relevance_arguments(relevance: Any) -> None:
+    """Add the ROA relevance's flags to the argument group ``relevance``."""
+    relevance.add_argument(
+        "--rho-in-fraction",
+        type=float,
+        metavar="FLOAT",
+        help="ROA relevance: the flat top's level as a fraction of the certified rho, in (0, 1] "
+        "(default 1)",
+    )
+    relevance.add_argument(
+        "--width-init",
+        type=float,
+        metavar="FLOAT",
+        help="ROA relevance: initial width (> 0) of the band over which r falls to 0 (default 1)",
+    )
+    relevance.add_argument(
+        "--freeze-width",
+        action="store_true",
+        default=None,
+        help="ROA relevance: training keeps the band width at --width-init (learn_width=False)",
+    )
+
+
+def hybrid_changes(args: argparse.Namespace) -> dict[str, Any]:
+    """The :class:`~leoc.policies.HybridSpec` fields the relevance flags given set (a flag left
+    out sets nothing)."""
+    changes = {}
+    for field, flag in HYBRID_FLAGS.items():
+        value = getattr(args, flag.lstrip("-").replace("-", "_"), None)
+        if value is not None:
+            changes[field] = not value if flag.startswith("--freeze-") else value
+    return changes
+
+
+def with_flag(message: str, changes: dict[str, Any]) -> str:
+    """``message`` (a ``ValueError``'s, ``"FIELD: ..."`` or ``"FIELD must ..."``) led by the
+    flag that set FIELD, when a flag did (``--r-min: r_min: expected ...``)."""
+    field = re.split(r"\W", message, maxsplit=1)[0]
+    return f"{HYBRID_FLAGS[field]}: {message}" if field in changes else message
+
+
+def hybrid_of(args: argparse.Namespace) -> Any:
+    """The :class:`~leoc.policies.HybridSpec` of ``--hybrid`` and the relevance flags (None
+    without ``--hybrid``).
+
+    Raises
+    ------
+    ValueError
+        A relevance flag without ``--hybrid``, or a value ``HybridSpec`` refuses, naming the
+        flag.
+    """
+    changes = hybrid_changes(args)
+    if not args.hybrid:
+        if changes:
+            flags = ", ".join(HYBRID_FLAGS[field] for field in changes)
+            raise ValueError(
+                f"{flags}: only with --hybrid (a baseline has no relevance); add --hybrid or "
+                f"leave {flags} out"
+            )
+        return None
+    from leoc.policies.spec import HybridSpec
+
+    try:
+        return HybridSpec(**changes)
+    except ValueError as error:
+        raise ValueError(with_flag(str(error), changes)) from None
+
+
 def check_budget_arguments(args: argparse.Namespace) -> None:
     """``--iterations`` is PILCO's budget and ``--steps`` the model-free learners'; giving one
     to the other kind of learner is an error (ValueError naming the argument), not a silent
@@ -112,11 +251,10 @@ def default_run_dir(args: argparse.Namespace) -> Path:
 
 def controller_of(args: argparse.Namespace) -> Any:
     """The :class:`~leoc.learners.ControllerSpec` ``args`` describe (``--algo``, ``--hybrid``,
-    ``--relevance``)."""
+    ``--relevance`` and its parameters' flags: :func:`hybrid_of`)."""
     from leoc.learners import ControllerSpec
 
-    relevance = (args.relevance or "paper") if args.hybrid else None
-    return ControllerSpec.from_name(ControllerName(args.algo, relevance).name)
+    return ControllerSpec(args.algo, hybrid_of(args))
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -129,7 +267,44 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     profile = get_profile(args.profile) if args.profile else Profile("default", (), {}, {})
     budget = args.iterations if args.algo == "pilco" else args.steps
     variant = get_variant(args.variant)
-    return profile.training_settings(variant, controller_of(args), args.system, budget)
+    settings = profile.training_settings(variant, controller_of(args), args.system, budget)
+    # the flags given win over the variant's and the profile's refinements of the hybrid
+    settings.update({k: v for k, v in hybrid_changes(args).items() if k != "relevance"})
+    return settings
+
+
+def check_run_folder_hybrid(run_dir: Path, hybrid: Any, overwrite: bool) -> None:
+    """Refuse, naming the fields that differ, a run folder whose saved run is of another hybrid
+    (``hybrid``: the run's final :class:`~leoc.policies.HybridSpec` or None); the learner's own
+    check would name the whole spec dicts. A folder without ``config.json``, or ``overwrite``:
+    nothing to check."""
+    import json
+
+    from leoc.policies.spec import legacy_hybrid_config
+
+    path = run_dir / "config.json"
+    if overwrite or not path.is_file():
+        return
+    try:
+        saved = legacy_hybrid_config(json.loads(path.read_text())).get("hybrid")
+    except (ValueError, TypeError, AttributeError):
+        return  # not a learner's config: the learner's own check speaks
+    here = None if hybrid is None else hybrid.to_dict()
+    if saved == here:
+        return
+    if saved is None or here is None:
+        kinds = ("a baseline", "a hybrid") if saved is None else ("a hybrid", "a baseline")
+        shown = f"{kinds[0]} there, {kinds[1]} here"
+    else:
+        shown = "; ".join(
+            f"{HYBRID_FLAGS.get(k, k)} ({k}): {saved.get(k)!r} there, {here.get(k)!r} here"
+            for k in sorted(set(saved) | set(here))
+            if saved.get(k) != here.get(k)
+        )
+    raise ValueError(
+        f"run folder: {str(run_dir)!r} holds a run of another hybrid ({shown}); pass "
+        "--overwrite to replace it, or choose another folder (--out)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -137,26 +312,30 @@ def run(args: argparse.Namespace) -> int:
     run folder."""
     from leoc.experiments.variants import get_variant
     from leoc.learners import get_learner
+    from leoc.policies.spec import with_hybrid_overrides
 
     check_budget_arguments(args)
-    if args.relevance is not None and not args.hybrid:
-        raise ValueError(
-            f"--relevance: only with --hybrid (a baseline has no relevance), found --relevance "
-            f"{args.relevance} without it"
-        )
+    controller = controller_of(args)  # checks the relevance flags first
     run_dir = args.out or default_run_dir(args)
     settings = run_settings(args)
-    controller = controller_of(args)
+    hybrid = with_hybrid_overrides(controller.hybrid, dict(settings))
+    check_run_folder_hybrid(run_dir, hybrid, args.overwrite)
     # the system, built once: the variant's, stepping under the rules the settings record
     system = get_variant(args.variant).system(args.system)
-    result = get_learner(args.algo).train(
-        system,
-        controller,
-        args.seed,
-        run_dir,
-        settings,
-        progress=not args.quiet,
-        overwrite=args.overwrite,
-    )
+    try:
+        result = get_learner(args.algo).train(
+            system,
+            controller,
+            args.seed,
+            run_dir,
+            settings,
+            progress=not args.quiet,
+            overwrite=args.overwrite,
+        )
+    except ValueError as error:  # a learner refusing a field: name the flag that set it
+        message = with_flag(str(error), hybrid_changes(args))
+        if message == str(error):
+            raise
+        raise ValueError(message) from error
     print(f"run folder: {result.run_dir}")
     return 0

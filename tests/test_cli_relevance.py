@@ -1,0 +1,189 @@
+"""``leoc train --hybrid --relevance ...`` and the relevance's parameters as flags: each flag
+sets its :class:`~leoc.policies.HybridSpec` field, the run folder records the spec, and the
+commands that load a run folder (``leoc simulate``, ``leoc roa``) build that hybrid."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+
+from leoc.cli import build_parser, main
+from leoc.cli.train import HYBRID_FLAGS, RELEVANCE_PARAMETRISATIONS, default_run_dir, hybrid_of
+from leoc.names import RELEVANCE_NAMES, parse_controller
+from leoc.policies import HybridPolicy
+from leoc.policies.spec import RELEVANCE_DESIGNS, HybridSpec
+
+SMOKE = ("--profile", "smoke", "--quiet")  # a few hundred steps, 32-unit networks
+
+
+def _train(*argv: str) -> int:
+    return main(["train", "pendulum", "--algo", "ddpg", *argv, *SMOKE])
+
+
+def _error_line(capsys) -> str:
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    return line
+
+
+def test_every_flag_sets_its_hybrid_spec_field() -> None:
+    """All the flags at once give the spec with each field set by its flag; every HybridSpec
+    field has a flag, and the parametrisations are the library's."""
+    from leoc.policies.relevance import RELEVANCE_PARAMETRISATIONS as LIBRARY
+
+    argv = [
+        "train", "pendulum", "--algo", "ddpg", "--hybrid", "--relevance", "roa",
+        "--lambda-init", "2,3,4", "--freeze-lambda", "--r-min", "0.5",
+        "--relevance-lr-scale", "0.1", "--rho-in-fraction", "0.25", "--width-init", "2",
+        "--freeze-width",
+    ]  # fmt: skip
+    expected = HybridSpec(
+        relevance="roa",
+        lambda_init=(2.0, 3.0, 4.0),
+        learn_lambda=False,
+        rho_in_fraction=0.25,
+        width_init=2.0,
+        learn_width=False,
+        r_min=0.5,
+        relevance_lr_scale=0.1,
+    )
+    assert hybrid_of(build_parser().parse_args(argv)) == expected
+    precision = [*argv[:5], "--relevance-parametrisation", "precision"]
+    assert hybrid_of(build_parser().parse_args(precision)).relevance_parametrisation == "precision"
+    assert set(HYBRID_FLAGS) == set(HybridSpec.field_names())
+    assert RELEVANCE_PARAMETRISATIONS == LIBRARY
+    # no flag: HybridSpec's defaults; no --hybrid: no hybrid
+    assert hybrid_of(build_parser().parse_args(argv[:5])) == HybridSpec()
+    assert hybrid_of(build_parser().parse_args(argv[:4])) is None
+
+
+def test_the_flags_win_over_the_variants_hybrid_settings() -> None:
+    """The authors' DDPG holds Lambda as a precision; --relevance-parametrisation log_lambda
+    under --variant authors trains the log-lambda hybrid (what the learner's config gets)."""
+    from leoc.cli.train import controller_of, run_settings
+    from leoc.policies.spec import with_hybrid_overrides
+
+    def trained_spec(*flags: str) -> HybridSpec:
+        argv = ["train", "pendulum", "--algo", "ddpg", "--hybrid", "--variant", "authors"]
+        args = build_parser().parse_args([*argv, *flags])
+        return with_hybrid_overrides(controller_of(args).hybrid, run_settings(args))
+
+    assert trained_spec().relevance_parametrisation == "precision"
+    chosen = trained_spec("--relevance-parametrisation", "log_lambda", "--lambda-init", "2")
+    assert (chosen.relevance_parametrisation, chosen.lambda_init) == ("log_lambda", 2.0)
+
+
+def test_every_relevance_design_is_a_choice_and_names_its_run_folder(monkeypatch) -> None:
+    """--relevance takes each design of RELEVANCE_DESIGNS (one added there too), and the
+    default run folder is named as leoc reproduce names the controller (ddpg_hybrid_roa)."""
+    from leoc.cli import _args
+
+    base = ["train", "pendulum", "--algo", "ddpg", "--hybrid", "--relevance"]
+    for name in (*RELEVANCE_NAMES, *RELEVANCE_DESIGNS):
+        folder = default_run_dir(build_parser().parse_args([*base, name]))
+        assert parse_controller(folder.parent.name).relevance == name
+        assert folder.parent.name == f"ddpg_{'hybrid' if name == 'paper' else 'hybrid_' + name}"
+    monkeypatch.setattr(_args, "registered_relevance_names", lambda: ("paper", "roa", "new"))
+    assert build_parser().parse_args([*base, "new"]).relevance == "new"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([*base, "nonsense"])
+
+
+def test_an_roa_hybrid_from_the_command_line(tmp_path, monkeypatch, capsys) -> None:
+    """`leoc train pendulum --algo ddpg --hybrid --relevance roa` trains an ROA hybrid into
+    runs/pendulum/ddpg_hybrid_roa/seed0: config.json records the spec, the loaded controller
+    holds an ROARelevance, and leoc simulate and leoc roa run on the folder."""
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.policies import ROARelevance
+
+    monkeypatch.chdir(tmp_path)
+    assert _train("--hybrid", "--relevance", "roa", "--rho-in-fraction", "0.5") == 0
+    run = tmp_path / "runs" / "pendulum" / "ddpg_hybrid_roa" / "seed0"
+    assert f"run folder: {run.relative_to(tmp_path)}" in capsys.readouterr().out
+    saved = json.loads((run / "config.json").read_text())["hybrid"]
+    assert saved == HybridSpec(relevance="roa", rho_in_fraction=0.5).to_dict()
+    controller = load_trained_controller(run)
+    assert any(isinstance(module, ROARelevance) for module in controller.modules())
+    assert main(["simulate", str(run), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["controller"] == str(run)
+    roa = ["roa", "--controller", str(run), "--samples", "500", "--starts", "4", "--json"]
+    assert main(roa) == 0
+    basin = json.loads(capsys.readouterr().out)["basins"][run.name]
+    assert basin["flat_top_same_P"] is True
+
+
+def test_lambda_init_and_freeze_lambda_reach_the_loaded_policy(tmp_path, capsys) -> None:
+    """--lambda-init 3 --freeze-lambda: the loaded policy's Lambda is exactly 3 after training;
+    the same command again returns the finished run, another spec in the folder is refused
+    naming the flag that differs."""
+    from leoc.experiments.controllers import load_trained_controller
+
+    run = tmp_path / "paper_lambda3"
+    command = ("--hybrid", "--lambda-init", "3", "--freeze-lambda", "--out", str(run))
+    assert _train(*command) == 0
+    saved = json.loads((run / "config.json").read_text())["hybrid"]
+    assert saved["lambda_init"] == 3.0 and saved["learn_lambda"] is False
+    controller = load_trained_controller(run)
+    (hybrid,) = {id(m): m for m in controller.modules() if isinstance(m, HybridPolicy)}.values()
+    assert torch.equal(hybrid.log_lambda, torch.full((3,), math.log(3.0), dtype=torch.float64))
+    assert "log_lambda" not in dict(hybrid.named_parameters())  # a buffer: frozen
+    assert _train(*command) == 0  # the same run: returned, not refused
+    capsys.readouterr()
+    assert _train(*command, "--r-min", "0.5") == 2
+    line = _error_line(capsys)
+    assert "--r-min (r_min): None there, 0.5 here" in line and "--overwrite" in line
+    assert _train("--hybrid", "--out", str(run)) == 2
+    line = _error_line(capsys)
+    assert "--lambda-init (lambda_init): 3.0 there, 1.0 here" in line
+    assert "--freeze-lambda (learn_lambda): False there, True here" in line
+
+
+@pytest.mark.parametrize(
+    "flag",
+    [
+        ["--relevance", "roa"],
+        ["--lambda-init", "3"],
+        ["--freeze-lambda"],
+        ["--relevance-parametrisation", "precision"],
+        ["--r-min", "0.5"],
+        ["--relevance-lr-scale", "0.1"],
+        ["--rho-in-fraction", "0.5"],
+        ["--width-init", "2"],
+        ["--freeze-width"],
+    ],
+)
+def test_a_relevance_flag_without_hybrid_is_an_error_naming_it(tmp_path, capsys, flag) -> None:
+    assert _train(*flag, "--out", str(tmp_path / "run")) == 2
+    line = _error_line(capsys)
+    assert line.startswith(f"leoc train: error: {flag[0]}: only with --hybrid"), line
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize(
+    ("flag", "field"),
+    [
+        (["--r-min", "1.5"], "r_min"),
+        (["--lambda-init", "1,0,1"], "lambda_init"),
+        (["--lambda-init", "1,2"], "lambda_init"),  # pendulum's observation has 3 entries
+        (["--relevance-lr-scale", "0"], "relevance_lr_scale"),
+        (["--relevance", "roa", "--rho-in-fraction", "2"], "rho_in_fraction"),
+        (["--relevance", "roa", "--width-init", "-1"], "width_init"),
+        (["--relevance", "lyapunov", "--lambda-init", "1,2,3"], "lambda_init"),  # a scalar
+    ],
+)
+def test_a_value_hybrid_spec_refuses_is_one_line_naming_it(tmp_path, capsys, flag, field):
+    assert _train("--hybrid", *flag, "--out", str(tmp_path / "run")) == 2
+    line = _error_line(capsys)
+    assert f"{flag[-2]}: {field}" in line, line
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_flag_pilco_cannot_honour_is_one_line_naming_it(tmp_path, capsys) -> None:
+    run = tmp_path / "pilco"
+    argv = ["train", "pendulum", "--algo", "pilco", "--hybrid", *SMOKE, "--out", str(run)]
+    assert main([*argv, "--relevance-parametrisation", "precision"]) == 2
+    line = _error_line(capsys)
+    assert "--relevance-parametrisation: relevance_parametrisation" in line and "PILCO" in line
+    assert not run.exists()
