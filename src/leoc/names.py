@@ -192,6 +192,7 @@ ABLATION_ALL_SETTINGS = (
     "relevance_lr_0.01",
     "relevance_floor_0.99",
     "relevance_floor_0.9",
+    "relevance_floor_0.5",
     "relevance_lyapunov",
 )
 """Every setting the ablation runs (``leoc.experiments.ablation.ALL_SETTINGS``, same order)."""

@@ -218,6 +218,7 @@ RELEVANCE_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         {"r_min": 0.99},
     ),
     "relevance_floor_0.9": ("Lambda floored: r >= 0.9 on the LQR's proved set", {"r_min": 0.9}),
+    "relevance_floor_0.5": ("Lambda floored: r >= 0.5 on the LQR's proved set", {"r_min": 0.5}),
     "relevance_lyapunov": (
         "distance = LQR's Lyapunov function V / (lambda rho), lambda learned",
         {"relevance": "lyapunov"},

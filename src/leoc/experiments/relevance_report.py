@@ -43,8 +43,11 @@ __all__ = [
 ]
 
 RELEVANCE_TABLE = "relevance.md"
+"""The report's markdown, in the ablation folder."""
 RELEVANCE_CSV = "relevance.csv"
+"""One row per cell (:data:`CSV_COLUMNS`)."""
 RELEVANCE_FIGURE = "relevance_tradeoff.png"
+"""The trade-off figure (``plot_relevance_tradeoff``)."""
 CSV_COLUMNS = (
     "system",
     "controller",

@@ -108,6 +108,10 @@ class PhysicalPolicy(nn.Module):
         return self.hybrid.relevance(x)
 
 
+#: Relevance modules whose one learned tensor (named here) is copied into a float64 rebuild.
+LEARNED_RELEVANCE = {"FlooredRelevance": "log_excess", "LyapunovRelevance": "log_lambda"}
+
+
 def _frozen_relevance64(actor: HybridActorMixin) -> dict[str, Any]:
     """Keywords of :class:`~leoc.policies.HybridPolicy` for a float64, frozen copy of the
     actor's learned relevance."""
@@ -120,6 +124,15 @@ def _frozen_relevance64(actor: HybridActorMixin) -> dict[str, Any]:
         copy64 = PrecisionRelevance(actor.operating_obs.detach().cpu(), 1.0, False, DTYPE)
         copy64.precision.copy_(module.precision.detach().cpu().to(DTYPE))
         return {"relevance": copy64}
+    learned = LEARNED_RELEVANCE.get(type(module).__name__)
+    if learned is not None:
+        # rebuilt in float64 from the design data (the floor, P, rho stay exact), frozen, with
+        # the learned parameter copied over
+        frozen = actor.hybrid_spec.replace(learn_lambda=False)
+        data = actor.hybrid_design.relevance_data
+        built = frozen.design.build(frozen, data, actor.operating_obs.cpu().numpy(), DTYPE)
+        getattr(built["relevance"], learned).copy_(getattr(module, learned).detach().cpu())
+        return built
     # Any other design is rebuilt in float64 from the actor's float64 design data (the ROA
     # relevance's P, rho_in) with its learned band width, frozen. float32 sigmoid can round w up
     # to w_max itself; the float64 rebuild needs w < w_max.
