@@ -1,7 +1,8 @@
 """The workflow matrix: every run leoc makes works with every command.
 
 For each learner (PILCO, DDPG, TD3, SAC) x controller kind (baseline, hybrid with the paper's
-relevance, hybrid with the ROA relevance) x system x variant (leoc's, the authors'), a tiny run
+relevance, hybrid with the ROA relevance, and for DDPG, TD3 and SAC hybrid with the Lyapunov
+relevance, which PILCO refuses in one line) x system x variant (leoc's, the authors'), a tiny run
 (``leoc train ... --profile smoke``: a few hundred steps or one PILCO iteration on a short
 horizon), then, on that run folder, ``leoc simulate RUN``, ``leoc roa --controller RUN`` and a
 rerun of the same ``leoc train`` command; and ``leoc reproduce`` on every controller of a system,
@@ -15,7 +16,8 @@ system and variant appears in some case); the slow suite runs the rest of the pr
 acrobot. The assertions are about values, not exit codes only: a run is simulated on the plant it
 was trained on (the variant whose rules it recorded), an ROA hybrid gives exactly its LQR's
 impulse response (r = 1 along it, by construction: a mismatched plant, period or LQR breaks
-it), a baseline does not, a rerun trains nothing and leaves the controller as it was, and
+it), a baseline does not, nor does a Lyapunov hybrid (r = 1 at the operating point only), a
+rerun trains nothing and leaves the controller as it was, and
 ``simulate`` of a reproduce run gives the response ``reproduce`` recorded.
 """
 
@@ -38,7 +40,12 @@ from leoc.names import CONTROLLERS, PAPER_SYSTEM_NAMES, RELEVANCE_NAMES, VARIANT
 from leoc.systems import StepRules
 
 LEARNERS = ("pilco", "ddpg", "td3", "sac")
-KINDS = ("baseline", "hybrid", "hybrid_roa")
+KINDS = ("baseline", "hybrid", "hybrid_roa", "hybrid_lyapunov")
+#: The learners of each kind: PILCO's config refuses the Lyapunov relevance (refused in one line,
+#: tested apart: test_pilco_refuses_the_lyapunov_relevance_in_one_line).
+KIND_LEARNERS = {kind: LEARNERS for kind in KINDS} | {"hybrid_lyapunov": ("ddpg", "td3", "sac")}
+#: The relevance design of each hybrid kind (``--relevance``).
+KIND_RELEVANCE = {"hybrid": "paper", "hybrid_roa": "roa", "hybrid_lyapunov": "lyapunov"}
 SYSTEMS = (*PAPER_SYSTEM_NAMES, "acrobot")
 #: Basin starts and sampled-estimate samples of the matrix's ``leoc roa`` (the proof itself is
 #: the same at any setting).
@@ -49,12 +56,14 @@ SAME_RESPONSE_TOL = 1e-9
 
 
 def _pairwise_cover() -> list[tuple[str, str, str, str]]:
-    """One case per (learner, kind), with the system and variant cycling so that every pair of
-    the four factors over the paper's systems appears (i + k runs over 0..5, which fixes a
-    distinct (system, variant) pair for each residue)."""
+    """One case per (learner, kind) the learner has (:data:`KIND_LEARNERS`), with the system
+    and variant cycling so that every pair of the four factors over the paper's systems appears
+    (i + k runs over 0..6, which fixes a distinct (system, variant) pair for each residue mod 6;
+    a kind without PILCO still has three consecutive i, so every system)."""
     return [
         (learner, kind, PAPER_SYSTEM_NAMES[(i + k) % 3], VARIANT_NAMES[(i + k) % 2])
         for (i, learner), (k, kind) in itertools.product(enumerate(LEARNERS), enumerate(KINDS))
+        if learner in KIND_LEARNERS[kind]
     ]
 
 
@@ -67,11 +76,12 @@ ACROBOT_CASES = [(learner, "hybrid", "acrobot", "leoc") for learner in LEARNERS]
     ("ddpg", "baseline", "acrobot", "authors"),
     ("ddpg", "hybrid", "acrobot", "authors"),
 ]
-SLOW_CASES = [
+PRODUCT = [
     case
     for case in itertools.product(LEARNERS, KINDS, PAPER_SYSTEM_NAMES, VARIANT_NAMES)
-    if case not in FAST_CASES
-] + ACROBOT_CASES
+    if case[0] in KIND_LEARNERS[case[1]]
+]
+SLOW_CASES = [case for case in PRODUCT if case not in FAST_CASES] + ACROBOT_CASES
 
 
 def _case_id(case: tuple[str, str, str, str]) -> str:
@@ -87,7 +97,7 @@ def _run(args: list[str], capsys) -> tuple[int, str, str]:
 def _train_args(learner: str, kind: str, system: str, variant: str, out: Path) -> list[str]:
     args = ["train", system, "--algo", learner, "--variant", variant, "--profile", "smoke"]
     if kind != "baseline":
-        args += ["--hybrid", "--relevance", "roa" if kind == "hybrid_roa" else "paper"]
+        args += ["--hybrid", "--relevance", KIND_RELEVANCE[kind]]
     return [*args, "--out", out, "--quiet"]
 
 
@@ -102,6 +112,25 @@ def _actions(run: Path, system: str) -> torch.Tensor:
     observations = plant.observe(torch.as_tensor(states, dtype=torch.float64))
     with torch.no_grad():
         return load_trained_controller(run, system=system)(observations)
+
+
+def _check_no_flat_top(run: Path, system: str) -> None:
+    """The run's relevance is the Lyapunov relevance as loaded: 1 at the operating point and
+    below 1 at every observation of :func:`_actions`'s batch off it (no set where r == 1)."""
+    from leoc.systems import make_system
+    from leoc.systems.rollout import relevance_function
+
+    plant = make_system(system)
+    relevance = relevance_function(load_trained_controller(run, system=system))
+    assert relevance is not None
+    generator = np.random.default_rng(0)
+    starts = np.stack([plant.sample_start(generator) for _ in range(16)])
+    operating = np.asarray(plant.operating_state, dtype=float)
+    states = np.concatenate([operating[None], 0.3 * starts + 0.7 * operating])
+    with torch.no_grad():
+        r = relevance(plant.observe(torch.as_tensor(states, dtype=torch.float64))).squeeze(-1)
+    assert abs(float(r[0]) - 1.0) <= 1e-12
+    assert torch.all(r[1:] < 1.0), r
 
 
 def _linear_response(run: Path, learner: str, variant: str, period: int) -> np.ndarray:
@@ -160,8 +189,11 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
     difference = np.max(np.abs(deviation - reference)) if same_length else np.inf
     if kind == "hybrid_roa":
         assert difference <= SAME_RESPONSE_TOL * max(1.0, np.max(np.abs(reference)))
-    elif kind == "baseline":
+    elif kind in ("baseline", "hybrid_lyapunov"):
+        # a Lyapunov hybrid has no flat top: r < 1 along the impulse, so H enters
         assert difference > SAME_RESPONSE_TOL
+    if kind == "hybrid_lyapunov":
+        _check_no_flat_top(run, system)
 
     # roa: the system read from the run, certified on the run's plant
     code, out, err = _run(["roa", "--controller", run, *ROA_ARGS], capsys)
@@ -201,12 +233,27 @@ def test_workflow_rest_of_the_product(case, tmp_path, capsys) -> None:
 def test_the_pairwise_cover_covers_every_pair() -> None:
     """Every pair of values of two factors appears in some fast case (so a defect that needs
     two choices together is met by the fast suite)."""
-    factors = (LEARNERS, KINDS, PAPER_SYSTEM_NAMES, VARIANT_NAMES)
     for a, b in itertools.combinations(range(4), 2):
         seen = {(case[a], case[b]) for case in FAST_CASES}
-        assert seen == set(itertools.product(factors[a], factors[b])), (a, b)
+        assert seen == {(case[a], case[b]) for case in PRODUCT}, (a, b)
     assert set(FAST_CASES).isdisjoint(SLOW_CASES)
-    assert len(set(FAST_CASES) | {c for c in SLOW_CASES if c[2] != "acrobot"}) == 72
+    # 4 learners x 3 kinds and the three SB3 learners' Lyapunov hybrids, x 3 systems x 2 variants
+    assert len(set(FAST_CASES) | {c for c in SLOW_CASES if c[2] != "acrobot"}) == 90
+    # the Lyapunov hybrids split as the ROA hybrids do: one fast case per learner, the rest slow
+    for kind in ("hybrid_roa", "hybrid_lyapunov"):
+        assert sorted(c[0] for c in FAST_CASES if c[1] == kind) == sorted(KIND_LEARNERS[kind])
+    assert all(c[:2] != ("pilco", "hybrid_lyapunov") for c in PRODUCT)
+
+
+def test_pilco_refuses_the_lyapunov_relevance_in_one_line(capsys, tmp_path) -> None:
+    """PILCO x the Lyapunov relevance is not a case of the matrix: its config refuses it, in
+    one line naming the relevance, before anything is written."""
+    run = tmp_path / "run"
+    train = _train_args("pilco", "hybrid_lyapunov", "pendulum", "leoc", run)
+    code, _, err = _run(train, capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "--relevance" in err and "'lyapunov'" in err and "PILCO" in err
+    assert not run.exists()
 
 
 def test_the_command_line_names_agree_with_the_library() -> None:

@@ -33,14 +33,19 @@ CONTROLLERS = (
     "ddpg_baseline",
     "ddpg_hybrid",
     "ddpg_hybrid_roa",
+    "ddpg_hybrid_lyapunov",
     "sac_baseline",
     "sac_hybrid",
     "sac_hybrid_roa",
+    "sac_hybrid_lyapunov",
     "pilco_baseline",
     "pilco_hybrid",
     "pilco_hybrid_roa",
+    # no pilco_hybrid_lyapunov: PILCO's config refuses relevance='lyapunov' (PILCO's hybrid
+    # has the paper's or the ROA relevance, leoc.pilco.config), so such a run could not train
 )
-"""Every controller ``leoc reproduce`` knows, in report order."""
+"""Every controller ``leoc reproduce`` knows, in report order: per framework its baseline, then
+its hybrids with the paper's, the ROA and (DDPG and SAC only) the Lyapunov relevance."""
 LEARNER_NAMES = ("pilco", "ddpg", "td3", "sac")
 """leoc's learners (``leoc.learners.learner_names()``, registration order): ``leoc train
 --algo``'s choices."""
@@ -123,14 +128,18 @@ def controller_framework(controller: str) -> str:
 REQUEST_ONLY_FRAMEWORKS = ("sac",)
 """Learners whose controllers ``leoc reproduce`` runs only when ``--controllers`` names them
 (the paper has no SAC)."""
+REQUEST_ONLY_RELEVANCES = ("roa", "lyapunov")
+"""Relevance designs whose hybrids ``leoc reproduce`` runs only when ``--controllers`` names them
+(the paper's hybrids have the paper's relevance)."""
 DEFAULT_CONTROLLERS = tuple(
     name
     for name in CONTROLLERS
-    if not name.endswith("_roa") and controller_framework(name) not in REQUEST_ONLY_FRAMEWORKS
+    if parse_controller(name).relevance not in REQUEST_ONLY_RELEVANCES
+    and controller_framework(name) not in REQUEST_ONLY_FRAMEWORKS
 )
 """What ``leoc reproduce`` runs unless ``--controllers`` says otherwise: the paper's controllers
-and the two linear references (the ROA-relevance hybrids and SAC's controllers are added on
-request)."""
+and the two linear references (the ROA- and Lyapunov-relevance hybrids and SAC's controllers are
+added on request)."""
 PROFILE_NAMES = ("quick", "smoke", "paper")
 """The profiles of ``leoc reproduce`` (``leoc.experiments.profiles.PROFILES``, same order)."""
 VARIANT_NAMES = ("leoc", "authors")

@@ -65,8 +65,9 @@ def add_parser(commands: Any) -> None:
         choices=CONTROLLERS,
         default=list(DEFAULT_CONTROLLERS),
         help="controllers to run (default: the two linear references and the paper's four; "
-        "add ddpg_hybrid_roa / pilco_hybrid_roa for the ROA-relevance hybrids, sac_baseline / "
-        "sac_hybrid / sac_hybrid_roa for SAC at the DDPG budgets)",
+        "add ddpg_hybrid_roa / pilco_hybrid_roa for the ROA-relevance hybrids, "
+        "ddpg_hybrid_lyapunov / sac_hybrid_lyapunov for the Lyapunov-relevance hybrids (PILCO "
+        "has none), sac_baseline / sac_hybrid / sac_hybrid_roa for SAC at the DDPG budgets)",
     )
     reproduce.set_defaults(run=run)
 

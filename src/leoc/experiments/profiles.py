@@ -10,8 +10,8 @@ from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework, p
 from leoc.systems import SYSTEM_NAMES, system_names
 
 # Every controller, in report order, and the default set (the paper's controllers and the two
-# linear references; the ROA-relevance hybrids are added on request) live in leoc.names, where
-# the command line reads them without importing torch.
+# linear references; the ROA- and Lyapunov-relevance hybrids and SAC's controllers are added on
+# request) live in leoc.names, where the command line reads them without importing torch.
 LINEAR_CONTROLLERS = ("linear", "linear_pilco")
 TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in LINEAR_CONTROLLERS)
 # The linear reference of each framework: the LQR designed and run at that framework's control
@@ -24,9 +24,11 @@ CONTROLLER_LABELS = {
     "ddpg_baseline": "DDPG baseline",
     "ddpg_hybrid": "DDPG hybrid",
     "ddpg_hybrid_roa": "DDPG hybrid (ROA relevance)",
+    "ddpg_hybrid_lyapunov": "DDPG hybrid (Lyapunov relevance)",
     "sac_baseline": "SAC baseline",
     "sac_hybrid": "SAC hybrid",
     "sac_hybrid_roa": "SAC hybrid (ROA relevance)",
+    "sac_hybrid_lyapunov": "SAC hybrid (Lyapunov relevance)",
     "pilco_baseline": "PILCO baseline",
     "pilco_hybrid": "PILCO hybrid",
     "pilco_hybrid_roa": "PILCO hybrid (ROA relevance)",

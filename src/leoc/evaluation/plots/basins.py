@@ -38,6 +38,11 @@ TICK_FONT_SIZE = MIN_FONT_SIZE
 LABEL_ROW = 102.0
 """Height (percent) of the row of bar labels: above every bar and every certified tick (both
 at most 100%), so no label is crossed by a tick or sits on a neighbouring bar."""
+PANEL_SIZE = (4.8, 3.9)
+"""Size (inches) of a panel of up to :data:`PANEL_CONTROLLERS` controllers."""
+PANEL_CONTROLLERS = 11
+"""Controllers whose bar labels fit apart in a panel :data:`PANEL_SIZE` wide (the reproduce
+controllers before the Lyapunov hybrids); a panel of more is widened in proportion."""
 ELLIPSE_POINTS = 400
 """Points on the boundary of the certified set's slice."""
 BASIN_COLOURS = ("#d9d9d9", "#74c476")
@@ -57,7 +62,9 @@ def draw_basins(rows: Sequence[Mapping[str, Any]], labels: Mapping[str, str] | N
     plt = pyplot()
     labels = dict(labels or {})
     systems = list(dict.fromkeys(row["system"] for row in rows))
-    figure, axes = new_figure(1, len(systems), (4.8, 3.9))
+    most = max((sum(row["system"] == s for row in rows) for s in systems), default=1)
+    width = PANEL_SIZE[0] * max(1.0, most / PANEL_CONTROLLERS)
+    figure, axes = new_figure(1, len(systems), (width, PANEL_SIZE[1]))
     for axis, system in zip(axes[0], systems, strict=True):
         selected = [row for row in rows if row["system"] == system]
         positions = np.arange(len(selected))

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.profiles import CONTROLLER_LABELS, CONTROLLERS
 from leoc.experiments.summary import CheckSummary, Failure, check_summary
+from leoc.names import parse_controller
 
 FMT = "{:.3g}"
 
@@ -81,6 +82,16 @@ class Section(NamedTuple):
 def ordered(controllers: dict[str, Any]) -> list[str]:
     """The controllers of ``controllers`` in the profiles' order."""
     return [name for name in CONTROLLERS if name in controllers]
+
+
+def relevances(evaluations: Evaluations) -> set[str]:
+    """The relevance designs of the study's hybrids (``paper``, ``roa``, ``lyapunov``)."""
+    return {
+        relevance
+        for by_controller in evaluations.values()
+        for controller in by_controller
+        if (relevance := parse_controller(controller).relevance) is not None
+    }
 
 
 def label(controller: str) -> str:

@@ -10,7 +10,7 @@ from typing import Any
 
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.profiles import LINEAR_CONTROLLERS
-from leoc.experiments.report.base import Report, Section, missing_runs
+from leoc.experiments.report.base import Report, Section, missing_runs, relevances
 from leoc.experiments.summary import wall_time_text
 from leoc.names import controller_framework
 
@@ -165,6 +165,30 @@ def _sac_note(evaluations: Evaluations) -> str:
     )
 
 
+RELEVANCE_NOTES = {
+    "roa": "the ROA relevance is exactly 1 on a flat top V <= rho_in inside its LQR's certified "
+    "region",
+    "lyapunov": "the Lyapunov relevance is r = (1 + V~/(lambda rho))^-2, V~ its LQR's Lyapunov "
+    "function: like the paper's, r < 1 everywhere but at the operating point (no flat top)",
+}
+"""What each relevance design other than the paper's r = (1 + d)^-2 is, as the report says it."""
+
+
+def relevance_note(evaluations: Evaluations) -> str:
+    """What the relevance designs named in the study's hybrid labels are, said only in a report
+    that has a Lyapunov-relevance hybrid (the reports of the paper's and the ROA hybrids, those
+    published under results/ among them, read as before)."""
+    found = relevances(evaluations)
+    if "lyapunov" not in found:
+        return ""
+    notes = [RELEVANCE_NOTES[name] for name in RELEVANCE_NOTES if name in found]
+    return (
+        " A hybrid's label names its relevance where it is not the paper's r = (1 + d)^-2: "
+        + "; ".join(notes)
+        + "."
+    )
+
+
 def _runs_lines(meta: dict[str, Any], evaluations: Evaluations) -> list[str]:
     """The runs aggregated (seeds per system and controller) and those without results."""
     aggregated = "; ".join(
@@ -206,7 +230,9 @@ def render(report: Report) -> list[str]:
         "period it was trained at (the 'period' column: simulator steps per decision; PILCO "
         "holds each action for that many steps), and each hybrid is compared with the LQR "
         f"designed for its own period: {_dt_hybrids(evaluations)} with *linear (LQR at dt)*, "
-        "PILCO hybrids with *linear (LQR at PILCO's period)*." + _sac_note(evaluations),
+        "PILCO hybrids with *linear (LQR at PILCO's period)*."
+        + _sac_note(evaluations)
+        + relevance_note(evaluations),
         "",
         *_runs_lines(meta, evaluations),
     ]

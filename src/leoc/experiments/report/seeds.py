@@ -20,7 +20,7 @@ from leoc.experiments.report.base import (
     ordered,
 )
 from leoc.experiments.stats import MIN_RUNS_FOR_INTERVAL, probability_of_improvement, seed_summary
-from leoc.names import FRAMEWORKS
+from leoc.names import CONTROLLERS, FRAMEWORKS, controller_framework, parse_controller
 
 
 def first_hold_seconds(run: dict[str, Any]) -> float | None:
@@ -92,15 +92,25 @@ def _improvement_scores(
     return [score(run) for run in hybrid], [score(run) for run in baseline]
 
 
+def framework_hybrids(framework: str) -> tuple[str, ...]:
+    """The hybrids of ``framework`` that ``leoc reproduce`` knows, in report order: one per
+    relevance design (the paper's, the ROA, the Lyapunov relevance where the learner has it)."""
+    return tuple(
+        name
+        for name in CONTROLLERS
+        if controller_framework(name) == framework and parse_controller(name).hybrid
+    )
+
+
 def improvement_rows(evaluations: Evaluations) -> Rows:
-    """Probability that each hybrid (the paper's relevance and the ROA relevance) beats its
-    framework's baseline: a higher final return, and the first hold after less interaction
+    """Probability that each hybrid (every relevance design: :func:`framework_hybrids`) beats
+    its framework's baseline: a higher final return, and the first hold after less interaction
     time (the paper's claim (ii)); :func:`~leoc.experiments.stats.probability_of_improvement`."""
     rows = []
     for system, by_controller in evaluations.items():
         for framework in FRAMEWORKS:
             baseline = by_controller.get(f"{framework}_baseline")
-            for hybrid_name in (f"{framework}_hybrid", f"{framework}_hybrid_roa"):
+            for hybrid_name in framework_hybrids(framework):
                 hybrid = by_controller.get(hybrid_name)
                 if not hybrid or not baseline:
                     continue
