@@ -15,11 +15,14 @@ from torch import Tensor
 
 __all__ = [
     "as_float_tensor",
+    "as_point",
     "check_finite",
+    "check_flag",
     "check_last_dim",
     "check_positive",
     "check_positive_int",
     "check_shape",
+    "register_learnable",
     "shape_str",
 ]
 
@@ -133,3 +136,28 @@ def positive_scalar_or_vector(
     tensor = scalar_or_vector(value, name, size, size_label, dtype)
     check_positive(tensor, name)
     return tensor
+
+
+def check_flag(value: object, name: str) -> bool:
+    """``value`` if it is a bool; ``TypeError`` naming ``name`` otherwise."""
+    if not isinstance(value, bool):
+        raise TypeError(f"{name} must be a bool, found {type(value).__name__}")
+    return value
+
+
+def as_point(value: object, name: str, dtype: torch.dtype, letter: str = "D") -> Tensor:
+    """``value`` as a finite vector (``letter``,) of ``dtype`` (an operating point)."""
+    point = as_float_tensor(value, name, dtype)
+    if point.ndim != 1:
+        raise ValueError(f"{name} must have shape ({letter},), found {tuple(point.shape)}")
+    check_finite(point, name)
+    return point
+
+
+def register_learnable(module: torch.nn.Module, name: str, value: Tensor, learn: bool) -> None:
+    """``module.name = value``: an ``nn.Parameter`` if ``learn`` (training changes it), else a
+    buffer (saved with the module, frozen)."""
+    if learn:
+        module.register_parameter(name, torch.nn.Parameter(value))
+    else:
+        module.register_buffer(name, value)

@@ -65,9 +65,11 @@ from torch import Tensor, nn
 from ._checks import (
     as_float_tensor,
     check_finite,
+    check_flag,
     check_last_dim,
     check_shape,
     positive_scalar_or_vector,
+    register_learnable,
     shape_str,
 )
 from .linear import LinearController
@@ -187,8 +189,7 @@ class HybridPolicy(nn.Module):
                 )
         lambda_init = DEFAULT_LAMBDA if lambda_init is None else lambda_init
         learn_lambda = True if learn_lambda is None else learn_lambda
-        if not isinstance(learn_lambda, bool):
-            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        check_flag(learn_lambda, "learn_lambda")
         self.saturation = check_saturation_mode(saturation, "saturation")
         self.linear = linear
         self.nonlinear = nonlinear
@@ -206,10 +207,7 @@ class HybridPolicy(nn.Module):
         self.relevance_module = relevance
         if relevance is None:
             log_lambda = torch.log(self._lambda_vector(lambda_init, obs_dim, dtype).to(device))
-            if learn_lambda:
-                self.log_lambda = nn.Parameter(log_lambda)
-            else:
-                self.register_buffer("log_lambda", log_lambda)
+            register_learnable(self, "log_lambda", log_lambda, learn_lambda)
 
         self.register_buffer("action_limit", self._limit_tensor(action_limit, act_dim, dtype))
         if self.action_limit is not None:

@@ -136,7 +136,15 @@ from torch import Tensor, nn
 from leoc.names import RELEVANCE_NAMES
 from leoc.systems.observation import as_observation_map
 
-from ._checks import as_float_tensor, check_finite, check_last_dim, check_shape
+from ._checks import (
+    as_float_tensor,
+    as_point,
+    check_finite,
+    check_flag,
+    check_last_dim,
+    check_shape,
+    register_learnable,
+)
 
 __all__ = [
     "DEFAULT_ROA_WIDTH",
@@ -211,20 +219,13 @@ class PaperRelevance(nn.Module):
         super().__init__()
         from ._checks import positive_scalar_or_vector
 
-        if not isinstance(learn_lambda, bool):
-            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
-        point = as_float_tensor(operating_point, "operating_point", dtype)
-        if point.ndim != 1:
-            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
-        check_finite(point, "operating_point")
+        check_flag(learn_lambda, "learn_lambda")
+        point = as_point(operating_point, "operating_point", dtype)
         self.register_buffer("operating_point", point)
         size = point.shape[0]
         lam = positive_scalar_or_vector(lambda_init, "lambda_init", size, "D", dtype)
         log_lambda = torch.log(lam.expand(size).clone())
-        if learn_lambda:
-            self.log_lambda = nn.Parameter(log_lambda)
-        else:
-            self.register_buffer("log_lambda", log_lambda)
+        register_learnable(self, "log_lambda", log_lambda, learn_lambda)
 
     @property
     def lambda_(self) -> Tensor:
@@ -277,22 +278,13 @@ class PrecisionRelevance(nn.Module):
         super().__init__()
         from ._checks import positive_scalar_or_vector
 
-        if not isinstance(learn_precision, bool):
-            raise TypeError(
-                f"learn_precision must be a bool, found {type(learn_precision).__name__}"
-            )
-        point = as_float_tensor(operating_point, "operating_point", dtype)
-        if point.ndim != 1:
-            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
-        check_finite(point, "operating_point")
+        check_flag(learn_precision, "learn_precision")
+        point = as_point(operating_point, "operating_point", dtype)
         self.register_buffer("operating_point", point)
         size = point.shape[0]
         start = positive_scalar_or_vector(precision_init, "precision_init", size, "D", dtype)
         precision = start.expand(size).clone()
-        if learn_precision:
-            self.precision = nn.Parameter(precision)
-        else:
-            self.register_buffer("precision", precision)
+        register_learnable(self, "precision", precision, learn_precision)
 
     def forward(self, x: Tensor) -> Tensor:
         """Relevance (..., 1) of observations ``x`` (..., D)."""
@@ -350,10 +342,7 @@ class ObservationDeviation(nn.Module):
         self, obs_layout: Sequence[Any], operating_state: object, dtype: torch.dtype = torch.float64
     ) -> None:
         super().__init__()
-        state = as_float_tensor(operating_state, "operating_state", dtype)
-        if state.ndim != 1:
-            raise ValueError(f"operating_state must have shape (S,), found {tuple(state.shape)}")
-        check_finite(state, "operating_state")
+        state = as_point(operating_state, "operating_state", dtype, "S")
         self.observation = as_observation_map(obs_layout, state.shape[0])
         self.layout = self.observation.pairs()
         self.plan = _layout_plan(self.observation, state.shape[0])
@@ -474,8 +463,7 @@ class ROARelevance(nn.Module):
         dtype: torch.dtype = torch.float64,
     ) -> None:
         super().__init__()
-        if not isinstance(learn_width, bool):
-            raise TypeError(f"learn_width must be a bool, found {type(learn_width).__name__}")
+        check_flag(learn_width, "learn_width")
         self.deviation = ObservationDeviation(obs_layout, operating_state, dtype)
         size = self.deviation.state_dim
         matrix = lyapunov_matrix(P, size)
@@ -493,10 +481,7 @@ class ROARelevance(nn.Module):
         self.register_buffer("lyapunov_matrix", matrix.to(dtype))
         self.register_buffer("rho_in", torch.tensor(float(rho_in), dtype=dtype))
         raw = torch.tensor(self._raw_width(float(width_init)), dtype=dtype)
-        if learn_width:
-            self.width_param = nn.Parameter(raw)
-        else:
-            self.register_buffer("width_param", raw)
+        register_learnable(self, "width_param", raw, learn_width)
 
     def _raw_width(self, width: float) -> float:
         if math.isinf(self.max_width):
@@ -638,12 +623,8 @@ class FlooredRelevance(nn.Module):
         super().__init__()
         from ._checks import check_positive, positive_scalar_or_vector
 
-        if not isinstance(learn_lambda, bool):
-            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
-        point = as_float_tensor(operating_point, "operating_point", torch.float64)
-        if point.ndim != 1:
-            raise ValueError(f"operating_point must have shape (D,), found {tuple(point.shape)}")
-        check_finite(point, "operating_point")
+        check_flag(learn_lambda, "learn_lambda")
+        point = as_point(operating_point, "operating_point", torch.float64)
         size = point.shape[0]
         lower = as_float_tensor(floor, "floor", torch.float64)
         check_shape(lower, "floor", (size,), "(D,)")
@@ -653,10 +634,7 @@ class FlooredRelevance(nn.Module):
         excess = torch.log(start / lower - 1.0).to(dtype)
         self.register_buffer("operating_point", point.to(dtype))
         self.register_buffer("floor", lower.to(dtype))
-        if learn_lambda:
-            self.log_excess = nn.Parameter(excess)
-        else:
-            self.register_buffer("log_excess", excess)
+        register_learnable(self, "log_excess", excess, learn_lambda)
 
     @property
     def lambda_(self) -> Tensor:
@@ -716,8 +694,7 @@ class LyapunovRelevance(nn.Module):
         dtype: torch.dtype = torch.float64,
     ) -> None:
         super().__init__()
-        if not isinstance(learn_lambda, bool):
-            raise TypeError(f"learn_lambda must be a bool, found {type(learn_lambda).__name__}")
+        check_flag(learn_lambda, "learn_lambda")
         matrix = lyapunov_matrix(P)
         point = as_float_tensor(operating_point, "operating_point", torch.float64)
         obs_map = as_observation_map(obs_layout, matrix.shape[0])
@@ -737,10 +714,7 @@ class LyapunovRelevance(nn.Module):
         self.register_buffer("operating_point", point.to(dtype))
         self.register_buffer("lyapunov_matrix", matrix.to(dtype))
         self.register_buffer("rho", torch.tensor(_positive_number(rho, "rho"), dtype=dtype))
-        if learn_lambda:
-            self.log_lambda = nn.Parameter(log_lambda.to(dtype))
-        else:
-            self.register_buffer("log_lambda", log_lambda.to(dtype))
+        register_learnable(self, "log_lambda", log_lambda.to(dtype), learn_lambda)
 
     @property
     def lambda_(self) -> Tensor:
