@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from leoc.evaluation.impulse_sweep import FLAT_TOP
 from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
 from leoc.systems.base import System
 from leoc.systems.rollout import Controller
@@ -69,7 +70,7 @@ def _test_agreement(system: System, controller: Controller, lqr: Controller, tes
     return {
         "distance_pct": distance,
         "min_relevance": lowest,
-        "by_construction": lowest is not None and lowest >= 1.0,
+        "by_construction": lowest is not None and lowest >= FLAT_TOP,
         "settling_time": settle[0],
         "lqr_settling_time": settle[1],
         "lqr_peak": float(np.max(np.abs(theirs.deviation))),
@@ -77,7 +78,9 @@ def _test_agreement(system: System, controller: Controller, lqr: Controller, tes
     }
 
 
-def lqr_agreement(system: System, controller: Controller, lqr: Controller) -> dict[str, Any]:
+def lqr_agreement(
+    system: System, controller: Controller, lqr: Controller | None = None
+) -> dict[str, Any]:
     """The hybrid ``controller`` against ``lqr`` (the LQR at the same control period) on the
     paper's impulse and step tests, and its relevance's parameters.
 
@@ -87,8 +90,9 @@ def lqr_agreement(system: System, controller: Controller, lqr: Controller) -> di
         The plant the controller was trained on (its rules).
     controller : callable
         A trained hybrid at its own control period.
-    lqr : callable
-        The LQR designed for that period (:func:`leoc.policies.lqr_controller`).
+    lqr : callable, optional
+        The LQR designed for that period (:func:`leoc.policies.lqr_controller`); default the
+        discrete LQR of ``system`` designed for the controller's period.
 
     Returns
     -------
@@ -97,6 +101,11 @@ def lqr_agreement(system: System, controller: Controller, lqr: Controller) -> di
         ``by_construction``, ``settling_time``, ``lqr_settling_time``, ``lqr_peak``,
         ``keeps_lqr``) and ``relevance`` (:func:`relevance_parameters`).
     """
+    if lqr is None:
+        from leoc.control import design_lqr
+        from leoc.policies import lqr_controller
+
+        lqr = lqr_controller(design_lqr(system, action_repeat=control_period(controller)))
     result: dict[str, Any] = {
         test: _test_agreement(system, controller, lqr, test) for test in RESPONSE_TESTS
     }

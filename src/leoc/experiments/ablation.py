@@ -811,15 +811,10 @@ def delivered_lqr_agreement(run_dir: Path, system: Any, hybrid: bool) -> dict[st
     period, on ``system``; None for a baseline."""
     if not hybrid:
         return None
-    from leoc.control import design_lqr
     from leoc.evaluation.lqr_agreement import lqr_agreement
-    from leoc.evaluation.rollout import control_period
     from leoc.experiments.controllers import load_trained_controller
-    from leoc.policies import lqr_controller
 
-    controller = load_trained_controller(run_dir / TRAIN_DIR)
-    design = design_lqr(system, action_repeat=control_period(controller))
-    return lqr_agreement(system, controller, lqr_controller(design))
+    return lqr_agreement(system, load_trained_controller(run_dir / TRAIN_DIR))
 
 
 def _record(

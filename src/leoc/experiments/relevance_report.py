@@ -23,6 +23,7 @@ learning the swing-up shows as a cloud per setting.
 
 from __future__ import annotations
 
+import functools
 import math
 import statistics
 from collections.abc import Iterable, Mapping, Sequence
@@ -66,7 +67,9 @@ CSV_COLUMNS = (
 )
 
 
+@functools.cache
 def _dt(system: str) -> float:
+    """The system's step [s] (built once per name)."""
     from leoc.systems import make_system
 
     return float(make_system(system).dt)
