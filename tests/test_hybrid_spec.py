@@ -79,6 +79,18 @@ BAD_FIELDS = [
     ({"relevance": "roa", "width_init": -0.3}, "width_init"),
     ({"relevance": "roa", "width_init": math.inf}, "width_init"),
     ({"relevance": "roa", "width_init": True}, "width_init"),
+    # the floor (r_min) and the Lyapunov relevance
+    ({"r_min": 0.9, "relevance_parametrisation": "precision"}, "r_min"),
+    ({"r_min": 0.9, "relevance_parametrisation": "precision", "relevance": "roa"}, "r_min"),
+    ({"r_min": 0.0}, "r_min"),
+    ({"r_min": 1.0}, "r_min"),
+    ({"r_min": -0.5}, "r_min"),
+    ({"r_min": math.nan}, "r_min"),
+    ({"r_min": True}, "r_min"),
+    ({"r_min": "0.9"}, "r_min"),
+    ({"relevance": "lyapunov", "lambda_init": (1.0, 2.0, 3.0)}, "lambda_init"),
+    ({"relevance": "lyapunov", "lambda_init": 0.0}, "lambda_init"),
+    ({"relevance": "lyapunov", "r_min": 0.9}, "r_min"),
 ]
 
 
