@@ -187,3 +187,50 @@ def test_a_flag_pilco_cannot_honour_is_one_line_naming_it(tmp_path, capsys) -> N
     line = _error_line(capsys)
     assert "--relevance-parametrisation: relevance_parametrisation" in line and "PILCO" in line
     assert not run.exists()
+
+
+def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
+    """`leoc train pendulum --algo pilco --hybrid --r-min 0.5`: config.json records the floor,
+    the loaded controller's relevance is the paper's with Lambda floored on the proved set of
+    the LQR at PILCO's own control period, so r >= 0.5 on states sampled in that set (a numpy
+    reference from the certificate's P and rho, not the floor's own code), and r < 1 off the
+    operating point; leoc simulate and leoc roa run on the folder."""
+    import numpy as np
+
+    from leoc.control import certify_lqr, design_lqr
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.pilco.config import PilcoConfig
+    from leoc.policies import FlooredRelevance
+    from leoc.systems import make_system
+
+    run = tmp_path / "pilco_floor"
+    argv = ["train", "pendulum", "--algo", "pilco", "--hybrid", "--r-min", "0.5", *SMOKE]
+    assert main([*argv, "--out", str(run)]) == 0
+    assert json.loads((run / "config.json").read_text())["hybrid"]["r_min"] == 0.5
+    controller = load_trained_controller(run)
+    (relevance,) = [m for m in controller.modules() if isinstance(m, FlooredRelevance)]
+    lam = relevance.lambda_.detach().numpy()
+    system = make_system("pendulum")
+    period = PilcoConfig.for_system("pendulum").controller_action_repeat
+    certificate = certify_lqr(system, design_lqr(system, action_repeat=period))
+    assert certificate.certified and certificate.action_repeat == period
+    # states on the boundary of the proved set {z^T P z <= rho} (where r is smallest)
+    rng = np.random.default_rng(0)
+    P, rho = np.asarray(certificate.P), certificate.rho
+    u = rng.standard_normal((4000, 2))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    z = np.sqrt(rho) * np.linalg.solve(np.linalg.cholesky(P).T, u.T).T
+    theta = z[:, 0]  # the pendulum's deviation from upright (cos theta = 1 there)
+    obs = np.stack([np.cos(theta), np.sin(theta), z[:, 1]], axis=-1)
+    a = np.array([1.0, 0.0, 0.0])
+    r = 1.0 / (1.0 + ((obs - a) ** 2 / lam).sum(axis=-1)) ** 2
+    assert r.min() >= 0.5 and r.max() < 1.0
+    with torch.no_grad():
+        np.testing.assert_allclose(
+            relevance(torch.as_tensor(obs)).numpy()[:, 0], r, rtol=1e-12, atol=0.0
+        )
+    assert main(["simulate", str(run), "--json"]) == 0
+    capsys.readouterr()
+    roa = ["roa", "--controller", str(run), "--samples", "500", "--starts", "4", "--json"]
+    assert main(roa) == 0
+    assert json.loads(capsys.readouterr().out)["basins"][run.name]

@@ -227,13 +227,13 @@ def test_a_run_with_the_scale_resumes_exactly_and_loads(tmp_path, algo):
     ("changes", "field"),
     [
         ({"relevance_lr_scale": 2.0}, "relevance_lr_scale"),
-        ({"r_min": 0.5}, "r_min"),
         ({"relevance": "lyapunov"}, "relevance"),
     ],
 )
 def test_pilco_refuses_what_its_hybrid_does_not_implement(changes, field):
-    """PILCO's config refuses the scale, the floor and the Lyapunov relevance, one line naming
-    the field, the expectation and what it found."""
+    """PILCO's config refuses the scale and the Lyapunov relevance, one line naming the field,
+    the expectation and what it found (the floor it takes: test_cli_relevance's
+    test_a_floored_pilco_hybrid_from_the_command_line)."""
     spec = HybridSpec()
     for key, value in changes.items():  # "lyapunov" may not be a design here yet
         object.__setattr__(spec, key, value)

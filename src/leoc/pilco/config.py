@@ -231,9 +231,13 @@ class PilcoConfig:
 
 
 def _check_pilco_hybrid(spec: HybridSpec) -> None:
-    """Refuse the :class:`~leoc.policies.HybridSpec` choices PILCO's hybrid does not implement
+    r"""Refuse the :class:`~leoc.policies.HybridSpec` choices PILCO's hybrid does not implement
     (ValueError naming the field): the precision parametrisation, a relevance learning-rate
-    scale (an SB3 optimiser group), the floor ``r_min`` and the Lyapunov relevance."""
+    scale (an SB3 optimiser group) and the Lyapunov relevance. The floor ``r_min`` it takes:
+    the floored :math:`\Lambda` is a reparametrisation of the paper's relevance, whose moments
+    the quadrature of :func:`~leoc.pilco.propagate.hybrid_quadrature_moments` takes as it
+    takes any policy's; the floor is computed on the proved set of the LQR at PILCO's deployed
+    period."""
     if spec.relevance_parametrisation != "log_lambda":
         raise ValueError(
             "relevance_parametrisation: PILCO's hybrid holds the paper's relevance as "
@@ -243,11 +247,6 @@ def _check_pilco_hybrid(spec: HybridSpec) -> None:
         raise ValueError(
             "relevance_lr_scale: PILCO's L-BFGS optimises the controller's parameters as one "
             f"vector (no optimiser groups); expected 1, found {spec.relevance_lr_scale!r}"
-        )
-    if spec.r_min is not None:
-        raise ValueError(
-            "r_min: PILCO's hybrid has no floor on its relevance's Lambda; expected None, "
-            f"found {spec.r_min!r}"
         )
     if spec.relevance == "lyapunov":
         raise ValueError(
