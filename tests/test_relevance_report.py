@@ -89,7 +89,7 @@ def test_report_is_written_and_skips_records_without_agreement(tmp_path):
     records = _records() + [{**_records()[0], "lqr_agreement": None, "controller": "x"}]
     path = write_relevance_report(tmp_path, records, "leoc ablation ...")
     text = path.read_text()
-    assert "| ddpg_hybrid | leoc's defaults since issue 20 | 2/3 |" in text
+    assert "| DDPG hybrid | leoc's defaults since issue 20 | 2/3 |" in text
     assert (tmp_path / "relevance_tradeoff.png").stat().st_size > 10_000
     assert write_relevance_report(tmp_path / "none", records[-1:]) is None
     assert not math.isnan(relevance_cells(records)[0]["median_distance_pct"])

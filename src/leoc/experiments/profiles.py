@@ -29,6 +29,10 @@ CONTROLLER_LABELS = {
     "sac_hybrid": "SAC hybrid",
     "sac_hybrid_roa": "SAC hybrid (ROA relevance)",
     "sac_hybrid_lyapunov": "SAC hybrid (Lyapunov relevance)",
+    # TD3 runs in the ablation harness only (leoc reproduce has no TD3 controllers)
+    "td3_baseline": "TD3 baseline",
+    "td3_hybrid": "TD3 hybrid",
+    "td3_hybrid_roa": "TD3 hybrid (ROA relevance)",
     "pilco_baseline": "PILCO baseline",
     "pilco_hybrid": "PILCO hybrid",
     "pilco_hybrid_roa": "PILCO hybrid (ROA relevance)",

@@ -33,6 +33,7 @@ from typing import Any
 from leoc.evaluation.lqr_agreement import KEEP_TOLERANCE_PCT
 from leoc.experiments.ablation import ALL_SETTINGS, GRID_CONTROLLERS, SETTING_LABELS, run_outcome
 from leoc.experiments.markdown import markdown_table
+from leoc.experiments.profiles import CONTROLLER_LABELS
 from leoc.io import write_csv_atomic, write_text_atomic
 
 __all__ = [
@@ -155,7 +156,7 @@ def _row(cell: Mapping[str, Any]) -> list[str]:
     n = cell["seeds"]
     first = _number(cell["median_first_hold_s"], 0)
     return [
-        str(cell["controller"]),
+        CONTROLLER_LABELS.get(str(cell["controller"]), str(cell["controller"])),
         SETTING_LABELS.get(cell["setting"], cell["setting"]),
         f"{cell['success']}/{n}",
         f"{first} ({cell['ever_held']}/{n})",
