@@ -97,7 +97,7 @@ nitpick_ignore_regex = [
 ]
 
 # --- API reference -------------------------------------------------------------------------------
-leoc_api_packages = list(leoc_api.PUBLIC_PACKAGES)  # the seven packages of the library
+leoc_api_packages = list(leoc_api.PUBLIC_PACKAGES)  # the packages of the library
 # referenced from the packages' docstrings; documented, not held to the docstring check
 leoc_api_extra_modules = ["leoc.learners", "leoc.names", "leoc.training", "leoc.linalg", "leoc.io"]
 autodoc_default_options = {"member-order": "bysource"}

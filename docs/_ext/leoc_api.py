@@ -45,6 +45,7 @@ PUBLIC_PACKAGES = (
     "leoc.sb3",
     "leoc.evaluation",
     "leoc.experiments",
+    "leoc.deploy",
 )
 API_DIR = "api"
 WARNING_TYPE = "leoc"

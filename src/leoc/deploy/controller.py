@@ -38,7 +38,8 @@ class Decision(nn.Module):
     Parameters
     ----------
     policy : nn.Module
-        The controller in physical units (:func:`load_trained_controller`'s module).
+        The controller in physical units (the module of
+        :func:`leoc.experiments.controllers.load_trained_controller`).
     low, high : array of shape (A,)
         The actuator's limits.
     """
@@ -74,7 +75,7 @@ def output_saturation(controller: nn.Module) -> str:
 class DeployedController:
     """A trained controller (or an LQR) ready to run: ``act(observation)`` and what it needs.
 
-    Built by :func:`load`. The decision is float64 throughout; call :meth:`act` once per
+    Built by :func:`leoc.deploy.load`. The decision is float64 throughout; call ``act`` once per
     control period and hold the action for ``period_steps`` simulator steps (``period``
     seconds).
 
@@ -245,8 +246,9 @@ def _load_lqr(
 
 
 def _load_run(run_dir: Path) -> DeployedController:
-    """The trained controller of ``run_dir`` (:func:`load_trained_controller`) with its plant,
-    LQR design (its config's method, at the controller's period) and hybrid spec."""
+    """The trained controller of ``run_dir``
+    (:func:`leoc.experiments.controllers.load_trained_controller`) with its plant, LQR design
+    (its config's method, at the controller's period) and hybrid spec."""
     from leoc.control import design_lqr
     from leoc.experiments.controllers import load_trained_controller, trained_plant, trainer_dir
     from leoc.policies.spec import as_hybrid_spec

@@ -16,6 +16,7 @@ An export that fails it is not written.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import warnings
@@ -114,7 +115,8 @@ def check_observations(
     steps = int(system.episode_steps)
     episodes = -(-(count - near.shape[0]) // (steps + 1))
     starts = np.stack([system.sample_start(rng) for _ in range(episodes)])
-    visited = simulate(system, controller.module, starts, steps, action_repeat=1).states
+    loop = simulate(system, controller.module, starts, steps, action_repeat=controller.period_steps)
+    visited = loop.states
     visited = visited.reshape(-1, system.state_dim)[: count - near.shape[0]]
     states = torch.as_tensor(np.concatenate([near, visited]), dtype=torch.float64)
     return system.observe(states).numpy()
@@ -131,7 +133,7 @@ def model_bytes(controller: DeployedController, fmt: str) -> bytes:
     # relevance's angle) from operations that have one (exportable_atan2); the check below
     # compares it with torch's own
     patch = mock.patch.object(torch, "atan2", exportable_atan2) if fmt == "onnx" else None
-    with torch.no_grad(), patch or _nothing(), warnings.catch_warnings():
+    with torch.no_grad(), patch or contextlib.nullcontext(), warnings.catch_warnings():
         # the tracer warns that the hybrid's input checks are constants of the trace: they are;
         # torch 2.13 marks torch.jit and the TorchScript-based ONNX exporter deprecated, and
         # they are what runs without onnxscript (the check below vouches for their output)
@@ -168,16 +170,6 @@ def _export_onnx(module: torch.nn.Module, example: torch.Tensor, buffer: io.Byte
         )
     finally:
         torch.set_default_dtype(default)
-
-
-class _nothing:
-    """A context that does nothing (``contextlib.nullcontext`` without the import)."""
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None
 
 
 #: Terms of the arctangent series on [0, tan(pi / 16)]: the first term left out is below
@@ -300,13 +292,6 @@ def _runtime(fmt: str) -> str:
     return "ONNX Runtime" if fmt == "onnx" else "TorchScript"
 
 
-def default_export_path(run_dir: str | Path, fmt: str) -> Path:
-    """Where ``leoc export RUN_DIR`` writes without ``--out``: ``RUN_DIR/controller.onnx``
-    (or ``controller.torchscript.pt``)."""
-    name = "controller.onnx" if fmt == "onnx" else "controller.torchscript.pt"
-    return Path(run_dir) / name
-
-
 def export_metadata(
     controller: DeployedController, path: Path, fmt: str, check: ExportCheck
 ) -> dict[str, Any]:
@@ -396,8 +381,11 @@ def _certificate_record(controller: DeployedController) -> dict[str, Any] | None
     certificate = controller.certificate
     if certificate is None:
         return None
+    # the ROA relevance's flat top {V <= rho_in}: there r = 1 and the model is the LQR
+    flat_top = next((m.rho_in for m in controller.module.modules() if hasattr(m, "rho_in")), None)
     return {
         "statement": "V(z) = z^T P z <= rho is a region of attraction of the saturated LQR",
+        "flat_top_rho": None if flat_top is None else float(flat_top),
         "rho": float(certificate.rho),
         "basis": certificate.basis,
         "P": np.asarray(certificate.P).tolist(),
