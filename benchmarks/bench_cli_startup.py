@@ -22,7 +22,10 @@ import time
 COMMAND_LINES = (
     ("--help",),
     ("--version",),
-    *((name, "--help") for name in ("lqr", "simulate", "roa", "train", "reproduce", "plot")),
+    *(
+        (name, "--help")
+        for name in ("lqr", "simulate", "roa", "train", "export", "reproduce", "plot")
+    ),
     ("publish", "--help"),
 )
 TARGET_S = 0.5

@@ -135,7 +135,17 @@ def test_simulate_with_a_missing_run_folder_is_a_clear_error(tmp_path, capsys) -
     assert "run folder" in capsys.readouterr().err
 
 
-COMMAND_NAMES = ["lqr", "simulate", "roa", "train", "reproduce", "ablation", "plot", "publish"]
+COMMAND_NAMES = [
+    "lqr",
+    "simulate",
+    "roa",
+    "train",
+    "export",
+    "reproduce",
+    "ablation",
+    "plot",
+    "publish",
+]
 
 
 def test_help_of_every_command_has_a_description(capsys) -> None:

@@ -263,7 +263,7 @@ def export_controller(
     """Write ``controller``'s decision to ``path`` in ``fmt`` with its metadata beside it
     (:func:`metadata_path`), after checking it (:func:`check_export`) on ``count``
     observations (:func:`check_observations` with ``seed``). Both files are written
-    atomically, the model last-but-one and only when the check passed.
+    atomically (the model, then its metadata), and only when the check passed.
 
     Raises
     ------
