@@ -98,7 +98,7 @@ class DeployedController:
 
     def __init__(
         self,
-        policy: nn.Module,
+        policy: torch.nn.Module,
         system: System,
         design: LQRDesign,
         hybrid_spec: HybridSpec | None = None,
