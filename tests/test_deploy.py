@@ -168,6 +168,33 @@ def test_export_check_passes_at_1e_6(runs, tmp_path, name, fmt):
         assert metadata["certificate"]["rho"] == controller.certificate.rho
 
 
+@pytest.mark.parametrize("variant", ["leoc", "authors"])
+@pytest.mark.parametrize("system", ["pendulum", "cartpole", "mountaincar", "acrobot"])
+def test_lqr_export_of_every_system_passes_its_check(tmp_path, system, variant):
+    """Every observation layout (angles through cos and sin, plain states, two angles) and the
+    authors' sin-squashed LQR."""
+    if system == "acrobot" and variant == "authors":
+        pytest.skip("the authors' variant has no LQR of the acrobot")
+    controller = leoc.load(system, variant=variant)
+    assert controller.saturation == ("sin" if variant == "authors" else "clip")
+    result = export_controller(controller, tmp_path / "model.onnx", "onnx", count=20_000)
+    assert result.check.passed and result.check.max_error <= 1e-6
+
+
+@pytest.mark.slow
+def test_export_of_a_cartpole_roa_hybrid_passes_its_check(tmp_path):
+    """The ROA relevance on the cart-pole's layout (a plain position, an angle through cos and
+    sin), whose certificate takes minutes to prove."""
+    out = tmp_path / "run"
+    train = ["train", "cartpole", "--algo", "ddpg", "--hybrid", "--relevance", "roa"]
+    assert main([*train, "--profile", "smoke", "--out", str(out), "--quiet"]) == 0
+    controller = leoc.load(out)
+    for fmt in ("onnx", "torchscript"):
+        result = export_controller(controller, tmp_path / f"model.{fmt}", fmt)
+        assert result.check.passed and result.check.max_error <= 1e-6
+    assert json.loads(result.metadata.read_text())["certificate"]["flat_top_rho"] > 0
+
+
 def test_a_wrong_export_fails_its_check_and_writes_nothing(runs, tmp_path, monkeypatch):
     """The check compares the exported bytes with torch: a model exported without the
     relevance (r = 0: the learned part alone) is caught, and nothing is written."""
@@ -311,6 +338,7 @@ def test_bad_input_is_refused_in_one_line(runs, tmp_path, capsys):
     _one_line_error(capsys, ["export", run, "--format", "tflite"], "--format", "tflite")
     _one_line_error(capsys, ["export", str(tmp_path / "none")], "RUN_DIR|SYSTEM", "none")
     _one_line_error(capsys, ["export", run, "--method", "continuous"], "--method", run)
+    _one_line_error(capsys, ["export", run, "--variant", "authors"], "--variant", run)
     _one_line_error(capsys, ["export", str(tmp_path)], "run folder", str(tmp_path))
     _one_line_error(capsys, ["export", run, "--out", str(tmp_path)], "--out", "folder")
     assert main(["export", run, "--out", out, "--overwrite", "--check-count", "100"]) == 0

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, positive_int, system_or_run_dir
-from leoc.names import LQR_METHODS
+from leoc.names import LQR_METHODS, VARIANT_NAMES
 
 #: What ``--format`` accepts (``leoc.deploy.EXPORT_FORMATS``, without importing torch).
 FORMATS = ("onnx", "torchscript")
@@ -60,6 +60,11 @@ def add_parser(commands: Any) -> None:
         default=1,
         help="a system's LQR only: its control period in simulator steps (default 1)",
     )
+    export.add_argument(
+        "--variant",
+        choices=VARIANT_NAMES,
+        help="a system's LQR only: leoc's (default) or the authors' (their LQR and sin squash)",
+    )
     export.set_defaults(run=run)
 
 
@@ -75,14 +80,16 @@ def run(args: argparse.Namespace) -> int:
     from leoc.deploy import export_controller, load
 
     if isinstance(args.target, Path):
-        if args.method is not None or args.action_repeat != 1:
+        if args.method is not None or args.action_repeat != 1 or args.variant is not None:
             raise ValueError(
-                "--method, --action-repeat: expected them only with SYSTEM (its LQR alone), "
-                f"found them with the run folder {str(args.target)!r} (its LQR is its own)"
+                "--method, --action-repeat, --variant: expected them only with SYSTEM (its LQR "
+                f"alone), found them with the run folder {str(args.target)!r} (its LQR is its "
+                "own)"
             )
         controller = load(args.target)
     else:
-        controller = load(args.target, method=args.method, action_repeat=args.action_repeat)
+        variant = args.variant or "leoc"
+        controller = load(args.target, args.method, args.action_repeat, variant)
     out = args.out if args.out is not None else _default_out(args.target, args.format)
     try:
         result = export_controller(

@@ -61,12 +61,14 @@ class Decision(nn.Module):
 
 def output_saturation(controller: nn.Module) -> str:
     """The squash of a loaded controller's output: that of its outermost module with a
-    ``saturation`` (a hybrid's, or PILCO's ``sin``); ``clip`` when it has none or it is the
-    actuator's own clip."""
+    ``saturation`` (a hybrid's, or PILCO's ``sin``) or a ``Saturated`` wrapper's ``mode`` (the
+    authors' LQR: ``sin``); ``clip`` when it has none or it is the actuator's own clip."""
     from leoc.policies.hybrid import ACTUATOR_CLIPS
+    from leoc.policies.saturation import Saturated
 
     for module in controller.modules():
-        saturation = getattr(module, "saturation", None)
+        saturation = module.mode if isinstance(module, Saturated) else None
+        saturation = getattr(module, "saturation", saturation)
         if isinstance(saturation, str):
             return "clip" if saturation in ACTUATOR_CLIPS else saturation
     return "clip"
