@@ -149,6 +149,7 @@ def test_lambda_init_and_freeze_lambda_reach_the_loaded_policy(tmp_path, capsys)
         ["--relevance-parametrisation", "precision"],
         ["--r-min", "0.5"],
         ["--relevance-lr-scale", "0.1"],
+        ["--relevance-power", "2"],
         ["--rho-in-fraction", "0.5"],
         ["--width-init", "2"],
         ["--freeze-width"],
@@ -168,6 +169,8 @@ def test_a_relevance_flag_without_hybrid_is_an_error_naming_it(tmp_path, capsys,
         (["--lambda-init", "1,0,1"], "lambda_init"),
         (["--lambda-init", "1,2"], "lambda_init"),  # pendulum's observation has 3 entries
         (["--relevance-lr-scale", "0"], "relevance_lr_scale"),
+        (["--relevance-power", "0.5"], "relevance_power"),
+        (["--relevance", "roa", "--relevance-power", "2"], "relevance_power"),
         (["--relevance", "roa", "--rho-in-fraction", "2"], "rho_in_fraction"),
         (["--relevance", "roa", "--width-init", "-1"], "width_init"),
         (["--relevance", "lyapunov", "--lambda-init", "1,2,3"], "lambda_init"),  # a scalar
@@ -234,3 +237,39 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
     roa = ["roa", "--controller", str(run), "--samples", "500", "--starts", "4", "--json"]
     assert main(roa) == 0
     assert json.loads(capsys.readouterr().out)["basins"][run.name]
+
+
+@pytest.mark.parametrize(
+    ("algo", "flags", "module_name"),
+    [
+        ("ddpg", ("--relevance-power", "2"), "PaperRelevance"),
+        ("sac", ("--relevance-power", "2", "--r-min", "0.5"), "FlooredRelevance"),
+        ("pilco", ("--relevance-power", "2", "--r-min", "0.5"), "FlooredRelevance"),
+    ],
+)
+def test_relevance_power_reaches_the_loaded_controller(tmp_path, capsys, algo, flags, module_name):
+    """--relevance-power 2: config.json records it, the loaded (float64, physical) controller's
+    relevance is (1 + d^2)^-2 of its own learned Lambda (numpy reference) off the operating
+    point, with r(a) = 1; leoc simulate runs on the folder."""
+    import numpy as np
+
+    from leoc.experiments.controllers import load_trained_controller
+
+    run = tmp_path / f"{algo}_power2"
+    argv = ["train", "pendulum", "--algo", algo, "--hybrid", *flags, *SMOKE, "--out", str(run)]
+    assert main(argv) == 0
+    assert json.loads((run / "config.json").read_text())["hybrid"]["relevance_power"] == 2.0
+    controller = load_trained_controller(run)
+    (module,) = [m for m in controller.modules() if type(m).__name__ == module_name]
+    assert module.power == 2.0
+    lam = module.lambda_.detach().numpy()
+    rng = np.random.default_rng(3)
+    theta, speed = rng.uniform(-3.0, 3.0, 200), rng.uniform(-8.0, 8.0, 200)
+    obs = np.stack([np.cos(theta), np.sin(theta), speed], axis=-1)
+    d = ((obs - np.array([1.0, 0.0, 0.0])) ** 2 / lam).sum(axis=-1)
+    with torch.no_grad():
+        r = module(torch.as_tensor(obs)).numpy()[:, 0]
+        assert float(module(torch.tensor([[1.0, 0.0, 0.0]], dtype=torch.float64))) == 1.0
+    np.testing.assert_allclose(r, 1.0 / (1.0 + d**2) ** 2, rtol=1e-12)
+    assert main(["simulate", str(run), "--json"]) == 0
+    capsys.readouterr()

@@ -91,6 +91,16 @@ BAD_FIELDS = [
     ({"relevance": "lyapunov", "lambda_init": (1.0, 2.0, 3.0)}, "lambda_init"),
     ({"relevance": "lyapunov", "lambda_init": 0.0}, "lambda_init"),
     ({"relevance": "lyapunov", "r_min": 0.9}, "r_min"),
+    # the relevance's power p of (1 + d^p)^-2
+    ({"relevance_power": 0.5}, "relevance_power"),
+    ({"relevance_power": 0.0}, "relevance_power"),
+    ({"relevance_power": math.inf}, "relevance_power"),
+    ({"relevance_power": math.nan}, "relevance_power"),
+    ({"relevance_power": True}, "relevance_power"),
+    ({"relevance_power": "2"}, "relevance_power"),
+    ({"relevance_power": 2.0, "relevance_parametrisation": "precision"}, "relevance_power"),
+    ({"relevance_power": 2.0, "relevance": "roa"}, "relevance_power"),
+    ({"relevance_power": 2.0, "relevance": "lyapunov"}, "relevance_power"),
 ]
 
 
@@ -472,6 +482,7 @@ EXPECTED_SPEC = {
     # fields added after these configs were saved: their defaults
     "r_min": None,
     "relevance_lr_scale": 1.0,
+    "relevance_power": 1.0,
 }
 
 

@@ -396,13 +396,91 @@ def test_lyapunov_relevance_is_one_only_at_the_operating_point(plants, name):
 
 
 # ---------------------------------------------------------------------------------------------
+# 3b. The power p of r = (1 + d^p)^-2
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", SYSTEMS)
+@pytest.mark.parametrize("r_min", (0.5, 0.9))
+def test_power_two_floor_keeps_r_above_r_min_and_is_tight(plants, name, r_min):
+    """The floor for p = 2 keeps (1 + d^2)^-2 >= r_min on the proved set, the numpy formula
+    at the floor's own Lambda; it is narrower than p = 1's (d may reach sqrt(d_max) > d_max),
+    and without angles (the mountain car) r_min is reached on the boundary (tight)."""
+    system, design, certificate = plants[name]
+    P, rho = np.asarray(certificate.P), certificate.rho
+    layout = system.observation.to_list()
+    floor = relevance_floor(layout, P, rho, r_min, power=2.0)
+    np.testing.assert_allclose(
+        relevance_floor(layout, P, rho, r_min) / floor,
+        # f ~ 1 / d_max and d_max(p = 2) = sqrt(d_max(p = 1)): f(1) / f(2) = 1 / sqrt(d_max(1))
+        1.0 / math.sqrt(r_min**-0.5 - 1.0),
+        rtol=1e-12,
+    )
+    obs = _observe(system, _proved_set_deviations(P, rho, 6_000, seed=7))
+    point = np.asarray(system.operating_obs)
+    distance = ((obs - point) ** 2 / floor).sum(axis=-1)
+    r = 1.0 / (1.0 + distance**2) ** 2
+    assert r.min() >= r_min
+    if name == "mountaincar":
+        assert r.min() == pytest.approx(r_min, rel=1e-6)
+    module = FlooredRelevance(point, floor, power=2.0)
+    with torch.no_grad():
+        module.log_excess.fill_(-60.0)  # at the floor
+    np.testing.assert_allclose(_relevance(module, obs), r, rtol=1e-9)
+
+
+def test_power_leaks_at_fourth_order_near_the_operating_point(plants):
+    """Along a ray x = a + t v: 1 - r ~ 2 d(t) = O(t^2) for the paper's relevance and
+    2 d(t)^2 = O(t^4) for p = 2, measured on the built hybrid's relevance (log-log slope of
+    1 - r against t between t = 1e-2 and 1e-3), and a hybrid with p = 2 keeps r = 1 only at a."""
+    system, design, certificate = plants["cartpole"]
+    point = torch.as_tensor(system.operating_obs, dtype=DTYPE)
+    direction = torch.linspace(0.3, 1.0, point.shape[0], dtype=DTYPE)
+    H = nn.Linear(point.shape[0], 1, dtype=DTYPE)
+    slopes = {}
+    for power in (1.0, 2.0):
+        spec = HybridSpec(relevance_power=power)
+        policy = build_hybrid(spec, hybrid_design(spec, system, design, certificate=certificate), H)
+        with torch.no_grad():
+            leak = [1.0 - float(policy.relevance(point + t * direction)) for t in (1e-2, 1e-3)]
+        slopes[power] = math.log10(leak[0] / leak[1])
+        assert leak[1] > 0.0  # r < 1 off a
+    assert slopes[1.0] == pytest.approx(2.0, abs=0.01)
+    assert slopes[2.0] == pytest.approx(4.0, abs=0.01)
+
+
+def test_power_spec_builds_its_relevance_and_power_one_is_todays(plants):
+    """p = 2 without a floor: a PaperRelevance(power=2) with Lambda = lambda_init; p = 1: the
+    hybrid's own log lambda, as before the option (no relevance module)."""
+    from leoc.policies import PaperRelevance
+
+    system, design, certificate = plants["pendulum"]
+    H = nn.Linear(3, 1, dtype=DTYPE)
+    for power, kind in ((2.0, PaperRelevance), (1.0, type(None))):
+        spec = HybridSpec(relevance_power=power, lambda_init=0.7)
+        policy = build_hybrid(spec, hybrid_design(spec, system, design, certificate=certificate), H)
+        assert isinstance(policy.relevance_module, kind)
+        obs = _observe(system, _proved_set_deviations(design.P, certificate.rho, 500, seed=9))
+        d = ((obs - np.asarray(system.operating_obs)) ** 2 / 0.7).sum(axis=-1)
+        with torch.no_grad():
+            r = policy.relevance(torch.as_tensor(obs)).numpy()[:, 0]
+        np.testing.assert_allclose(r, 1.0 / (1.0 + d**power) ** 2, rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
 # 4. The hybrid's identities, with both designs
 # ---------------------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("name", ["pendulum", "cartpole"])
 @pytest.mark.parametrize(
-    "spec", [HybridSpec(r_min=0.9), HybridSpec(relevance="lyapunov", lambda_init=0.2)]
+    "spec",
+    [
+        HybridSpec(r_min=0.9),
+        HybridSpec(relevance="lyapunov", lambda_init=0.2),
+        HybridSpec(relevance_power=2.0, lambda_init=0.3),
+        HybridSpec(relevance_power=1.5, r_min=0.5),
+    ],
 )
 def test_identities_at_the_operating_point(plants, name, spec):
     system, design, certificate = plants[name]
@@ -429,6 +507,8 @@ def test_identities_at_the_operating_point(plants, name, spec):
 def test_good_specs_round_trip():
     for spec in (
         HybridSpec(r_min=0.99),
+        HybridSpec(r_min=0.5, relevance_power=2.0),
+        HybridSpec(relevance_power=3),
         HybridSpec(relevance="lyapunov", lambda_init=3.0, learn_lambda=False),
         HybridSpec(relevance="roa", r_min=0.5),  # the ROA relevance ignores r_min
         HybridSpec(relevance="paper", lambda_init=(1.0, 2.0), r_min=0.5),

@@ -39,6 +39,7 @@ HYBRID_FLAGS = {
     "learn_width": "--freeze-width",
     "r_min": "--r-min",
     "relevance_lr_scale": "--relevance-lr-scale",
+    "relevance_power": "--relevance-power",
 }
 """Each :class:`~leoc.policies.HybridSpec` field and the ``leoc train`` flag that sets it (a
 ``--freeze-X`` flag sets ``learn_X`` to False); only with ``--hybrid``."""
@@ -153,6 +154,13 @@ def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
         metavar="FLOAT",
         help="the relevance's parameters train at the actor's learning rate times this (> 0, "
         "default 1); DDPG/TD3/SAC",
+    )
+    relevance.add_argument(
+        "--relevance-power",
+        type=float,
+        metavar="FLOAT",
+        help="paper relevance (log lambda): p >= 1 of r = (1 + d^p)^-2 (default 1, the paper's; "
+        "2: the learned part leaks into the LQR's neighbourhood at fourth order, not second)",
     )
     add_roa_relevance_arguments(relevance)
 

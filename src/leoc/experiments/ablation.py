@@ -223,6 +223,15 @@ RELEVANCE_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         "distance = LQR's Lyapunov function V / (lambda rho), lambda learned",
         {"relevance": "lyapunov"},
     ),
+    "relevance_power_2": ("r = (1 + d^2)^-2 (Lambda learned, no floor)", {"relevance_power": 2.0}),
+    "relevance_power_2_floor_0.5": (
+        "r = (1 + d^2)^-2, Lambda floored: r >= 0.5 on the LQR's proved set",
+        {"relevance_power": 2.0, "r_min": 0.5},
+    ),
+    "relevance_power_2_floor_0.9": (
+        "r = (1 + d^2)^-2, Lambda floored: r >= 0.9 on the LQR's proved set",
+        {"relevance_power": 2.0, "r_min": 0.9},
+    ),
 }
 #: Every setting the harness runs: the default grid's, the combinations, the exit shapes,
 #: today's defaults, SAC's settings and the relevance's.

@@ -23,6 +23,7 @@ from .relevance import (
     ROARelevance,
     paper_relevance,
     relevance_floor,
+    relevance_of_distance,
 )
 from .saturation import SATURATION_MODES, saturate
 from .spec import (
@@ -63,6 +64,7 @@ __all__ = [
     "lqr_controller",
     "paper_relevance",
     "relevance_floor",
+    "relevance_of_distance",
     "roa_hybrid",
     "saturate",
     "with_control_period",

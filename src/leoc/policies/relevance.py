@@ -157,8 +157,10 @@ __all__ = [
     "PrecisionRelevance",
     "RELEVANCE_PARAMETRISATIONS",
     "ROARelevance",
+    "check_relevance_power",
     "paper_relevance",
     "relevance_floor",
+    "relevance_of_distance",
 ]
 
 #: Relevance functions r(x) of a hybrid: the paper's ``(1 + d)^-2`` or the ROA relevance, flat on
@@ -181,15 +183,42 @@ FLOOR_MARGIN = 1e-9
 UNIT_CIRCLE_ATOL = 1e-6  # |cos^2 a + sin^2 a - 1| allowed in an operating observation
 
 
-def paper_relevance(x: Tensor, operating_point: Tensor, log_lambda: Tensor) -> Tensor:
-    r"""The paper's :math:`r(x) = (1 + d(x))^{-2}`, :math:`d = \sum_i (x_i - a_i)^2 / \lambda_i`.
+def paper_relevance(
+    x: Tensor, operating_point: Tensor, log_lambda: Tensor, power: float = 1.0
+) -> Tensor:
+    r"""The paper's :math:`r(x) = (1 + d(x))^{-2}`, :math:`d = \sum_i (x_i - a_i)^2 / \lambda_i`;
+    with ``power`` :math:`p \ne 1`, :math:`r = (1 + d^p)^{-2}` (:func:`relevance_of_distance`).
 
     The one formula behind :class:`PaperRelevance` and :class:`~leoc.policies.HybridPolicy`'s
     default, so both give the same numbers bit for bit. Shapes: ``x`` (..., D),
     ``operating_point`` and ``log_lambda`` (D,) -> (..., 1).
     """
     distance = ((x - operating_point).square() / torch.exp(log_lambda)).sum(dim=-1, keepdim=True)
+    return relevance_of_distance(distance, power)
+
+
+def relevance_of_distance(distance: Tensor, power: float = 1.0) -> Tensor:
+    r""":math:`r = (1 + d^p)^{-2}` of a distance :math:`d \ge 0` (the paper: :math:`p = 1`).
+
+    Near the operating point :math:`1 - r \approx 2 d^p`: with :math:`p = 2` the hybrid leaks
+    its learned part into the LQR's neighbourhood at fourth order in the deviation instead of
+    second, while far from it (:math:`d > 1`) :math:`r` falls faster than the paper's. Any
+    :math:`p \ge 1` keeps :math:`r(a) = 1` and :math:`\nabla r(a) = 0`, hence
+    :math:`\pi(a) = G(a)` and :math:`d\pi/dx(a) = W`. ``power == 1`` computes exactly the
+    paper's :math:`(1 + d)^{-2}` (no ``pow``), bit for bit as before the option existed.
+    """
+    if power != 1.0:
+        distance = distance.pow(power)
     return (1.0 + distance).square().reciprocal()
+
+
+def check_relevance_power(power: object) -> float:
+    """``power`` as a float, or ValueError naming ``relevance_power``: a finite number >= 1
+    (below 1, :math:`d^p` has an infinite slope at the operating point)."""
+    ok = isinstance(power, (int, float)) and not isinstance(power, bool)
+    if not ok or not math.isfinite(power) or power < 1.0:
+        raise ValueError(f"relevance_power: expected a finite number >= 1, found {power!r}")
+    return float(power)
 
 
 class PaperRelevance(nn.Module):
@@ -204,6 +233,9 @@ class PaperRelevance(nn.Module):
     learn_lambda : bool
         ``log_lambda`` (D,) is an ``nn.Parameter`` if True, else a buffer.
     dtype : torch.dtype
+    power : float
+        :math:`p \ge 1` of :math:`r = (1 + d^p)^{-2}` (:func:`relevance_of_distance`; 1: the
+        paper's).
     """
 
     operating_point: Tensor
@@ -215,11 +247,13 @@ class PaperRelevance(nn.Module):
         lambda_init: float | object = 1.0,
         learn_lambda: bool = True,
         dtype: torch.dtype = torch.float64,
+        power: float = 1.0,
     ) -> None:
         super().__init__()
         from ._checks import positive_scalar_or_vector
 
         check_flag(learn_lambda, "learn_lambda")
+        self.power = check_relevance_power(power)
         point = as_point(operating_point, "operating_point", dtype)
         self.register_buffer("operating_point", point)
         size = point.shape[0]
@@ -235,7 +269,11 @@ class PaperRelevance(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
-        return paper_relevance(x, self.operating_point, self.log_lambda)
+        return paper_relevance(x, self.operating_point, self.log_lambda, self.power)
+
+    def extra_repr(self) -> str:
+        learned = isinstance(self.log_lambda, nn.Parameter)
+        return f"D={self.operating_point.shape[0]}, learn_lambda={learned}, power={self.power:g}"
 
 
 class PrecisionRelevance(nn.Module):
@@ -529,14 +567,17 @@ def _positive_number(value: object, name: str) -> float:
     return float(value)
 
 
-def relevance_floor(obs_layout: Sequence[Any], P: object, rho: float, r_min: float) -> np.ndarray:
+def relevance_floor(
+    obs_layout: Sequence[Any], P: object, rho: float, r_min: float, power: float = 1.0
+) -> np.ndarray:
     r"""Floor :math:`f` (D,) on the paper relevance's :math:`\lambda`: every :math:`\lambda \ge f`
     gives :math:`r \ge r_{min}` on :math:`\Omega = \{x : z^\top P z \le \rho\}`.
 
-    Derivation. :math:`r = (1 + d)^{-2} \ge r_{min}` iff :math:`d \le d_{max} =
-    r_{min}^{-1/2} - 1`. A plain entry :math:`j` of state :math:`s` adds :math:`z_s^2 /
-    \lambda_j`; an angle :math:`s` in columns :math:`c, k` adds :math:`(\cos\theta - \cos a)^2 /
-    \lambda_c + (\sin\theta - \sin a)^2 / \lambda_k \le \max(\lambda_c^{-1}, \lambda_k^{-1})
+    Derivation. :math:`r = (1 + d^p)^{-2} \ge r_{min}` iff :math:`d \le d_{max} =
+    (r_{min}^{-1/2} - 1)^{1/p}` (``power`` :math:`p`; the paper's :math:`p = 1`). A plain entry
+    :math:`j` of state :math:`s` adds :math:`z_s^2 / \lambda_j`; an angle :math:`s` in columns
+    :math:`c, k` adds :math:`(\cos\theta - \cos a)^2 / \lambda_c + (\sin\theta - \sin a)^2 /
+    \lambda_k \le \max(\lambda_c^{-1}, \lambda_k^{-1})
     \cdot 4 \sin^2(\delta / 2) \le \max(\lambda_c^{-1}, \lambda_k^{-1}) z_s^2`. Hence
     :math:`d \le z^\top \mathcal{W} z`, :math:`\mathcal{W} = \operatorname{diag}(w_s)`, and with
     :math:`z = \sqrt\rho P^{-1/2} u`, :math:`|u| \le 1`: :math:`\max_\Omega z^\top \mathcal{W} z
@@ -559,11 +600,14 @@ def relevance_floor(obs_layout: Sequence[Any], P: object, rho: float, r_min: flo
     rho : float
         The proved level (> 0).
     r_min : float in (0, 1)
+    power : float
+        :math:`p \ge 1` of the relevance :math:`(1 + d^p)^{-2}` the floor is for.
 
     Returns
     -------
     numpy.ndarray, shape (D,)
     """
+    power = check_relevance_power(power)
     matrix = lyapunov_matrix(P).numpy()
     size = matrix.shape[0]
     rho = _positive_number(rho, "rho")
@@ -573,7 +617,7 @@ def relevance_floor(obs_layout: Sequence[Any], P: object, rho: float, r_min: flo
     spread = np.diag(inverse).copy()  # (P^-1)_ss
     # diag(1/c) P^-1 is similar to the symmetric diag(c)^-1/2 P^-1 diag(c)^-1/2
     peak = float(np.linalg.eigvalsh(inverse / np.sqrt(np.outer(spread, spread)))[-1])
-    d_max = float(r_min) ** -0.5 - 1.0
+    d_max = (float(r_min) ** -0.5 - 1.0) ** (1.0 / power)
     per_state = (1.0 + FLOOR_MARGIN) * spread * rho * peak / d_max  # 1 / w_s
     floor = np.empty(as_observation_map(obs_layout, size).obs_dim)
     for kind, index, column, sin_column in _layout_plan(obs_layout, size):
@@ -588,7 +632,7 @@ class FlooredRelevance(nn.Module):
 
     .. math::
 
-        r(x) = \frac{1}{(1 + d(x))^2}, \qquad d(x) = \sum_{j=1}^{D} \frac{(x_j - a_j)^2}
+        r(x) = \frac{1}{(1 + d(x)^p)^2}, \qquad d(x) = \sum_{j=1}^{D} \frac{(x_j - a_j)^2}
         {\lambda_j}, \qquad \lambda_j = f_j (1 + e^{q_j}),
 
     :math:`q` (``log_excess``) learnable: whatever training does, :math:`\lambda > f`, so with the
@@ -606,6 +650,9 @@ class FlooredRelevance(nn.Module):
     learn_lambda : bool
         ``log_excess`` (D,) is an ``nn.Parameter`` if True, else a buffer.
     dtype : torch.dtype
+    power : float
+        :math:`p \ge 1` (1: the paper's relevance); the floor must be
+        :func:`relevance_floor`'s for the same :math:`p`.
     """
 
     operating_point: Tensor
@@ -619,11 +666,13 @@ class FlooredRelevance(nn.Module):
         lambda_init: float | object = 1.0,
         learn_lambda: bool = True,
         dtype: torch.dtype = torch.float64,
+        power: float = 1.0,
     ) -> None:
         super().__init__()
         from ._checks import check_positive, positive_scalar_or_vector
 
         check_flag(learn_lambda, "learn_lambda")
+        self.power = check_relevance_power(power)
         point = as_point(operating_point, "operating_point", torch.float64)
         size = point.shape[0]
         lower = as_float_tensor(floor, "floor", torch.float64)
@@ -645,11 +694,11 @@ class FlooredRelevance(nn.Module):
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
         distance = ((x - self.operating_point).square() / self.lambda_).sum(dim=-1, keepdim=True)
-        return (1.0 + distance).square().reciprocal()
+        return relevance_of_distance(distance, self.power)
 
     def extra_repr(self) -> str:
         learned = isinstance(self.log_excess, nn.Parameter)
-        return f"D={self.operating_point.shape[0]}, learn_lambda={learned}"
+        return f"D={self.operating_point.shape[0]}, learn_lambda={learned}, power={self.power:g}"
 
 
 class LyapunovRelevance(nn.Module):

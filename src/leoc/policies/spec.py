@@ -46,8 +46,10 @@ from .relevance import (
     RELEVANCE_PARAMETRISATIONS,
     FlooredRelevance,
     LyapunovRelevance,
+    PaperRelevance,
     PrecisionRelevance,
     ROARelevance,
+    check_relevance_power,
     relevance_floor,
 )
 
@@ -120,6 +122,12 @@ class HybridSpec:
     relevance_lr_scale : float
         The relevance's parameters train in their own optimiser group, at the actor's learning
         rate times this (> 0; default 1: one group, as before). Stable-Baselines3 learners only.
+    relevance_power : float
+        Paper relevance (``log_lambda``, floored or not): :math:`p \ge 1` of
+        :math:`r = (1 + d^p)^{-2}` (:func:`~leoc.policies.relevance_of_distance`); 1 (default):
+        the paper's. With :math:`p = 2` the learned part leaks into the LQR's neighbourhood at
+        fourth order in the deviation instead of second. Not with the ``precision``
+        parametrisation, the ROA or the Lyapunov relevance.
 
     Raises
     ------
@@ -136,6 +144,7 @@ class HybridSpec:
     learn_width: bool = True
     r_min: float | None = None
     relevance_lr_scale: float = 1.0
+    relevance_power: float = 1.0
 
     def __post_init__(self) -> None:
         if self.relevance not in RELEVANCE_DESIGNS:
@@ -150,6 +159,7 @@ class HybridSpec:
         for name in ("learn_lambda", "learn_width"):
             _flag(getattr(self, name), name)
         _positive(self.relevance_lr_scale, "relevance_lr_scale")
+        object.__setattr__(self, "relevance_power", check_relevance_power(self.relevance_power))
         if self.r_min is not None:
             value = self.r_min
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < 1:
@@ -371,6 +381,14 @@ class PaperRelevanceDesign(RelevanceDesign):
                 f"r_min: expected None with relevance_parametrisation='precision' (an "
                 f"unconstrained S has no floor), found {spec.r_min!r}"
             )
+        if spec.relevance_power != 1.0 and (
+            spec.relevance != "paper" or spec.relevance_parametrisation == "precision"
+        ):
+            raise ValueError(
+                "relevance_power: expected 1 except with the paper relevance held as log lambda "
+                f"(relevance={spec.relevance!r}, relevance_parametrisation="
+                f"{spec.relevance_parametrisation!r}), found {spec.relevance_power!r}"
+            )
 
     def resolve(
         self, spec: HybridSpec, system: Any, lqr_design: Any, certificate: Any
@@ -384,7 +402,7 @@ class PaperRelevanceDesign(RelevanceDesign):
                 f"on, found none for {system.name} (rho = {proved.rho!r}); drop r_min"
             )
         layout = system.observation.to_list()
-        floor = relevance_floor(layout, proved.P, proved.rho, spec.r_min)
+        floor = relevance_floor(layout, proved.P, proved.rho, spec.r_min, spec.relevance_power)
         return {"lambda_floor": floor.tolist(), "rho": float(proved.rho), "r_min": spec.r_min}
 
     def build(
@@ -397,6 +415,7 @@ class PaperRelevanceDesign(RelevanceDesign):
                 lambda_init=spec.lambda_init,
                 learn_lambda=spec.learn_lambda,
                 dtype=dtype,
+                power=spec.relevance_power,
             )
             return {"relevance": floored}
         if spec.relevance_parametrisation == "precision":
@@ -407,6 +426,11 @@ class PaperRelevanceDesign(RelevanceDesign):
                 dtype=dtype,
             )
             return {"relevance": precision}
+        if spec.relevance_power != 1.0:
+            paper = PaperRelevance(
+                operating_obs, spec.lambda_init, spec.learn_lambda, dtype, spec.relevance_power
+            )
+            return {"relevance": paper}
         return {"lambda_init": spec.lambda_init, "learn_lambda": spec.learn_lambda}
 
 

@@ -109,7 +109,11 @@ class PhysicalPolicy(nn.Module):
 
 
 #: Relevance modules whose one learned tensor (named here) is copied into a float64 rebuild.
-LEARNED_RELEVANCE = {"FlooredRelevance": "log_excess", "LyapunovRelevance": "log_lambda"}
+LEARNED_RELEVANCE = {
+    "FlooredRelevance": "log_excess",
+    "LyapunovRelevance": "log_lambda",
+    "PaperRelevance": "log_lambda",
+}
 
 
 def _frozen_relevance64(actor: HybridActorMixin) -> dict[str, Any]:
