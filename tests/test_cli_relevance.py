@@ -250,7 +250,8 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
 def test_relevance_power_reaches_the_loaded_controller(tmp_path, capsys, algo, flags, module_name):
     """--relevance-power 2: config.json records it, the loaded (float64, physical) controller's
     relevance is (1 + d^2)^-2 of its own learned Lambda (numpy reference) off the operating
-    point, with r(a) = 1; leoc simulate runs on the folder."""
+    point, with r(a) = 1; leoc simulate and leoc roa run on the folder, and the same command
+    again returns the finished run."""
     import numpy as np
 
     from leoc.experiments.controllers import load_trained_controller
@@ -273,3 +274,10 @@ def test_relevance_power_reaches_the_loaded_controller(tmp_path, capsys, algo, f
     np.testing.assert_allclose(r, 1.0 / (1.0 + d**2) ** 2, rtol=1e-12)
     assert main(["simulate", str(run), "--json"]) == 0
     capsys.readouterr()
+    roa = ["roa", "--controller", str(run), "--samples", "500", "--starts", "4", "--json"]
+    assert main(roa) == 0
+    assert json.loads(capsys.readouterr().out)["basins"][run.name]
+    before = (run / "controller.pt").read_bytes() if (run / "controller.pt").exists() else None
+    assert main(argv) == 0  # the same command again: the finished run, nothing retrained
+    if before is not None:
+        assert (run / "controller.pt").read_bytes() == before
