@@ -1,7 +1,8 @@
 """Latency of one decision: the LQR, each hybrid kind and each baseline, in torch, TorchScript
 and ONNX Runtime, batch 1, one thread.
 
-Each controller is a tiny run of the pendulum with the paper's architecture (latency does not
+Each controller is a tiny run of each ``--systems`` (default: the pendulum) with the paper's
+architecture (latency does not
 depend on training, only on the architecture): DDPG, TD3 and SAC trained for 300 steps with
 their default settings (actor MLP 400 x 300: before any gradient step), PILCO for one iteration
 of the smoke profile (``--profile smoke``: an RBF policy of 5 basis functions; the paper's has
@@ -24,6 +25,7 @@ torch runs on one thread (``torch.set_num_threads(1)``). The table prints the me
 Usage::
 
     python benchmarks/bench_latency.py [--calls 10000] [--runs runs/bench-latency]
+        [--systems pendulum cartpole mountaincar]
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-#: The pendulum runs timed: each baseline and each hybrid kind (``leoc train`` arguments).
+#: The runs timed on each system: each baseline and each hybrid kind (``leoc train`` arguments).
 _PILCO = ["--algo", "pilco", "--profile", "smoke"]
 _SB3_STEPS = ["--steps", "300"]
 CONTROLLERS = {
@@ -57,16 +59,18 @@ PERCENTILE = 99
 RUNTIMES = ("torch", "act", "TorchScript", "ONNX Runtime")
 
 
-def trained_runs(folder: Path) -> dict[str, Path]:
-    """Every controller's run folder under ``folder``, trained (smoke profile) if missing."""
+def trained_runs(folder: Path, system: str = "pendulum") -> dict[str, Path]:
+    """Every controller's run folder of ``system`` under ``folder`` (the pendulum's directly
+    there, as before the option), trained (smoke profile) if missing."""
     from leoc.cli import main
 
     runs = {}
+    base = folder if system == "pendulum" else folder / system
     for label, arguments in CONTROLLERS.items():
-        out = folder / label.replace(" ", "_").replace("(", "").replace(")", "").replace(",", "")
+        out = base / label.replace(" ", "_").replace("(", "").replace(")", "").replace(",", "")
         if not (out / "config.json").is_file():
             print(f"training {label} into {out}", flush=True)
-            command = ["train", "pendulum", *arguments, "--quiet"]
+            command = ["train", system, *arguments, "--quiet"]
             if main([*command, "--out", str(out), "--overwrite"]) != 0:
                 raise SystemExit(f"training {label} failed")
         runs[label] = out
@@ -126,21 +130,31 @@ def main() -> None:
     parser.add_argument(
         "--runs", type=Path, default=Path("runs/bench-latency"), help="smoke runs (kept)"
     )
+    parser.add_argument(
+        "--systems", nargs="+", default=["pendulum"], help="systems timed (default: pendulum)"
+    )
     args = parser.parse_args()
     import torch
 
+    torch.set_num_threads(1)
+    for system in args.systems:
+        time_system(system, args.runs, args.calls)
+
+
+def time_system(system: str, folder: Path, calls: int) -> None:
+    """Print the latency table of ``system``'s controllers."""
     import leoc
 
-    torch.set_num_threads(1)
-    runs = trained_runs(args.runs)
-    controllers = {LQR: leoc.load("pendulum")} | {k: leoc.load(v) for k, v in runs.items()}
-    print(f"\nlatency of one decision, batch 1, one thread, {args.calls} calls (median / p99, us)")
+    runs = trained_runs(folder, system)
+    controllers = {LQR: leoc.load(system)} | {k: leoc.load(v) for k, v in runs.items()}
+    title = f"{system}: latency of one decision, batch 1, one thread, {calls} calls"
+    print(f"\n{title} (median / p99, us)")
     header = " | ".join(f"{name:>15}" for name in RUNTIMES)
     print(f"{'controller':<31}| {header} | exported p99 < {TARGET_US:g} us")
     for label, controller in controllers.items():
         cells, exported = [], []
         for runtime, decide in deciders(controller).items():
-            median, p99 = time_calls(decide, args.calls)
+            median, p99 = time_calls(decide, calls)
             cells.append(f"{median:6.1f} / {p99:6.1f}")
             if runtime in ("TorchScript", "ONNX Runtime"):
                 exported.append(p99)
