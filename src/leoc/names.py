@@ -203,6 +203,9 @@ ABLATION_ALL_SETTINGS = (
     "relevance_floor_0.9",
     "relevance_floor_0.5",
     "relevance_lyapunov",
+    "relevance_power_2",
+    "relevance_power_2_floor_0.5",
+    "relevance_power_2_floor_0.9",
 )
 """Every setting the ablation runs (``leoc.experiments.ablation.ALL_SETTINGS``, same order)."""
 ABLATION_TEST_EPISODES = 5
