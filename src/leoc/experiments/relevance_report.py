@@ -235,7 +235,7 @@ def write_relevance_report(
             "first_hold_s": first_hold_seconds(r),
         }
         for r in records
-        if r.get("lqr_agreement")
+        if r.get("lqr_agreement") and not r["lqr_agreement"]["impulse"]["by_construction"]
     ]
     plot_relevance_tradeoff(points, out / RELEVANCE_FIGURE, SETTING_LABELS, KEEP_TOLERANCE_PCT)
     markdown = out / RELEVANCE_TABLE

@@ -97,7 +97,9 @@ def plot_relevance_tradeoff(
     caption = (
         "One point per run (seed). Left of the dashed red line the hybrid keeps its LQR's "
         f"impulse response (within {tolerance_pct:g} % of its peak); lower is learning the "
-        "swing-up sooner. Runs whose held-out swing-ups never all held sit on the dotted line."
+        "swing-up sooner. Runs whose held-out swing-ups never all held sit on the dotted line. "
+        "Runs with r == 1 all along the response (the ROA hybrids) equal their LQR by "
+        "construction and are left out."
     )
     legend_below(figure, axes_handles(axes), caption)
     return save_figure(figure, path)
