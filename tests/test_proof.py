@@ -20,7 +20,19 @@ import torch
 
 from leoc.control import certify_level, certify_lqr, design_lqr, lqr_closed_loop
 from leoc.control.intervals import Jet, UnsupportedOperation, box_jet
-from leoc.control.proof import NO_BALL, _box_bound, _enclose, _Enclosure, _frame, prove_level
+from leoc.control.proof import (
+    MAX_BOXES,
+    NO_BALL,
+    RESOLUTION,
+    _annulus,
+    _box_bound,
+    _enclose,
+    _Enclosure,
+    _frame,
+    _initial_cover,
+    _split,
+    prove_level,
+)
 from leoc.control.roa import _closed_loop, describe_certificate
 from leoc.systems import make_system
 from leoc.systems.mountaincar import TRACK_HIGH, TRACK_LOW
@@ -159,12 +171,12 @@ def _scaled_gains(design, columns, gain_scale):
     return wrong
 
 
-def _first_violation(name: str, P: np.ndarray, W, b, level: float, seed: int) -> float:
-    """Smallest V among 10^6 uniform states of {V <= level} (seeded) where V does not decrease
-    or the state leaves the region; inf if none does."""
+def _first_violation(name: str, P: np.ndarray, W, b, level: float, seed: int, floor=0.0) -> float:
+    """Smallest V >= floor among 10^6 uniform states of {V <= level} (seeded) where V does not
+    decrease or the state leaves the region; inf if none does."""
     z = _ellipsoid(P, level, MONTE_CARLO, np.random.default_rng(seed), surface=False)
     value, following, outside = _numpy_decrease(name, P, np.asarray(W), np.asarray(b), z)
-    violating = ((following >= value) | outside) & (value > 0.0)
+    violating = ((following >= value) | outside) & (value > 0.0) & (value >= floor)
     return float(value[violating].min()) if violating.any() else math.inf
 
 
@@ -193,6 +205,19 @@ def test_a_perturbed_p_is_proved_up_to_its_first_violation():
     proof = prove_level(system, wrong, lqr_closed_loop(design), 1, certificate.rho)
     assert proof.limited_by == "decrease"
     assert PROVED_SHARE * first < proof.rho < first
+
+
+SMALL_BUDGET = 2_000  # box evaluations: the damping x1.5 proof needs about 420 000
+
+
+def test_a_proof_out_of_budget_counts_its_pending_boxes_as_unproved():
+    system, design, certificate = _certified("pendulum")
+    wrong = _scaled_gains(design, slice(2, 3), 1.5)
+    first = _first_violation("pendulum", design.P, wrong.W, wrong.b, certificate.rho, 13)
+    proof = prove_level(system, design.P, wrong, 1, certificate.rho, max_boxes=SMALL_BUDGET)
+    assert proof.limited_by == "budget" and proof.unproved_boxes > 0
+    # Still a proof (the inner ball at least), and never past the first violation.
+    assert 0.0 < proof.inner_level <= proof.rho < first
 
 
 def _assert_nothing_proved(name, P, controller, gain, target):
@@ -454,6 +479,66 @@ def test_box_bound_on_pendulum_boxes_against_the_numpy_closed_loop():
     excess = (bound - highest)[easy] / (highest - lowest)[easy]
     assert easy.sum() > 250
     assert np.median(excess) < 0.01 and excess.max() < 0.05
+
+
+# ---- the box search: every box of the annulus is checked ------------------------------------
+
+
+def _points_in_boxes(points: np.ndarray, centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Whether each point (N, S) lies in at least one box ``centre +/- half`` (B, S)."""
+    gap = np.abs(points[:, None] - centre[None]) - half[None]
+    return (gap <= 1e-12).all(-1).any(-1)
+
+
+@pytest.mark.parametrize("size", [2, 3, 4, 5])
+def test_the_initial_cover_and_the_bisection_tile_the_cube(size):
+    rng = np.random.default_rng(23)
+    radius = 1.7
+    centre, half = (t.numpy() for t in _initial_cover(size, radius))
+    # Volumes add up to the cube's (no overlap then, given the points below cover it).
+    assert np.prod(2.0 * half, -1).sum() == pytest.approx((2.0 * radius) ** size, rel=1e-12)
+    assert _points_in_boxes(rng.uniform(-radius, radius, (2000, size)), centre, half).all()
+    # Bisection: each parent's two children have half its volume, no longer side, and cover it.
+    parent_centre = rng.normal(size=(50, size))
+    parent_half = rng.uniform(0.1, 1.0, size=(50, size))
+    children, halves = (
+        t.numpy() for t in _split(torch.as_tensor(parent_centre), torch.as_tensor(parent_half))
+    )
+    volumes = np.prod(halves, -1).reshape(2, 50)
+    assert volumes == pytest.approx(0.5 * np.prod(parent_half, -1)[None].repeat(2, 0), rel=1e-12)
+    assert np.all(halves.reshape(2, 50, size).max(-1) <= parent_half.max(-1))
+    for index in range(50):
+        offsets = rng.uniform(-1.0, 1.0, (200, size)) * parent_half[index]
+        both = [index, index + 50]
+        assert _points_in_boxes(parent_centre[index] + offsets, children[both], halves[both]).all()
+
+
+def test_the_box_search_checks_every_box_outside_the_inner_ball():
+    # Given an inner radius inside the region where a perturbed loop (damping gain x1.5) already
+    # violates, the search must check the boxes that straddle the inner sphere and stop at the
+    # first Monte Carlo violation outside it, not past it (nor far inside: boxes reach in).
+    system, design, certificate = _certified("pendulum")
+    wrong = _scaled_gains(design, slice(2, 3), 1.5)
+    inner_level = 12.0
+    first = _first_violation(
+        "pendulum", design.P, wrong.W, wrong.b, certificate.rho, 17, floor=inner_level
+    )
+    assert first < 1.01 * inner_level  # violations right outside the inner sphere
+    frame = _frame(system, design.P)
+    with torch.no_grad():
+        search = _annulus(
+            system,
+            wrong,
+            1,
+            frame,
+            math.sqrt(inner_level),
+            math.sqrt(certificate.rho),
+            RESOLUTION[2],
+            MAX_BOXES,
+            math.inf,
+        )
+    assert search.limited_by == "decrease"
+    assert 0.99 * inner_level < search.level <= first
 
 
 # ---- the interval evaluator against samples ----------------------------------------------
