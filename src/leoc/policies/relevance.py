@@ -328,7 +328,7 @@ class PrecisionRelevance(nn.Module):
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         check_last_dim(x, self.operating_point.shape[0], self.operating_point.dtype)
         distance = ((x - self.operating_point).square() * self.precision).sum(dim=-1, keepdim=True)
-        return (1.0 + distance).square().reciprocal()
+        return relevance_of_distance(distance)
 
     def extra_repr(self) -> str:
         return (
@@ -793,7 +793,7 @@ class LyapunovRelevance(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         distance = self.lyapunov(x) / (self.lambda_ * self.rho)
-        return (1.0 + distance).square().reciprocal()
+        return relevance_of_distance(distance)
 
     def extra_repr(self) -> str:
         learned = isinstance(self.log_lambda, nn.Parameter)
