@@ -2,7 +2,34 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+
 import pytest
+
+CACHE_DIR_VARIABLE = "LEOC_CACHE_DIR"
+_session_cache: list[str] = []  # the folder this process made, removed at its end
+
+
+def pytest_configure(config) -> None:
+    """LQR certificates computed by the tests go to one temporary folder per run, not to the
+    user's ``~/.cache/leoc``, unless ``LEOC_CACHE_DIR`` is set already. Set in the process that
+    starts pytest, before xdist starts its workers, so they inherit it and share the folder."""
+    if os.environ.get(CACHE_DIR_VARIABLE) or os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    folder = tempfile.mkdtemp(prefix="leoc-test-cache-")
+    _session_cache.append(folder)
+    os.environ[CACHE_DIR_VARIABLE] = folder
+
+
+def pytest_unconfigure(config) -> None:
+    """Remove the run's certificate folder (only in the process that made it)."""
+    while _session_cache:
+        folder = _session_cache.pop()
+        if os.environ.get(CACHE_DIR_VARIABLE) == folder:
+            del os.environ[CACHE_DIR_VARIABLE]
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(autouse=True)

@@ -68,10 +68,15 @@ from __future__ import annotations
 import copy
 import functools
 import hashlib
+import importlib.util
 import math
+import os
 import pickle
+import sys
+import tempfile
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -580,9 +585,26 @@ def certify_lqr(
     Notes
     -----
     The certificate of the design's own ``G`` (no ``controller`` given) is computed once per
-    process for each system, design and options, and copied out afterwards: the search and
-    the proof are deterministic, and the proof costs 35 s (pendulum) to over 2 minutes
-    (cart-pole), which every ROA-hybrid run used to pay again when it built its relevance.
+    system, design and options, and copied out afterwards: the search and the proof are
+    deterministic (seeded), and the proof costs seconds (pendulum) to minutes (acrobot), which
+    every ROA-hybrid run would pay again when it builds its relevance. It is kept twice:
+
+    - in the process (the last :data:`~leoc.control.roa.CERTIFICATE_CACHE_SIZE`), and
+    - on disk, for the next process (xdist workers, each ``leoc train``, each ablation run):
+      a pickle ``<key>.pkl`` in :func:`~leoc.control.roa.certificate_cache_dir`, that is
+      ``$LEOC_CACHE_DIR/certificates``, else ``$XDG_CACHE_HOME/leoc/certificates``, else
+      ``~/.cache/leoc/certificates``. ``LEOC_CACHE_DIR=off`` turns the disk cache off. Files
+      are written atomically (temporary file, then rename), so concurrent processes never
+      read half a file; a file that does not load is recomputed and rewritten, and a folder
+      that cannot be written is skipped, never an error.
+
+    The key is a SHA-256 of the system's class and attributes, the design's ``W, b, P`` and
+    control period, the options, leoc's version and the source of the modules that compute
+    the certificate (:data:`~leoc.control.roa.PROOF_MODULES` and the system's own module), so
+    editing the proof or the dynamics makes a new key (a system whose source cannot be read
+    is not cached on disk). A proof cut by its wall-clock budget (the acrobot's) is stored as
+    found; delete the folder to prove again. Point ``LEOC_CACHE_DIR`` only at a folder no one
+    else can write: the files are unpickled.
     """
     if controller is not None:
         return certify_level(
@@ -591,13 +613,7 @@ def certify_lqr(
     key = _certificate_key(system, design, options)
     cached = _CERTIFICATES.get(key)
     if cached is None:
-        cached = certify_level(
-            system,
-            design.P,
-            lqr_closed_loop(design),
-            action_repeat=design.action_repeat,
-            **options,
-        )
+        cached = _stored_or_computed(system, design, key, options)
         _CERTIFICATES[key] = cached
         while len(_CERTIFICATES) > CERTIFICATE_CACHE_SIZE:
             _CERTIFICATES.popitem(last=False)
@@ -606,17 +622,135 @@ def certify_lqr(
     return copy.deepcopy(cached)
 
 
+def _stored_or_computed(
+    system: System, design: Any, key: str, options: Mapping[str, Any]
+) -> LyapunovCertificate:
+    """The LQR certificate of ``key`` from the disk cache, or computed (and stored there)."""
+    folder = certificate_cache_dir()
+    if _module_digest(type(system).__module__) is None:
+        folder = None  # a system without readable source: its dynamics are not in the key
+    path = None if folder is None else folder / f"{key}.pkl"
+    stored = None if path is None else _load_certificate(path)
+    if stored is not None:
+        return stored
+    certificate = certify_level(
+        system, design.P, lqr_closed_loop(design), action_repeat=design.action_repeat, **options
+    )
+    if path is not None:
+        _store_certificate(path, certificate)
+    return certificate
+
+
 CERTIFICATE_CACHE_SIZE = 16
 """How many LQR certificates :func:`certify_lqr` keeps per process (least recently used go)."""
 
 _CERTIFICATES: OrderedDict[str, LyapunovCertificate] = OrderedDict()
 
+CACHE_DIR_VARIABLE = "LEOC_CACHE_DIR"
+"""Environment variable naming leoc's cache folder; certificates go to its ``certificates``
+subfolder. Unset or empty: ``$XDG_CACHE_HOME/leoc`` (``~/.cache/leoc`` without it). Set to
+:data:`CACHE_OFF`: no disk cache (:func:`certificate_cache_dir`)."""
+
+CACHE_OFF = "off"
+"""The value of :data:`CACHE_DIR_VARIABLE` that turns the disk cache off (exactly this)."""
+
+CERTIFICATE_FOLDER = "certificates"
+"""Subfolder of the cache folder holding the LQR certificates, one ``<key>.pkl`` each."""
+
+PROOF_MODULES = (
+    "leoc.control.roa",
+    "leoc.control.proof",
+    "leoc.control.intervals",
+    "leoc.systems.base",
+    "leoc.systems.observation",
+)
+"""Modules whose source enters the certificate key (with the system's own module): the
+search, the proof, the interval engine and the shared step and observation code."""
+
+
+def certificate_cache_dir() -> Path | None:
+    """The folder of the on-disk certificate cache, or None when it is off.
+
+    ``$LEOC_CACHE_DIR/certificates`` if :data:`CACHE_DIR_VARIABLE` is set and not empty (None
+    if it is :data:`CACHE_OFF`), else ``$XDG_CACHE_HOME/leoc/certificates``, else
+    ``~/.cache/leoc/certificates`` (None if there is no home folder). Read at every call; the
+    folder is created only when a certificate is written.
+    """
+    value = os.environ.get(CACHE_DIR_VARIABLE, "")
+    if value == CACHE_OFF:
+        return None
+    if value:
+        return Path(value).expanduser() / CERTIFICATE_FOLDER
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    try:
+        base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    except RuntimeError:  # no home folder to expand
+        return None
+    return base / "leoc" / CERTIFICATE_FOLDER
+
+
+@functools.cache
+def _module_digest(name: str) -> str | None:
+    """SHA-256 of a module's source file, read once per process; None if it cannot be read
+    (a class defined in ``__main__``, a notebook, a zip without source)."""
+    try:
+        spec = importlib.util.find_spec(name)
+        origin = None if spec is None else spec.origin
+        if origin is None or not origin.endswith(".py"):
+            return None
+        return hashlib.sha256(Path(origin).read_bytes()).hexdigest()
+    except (ImportError, ValueError, OSError):
+        return None
+
+
+@functools.cache
+def _source_digest() -> str:
+    """SHA-256 of leoc's version and of the source of :data:`PROOF_MODULES`, once per
+    process: a change of the proof code changes every certificate key."""
+    digest = hashlib.sha256()
+    digest.update(str(getattr(sys.modules.get("leoc"), "__version__", "")).encode())
+    for name in PROOF_MODULES:
+        digest.update(name.encode())
+        digest.update(str(_module_digest(name)).encode())
+    return digest.hexdigest()
+
+
+def _load_certificate(path: Path) -> LyapunovCertificate | None:
+    """The certificate pickled at ``path``; None if there is none or it does not load."""
+    try:
+        with path.open("rb") as file:
+            loaded = pickle.load(file)
+    except Exception:  # missing, truncated, corrupt or stale: any failure is a cache miss
+        return None
+    return loaded if isinstance(loaded, LyapunovCertificate) else None
+
+
+def _store_certificate(path: Path, certificate: LyapunovCertificate) -> None:
+    """Pickle ``certificate`` to ``path`` atomically: a temporary file in the same folder,
+    then :func:`os.replace`, so a reader sees the old file or the whole new one. A folder
+    that cannot be written is skipped silently (the cache is an optimisation)."""
+    temporary = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(
+            dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp", delete=False
+        ) as file:
+            temporary = Path(file.name)
+            pickle.dump(certificate, file, protocol=pickle.HIGHEST_PROTOCOL)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(temporary, path)
+    except Exception:  # unwritable, full disk, unpicklable: keep the certificate, skip the file
+        if temporary is not None:
+            temporary.unlink(missing_ok=True)
+
 
 def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) -> str:
     """What an LQR certificate depends on, hashed: the system's class and attributes
     (parameters, step rules; not the cached derived ones), the design's ``W, b, P`` and
-    control period, and the options. The search is deterministic (seeded), so equal keys give
-    equal certificates."""
+    control period, the options, and the code (:func:`_source_digest`, the source of the
+    system's module). The search is deterministic (seeded), so equal keys give equal
+    certificates."""
     digest = hashlib.sha256()
     digest.update(f"{type(system).__module__}.{type(system).__qualname__}".encode())
     for name, value in sorted(vars(system).items()):
@@ -631,4 +765,6 @@ def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) ->
         digest.update(array.tobytes())
     digest.update(repr(int(design.action_repeat)).encode())
     digest.update(repr(sorted(options.items())).encode())
+    digest.update(_source_digest().encode())
+    digest.update(str(_module_digest(type(system).__module__)).encode())
     return digest.hexdigest()
