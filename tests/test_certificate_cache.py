@@ -8,6 +8,7 @@ replaced by a stand-in that returns that certificate and counts its calls.
 from __future__ import annotations
 
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -72,6 +73,13 @@ def _key(mountaincar, **options) -> str:
     return roa._certificate_key(system, design, options)
 
 
+def _cache_file(mountaincar, cache) -> Path:
+    """The cache file of the mountain car's certificate, its folder made."""
+    path = cache / f"{_key(mountaincar)}.pkl"
+    path.parent.mkdir(parents=True)
+    return path
+
+
 def test_a_second_process_loads_the_certificate_without_proving(
     mountaincar, reference, cache, monkeypatch
 ) -> None:
@@ -104,8 +112,7 @@ def test_a_file_that_does_not_load_is_recomputed_and_rewritten(
     mountaincar, reference, cache, monkeypatch, content
 ) -> None:
     system, design = mountaincar
-    path = cache / f"{_key(mountaincar)}.pkl"
-    path.parent.mkdir(parents=True)
+    path = _cache_file(mountaincar, cache)
     if content == "truncated":
         content = pickle.dumps(reference)[:-40]
     path.write_bytes(content)
@@ -122,8 +129,7 @@ def test_a_corrupt_file_gives_the_fresh_certificate(
 ) -> None:
     """The real proof, run again on a corrupt file, equals the certificate without a cache."""
     system, design = mountaincar
-    path = cache / f"{_key(mountaincar)}.pkl"
-    path.parent.mkdir(parents=True)
+    path = _cache_file(mountaincar, cache)
     path.write_bytes(b"\x80\x05corrupt" + bytes(range(256)))
     counted = _Counted()
     monkeypatch.setattr(roa, "certify_level", counted)
@@ -135,8 +141,7 @@ def test_off_writes_nothing_and_reads_nothing(
     mountaincar, reference, cache, monkeypatch, tmp_path
 ) -> None:
     system, design = mountaincar
-    path = cache / f"{_key(mountaincar)}.pkl"
-    path.parent.mkdir(parents=True)
+    path = _cache_file(mountaincar, cache)
     path.write_bytes(pickle.dumps(reference._replace(rho=123.0)))
     monkeypatch.setenv(roa.CACHE_DIR_VARIABLE, roa.CACHE_OFF)
     assert roa.certificate_cache_dir() is None
