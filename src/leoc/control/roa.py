@@ -73,7 +73,6 @@ import math
 import os
 import pickle
 import sys
-import tempfile
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -84,6 +83,7 @@ import torch
 from torch import Tensor
 
 from leoc.control.proof import MAX_BOXES, LevelProof, prove_level
+from leoc.io import write_bytes_atomic
 from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
 
 __all__ = [
@@ -726,23 +726,13 @@ def _load_certificate(path: Path) -> LyapunovCertificate | None:
 
 
 def _store_certificate(path: Path, certificate: LyapunovCertificate) -> None:
-    """Pickle ``certificate`` to ``path`` atomically: a temporary file in the same folder,
-    then :func:`os.replace`, so a reader sees the old file or the whole new one. A folder
-    that cannot be written is skipped silently (the cache is an optimisation)."""
-    temporary = None
+    """Pickle ``certificate`` to ``path`` atomically (:func:`leoc.io.write_bytes_atomic`: a
+    reader sees the old file or the whole new one). A folder that cannot be written is skipped
+    silently (the cache is an optimisation)."""
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(
-            dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp", delete=False
-        ) as file:
-            temporary = Path(file.name)
-            pickle.dump(certificate, file, protocol=pickle.HIGHEST_PROTOCOL)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(temporary, path)
+        write_bytes_atomic(path, pickle.dumps(certificate, protocol=pickle.HIGHEST_PROTOCOL))
     except Exception:  # unwritable, full disk, unpicklable: keep the certificate, skip the file
-        if temporary is not None:
-            temporary.unlink(missing_ok=True)
+        pass
 
 
 def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) -> str:
