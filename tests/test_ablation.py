@@ -88,6 +88,9 @@ PRE_ISSUE_20 = {
     "model_selection": "final",
     "eval_episodes": 5,
     "step_rules": {},
+    # the paper's relevance, unfloored (leoc's defaults floor it and square d since issue 40)
+    "r_min": None,
+    "relevance_power": 1.0,
 }
 PAPER_BUDGETS = {"pendulum": 10_000, "cartpole": 15_000, "mountaincar": 10_000}
 
@@ -97,7 +100,7 @@ def _fields(config: DDPGConfig) -> dict[str, object]:
     HybridSpec's defaults), as the grid's settings name them."""
     own = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
     spec = own.pop("hybrid") or HybridSpec()
-    return {**own, **dataclasses.asdict(spec)}
+    return {**own, **{name: getattr(spec, name) for name in HybridSpec.field_names()}}
 
 
 def _differences(first: DDPGConfig, second: DDPGConfig) -> dict[str, tuple]:
@@ -681,15 +684,28 @@ def test_the_defaults_setting_is_leocs_defaults_and_differs_from_the_grids_leoc(
         assert built == DDPGConfig.for_system("cartpole", algo, hybrid=hybrid, relevance=relevance)
     safe = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "all_safe_exit", 0))
     defaults = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "defaults", 0))
-    assert _differences(defaults, safe) == {"model_selection": ("best_held", "best_last_third")}
+    # issue 40's defaults floor the paper relevance and square d; the grid keeps the paper's
+    relevance = {"r_min": (0.5, None), "relevance_power": (2.0, 1.0)}
+    assert _differences(defaults, safe) == {
+        "model_selection": ("best_held", "best_last_third"),
+        **relevance,
+    }
     old = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "leoc", 0))
     assert set(_differences(defaults, old)) == (
         INTENDED["exploration"]
         | INTENDED["initial_collect"]
         | INTENDED["critic"]
         | INTENDED["model_selection"]
-        | {"step_rules"}
+        | {"step_rules", *relevance}
     )
+    # relevance_paper: today's defaults with the paper's relevance as it was before issue 40;
+    # each relevance setting differs from it in its own fields only
+    paper = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "relevance_paper", 0))
+    assert _differences(defaults, paper) == relevance
+    frozen = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "relevance_frozen", 0))
+    assert _differences(frozen, paper) == {"learn_lambda": (False, True)}
+    chosen = plan.config(AblationSpec("cartpole", "ddpg_hybrid", "relevance_power_2_floor_0.5", 0))
+    assert chosen == defaults
 
 
 COMMITTED = sorted(

@@ -115,29 +115,34 @@ def test_an_roa_hybrid_from_the_command_line(tmp_path, monkeypatch, capsys) -> N
 
 
 def test_lambda_init_and_freeze_lambda_reach_the_loaded_policy(tmp_path, capsys) -> None:
-    """--lambda-init 3 --freeze-lambda: the loaded policy's Lambda is exactly 3 after training;
-    the same command again returns the finished run, another spec in the folder is refused
-    naming the flag that differs."""
+    """--lambda-init 3 --freeze-lambda with the paper's relevance as published (--r-min none
+    --relevance-power 1: log_lambda on the policy): the loaded policy's Lambda is exactly 3
+    after training; the same command again returns the finished run, another spec in the
+    folder is refused naming the flags that differ."""
     from leoc.experiments.controllers import load_trained_controller
 
     run = tmp_path / "paper_lambda3"
-    command = ("--hybrid", "--lambda-init", "3", "--freeze-lambda", "--out", str(run))
+    paper = ("--r-min", "none", "--relevance-power", "1")
+    command = ("--hybrid", "--lambda-init", "3", "--freeze-lambda", *paper, "--out", str(run))
     assert _train(*command) == 0
     saved = json.loads((run / "config.json").read_text())["hybrid"]
     assert saved["lambda_init"] == 3.0 and saved["learn_lambda"] is False
+    assert (saved["r_min"], saved["relevance_power"]) == (None, 1.0)
     controller = load_trained_controller(run)
     (hybrid,) = {id(m): m for m in controller.modules() if isinstance(m, HybridPolicy)}.values()
     assert torch.equal(hybrid.log_lambda, torch.full((3,), math.log(3.0), dtype=torch.float64))
     assert "log_lambda" not in dict(hybrid.named_parameters())  # a buffer: frozen
     assert _train(*command) == 0  # the same run: returned, not refused
     capsys.readouterr()
-    assert _train(*command, "--r-min", "0.5") == 2
+    assert _train(*command, "--r-min", "0.5") == 2  # the last --r-min wins
     line = _error_line(capsys)
     assert "--r-min (r_min): None there, 0.5 here" in line and "--overwrite" in line
-    assert _train("--hybrid", "--out", str(run)) == 2
+    assert _train("--hybrid", "--out", str(run)) == 2  # today's default hybrid: floored at 0.5
     line = _error_line(capsys)
     assert "--lambda-init (lambda_init): 3.0 there, 1.0 here" in line
     assert "--freeze-lambda (learn_lambda): False there, True here" in line
+    assert "--r-min (r_min): None there, 0.5 here" in line
+    assert "--relevance-power (relevance_power): 1.0 there, 2.0 here" in line
 
 
 @pytest.mark.parametrize(
@@ -193,11 +198,12 @@ def test_a_flag_pilco_cannot_honour_is_one_line_naming_it(tmp_path, capsys) -> N
 
 
 def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
-    """`leoc train pendulum --algo pilco --hybrid --r-min 0.5`: config.json records the floor,
-    the loaded controller's relevance is the paper's with Lambda floored on the proved set of
-    the LQR at PILCO's own control period, so r >= 0.5 on states sampled in that set (a numpy
-    reference from the certificate's P and rho, not the floor's own code), and r < 1 off the
-    operating point; leoc simulate and leoc roa run on the folder."""
+    """`leoc train pendulum --algo pilco --hybrid --r-min 0.5`: config.json records the floor
+    and the default power p = 2, the loaded controller's relevance is the paper's,
+    r = (1 + d^2)^-2, with Lambda floored on the proved set of the LQR at PILCO's own control
+    period, so r >= 0.5 on states sampled on that set's boundary (a numpy reference from the
+    certificate's P and rho, not the floor's own code), and r < 1 off the operating point;
+    leoc simulate and leoc roa run on the folder."""
     import numpy as np
 
     from leoc.control import certify_lqr, design_lqr
@@ -209,9 +215,11 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
     run = tmp_path / "pilco_floor"
     argv = ["train", "pendulum", "--algo", "pilco", "--hybrid", "--r-min", "0.5", *SMOKE]
     assert main([*argv, "--out", str(run)]) == 0
-    assert json.loads((run / "config.json").read_text())["hybrid"]["r_min"] == 0.5
+    saved = json.loads((run / "config.json").read_text())["hybrid"]
+    assert (saved["r_min"], saved["relevance_power"]) == (0.5, 2.0)
     controller = load_trained_controller(run)
     (relevance,) = [m for m in controller.modules() if isinstance(m, FlooredRelevance)]
+    assert relevance.power == 2.0
     lam = relevance.lambda_.detach().numpy()
     system = make_system("pendulum")
     period = PilcoConfig.for_system("pendulum").controller_action_repeat
@@ -226,7 +234,7 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
     theta = z[:, 0]  # the pendulum's deviation from upright (cos theta = 1 there)
     obs = np.stack([np.cos(theta), np.sin(theta), z[:, 1]], axis=-1)
     a = np.array([1.0, 0.0, 0.0])
-    r = 1.0 / (1.0 + ((obs - a) ** 2 / lam).sum(axis=-1)) ** 2
+    r = 1.0 / (1.0 + ((obs - a) ** 2 / lam).sum(axis=-1) ** 2) ** 2
     assert r.min() >= 0.5 and r.max() < 1.0
     with torch.no_grad():
         np.testing.assert_allclose(
@@ -242,7 +250,7 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
 @pytest.mark.parametrize(
     ("algo", "flags", "module_name"),
     [
-        ("ddpg", ("--relevance-power", "2"), "PaperRelevance"),
+        ("ddpg", ("--relevance-power", "2", "--r-min", "none"), "PaperRelevance"),
         ("sac", ("--relevance-power", "2", "--r-min", "0.5"), "FlooredRelevance"),
         ("pilco", ("--relevance-power", "2", "--r-min", "0.5"), "FlooredRelevance"),
     ],
@@ -281,3 +289,80 @@ def test_relevance_power_reaches_the_loaded_controller(tmp_path, capsys, algo, f
     assert main(argv) == 0  # the same command again: the finished run, nothing retrained
     if before is not None:
         assert (run / "controller.pt").read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    ("flags", "r_min", "power", "module_name"),
+    [
+        ((), 0.5, 2.0, "FlooredRelevance"),
+        (("--r-min", "none", "--relevance-power", "1"), None, 1.0, None),
+    ],
+    ids=["default", "paper-as-published"],
+)
+def test_the_default_hybrid_and_the_papers_relevance_from_the_command_line(
+    tmp_path, flags, r_min, power, module_name
+):
+    """`--hybrid` alone (issue 40): config.json records r_min 0.5 and relevance_power 2, and the
+    loaded policy's relevance is a FlooredRelevance with p = 2; `--r-min none --relevance-power
+    1`: r_min None and power 1 recorded, and the paper's relevance as published (log_lambda on
+    the policy, no relevance module)."""
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.policies import FlooredRelevance
+
+    run = tmp_path / "run"
+    assert _train("--hybrid", *flags, "--out", str(run)) == 0
+    saved = json.loads((run / "config.json").read_text())["hybrid"]
+    assert saved["relevance"] == "paper" and saved["relevance_parametrisation"] == "log_lambda"
+    assert (saved["r_min"], saved["relevance_power"]) == (r_min, power)
+    controller = load_trained_controller(run)
+    (hybrid,) = {id(m): m for m in controller.modules() if isinstance(m, HybridPolicy)}.values()
+    if module_name is None:
+        assert hybrid.relevance_module is None and hybrid.relevance_kind == "paper"
+        assert hybrid.log_lambda.shape == (3,)
+    else:
+        assert isinstance(hybrid.relevance_module, FlooredRelevance)
+        assert hybrid.relevance_module.power == 2.0
+        assert not hasattr(hybrid, "log_lambda")
+
+
+def test_r_min_none_parses_to_no_floor_and_a_bad_value_is_an_argparse_error(capsys) -> None:
+    """--r-min takes 'none' (any case) for no floor and a number; anything else is argparse's
+    error (exit status 2) naming --r-min."""
+    base = ["train", "pendulum", "--algo", "ddpg", "--hybrid", "--r-min"]
+
+    def spec(value: str) -> HybridSpec:
+        return hybrid_of(build_parser().parse_args([*base, value]))
+
+    for word in ("none", "NONE", "None", " none "):
+        assert spec(word).r_min is None, word
+        assert spec(word) == HybridSpec(r_min=None)  # the power keeps its default (2)
+    assert spec("none").relevance_power == 2.0
+    assert spec("0.3").r_min == 0.3 and spec("0.3") == HybridSpec(r_min=0.3)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args([*base, "abc"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--r-min" in err and "'abc'" in err, err
+
+
+def test_r_min_with_the_precision_parametrisation(tmp_path, capsys) -> None:
+    """--relevance-parametrisation precision has no floor: --r-min none is accepted (the run
+    records r_min None and power 1) while --r-min 0.5 is a one-line error naming --r-min."""
+    precision = ("--hybrid", "--relevance-parametrisation", "precision")
+    argv = ["train", "pendulum", "--algo", "ddpg", *precision, "--r-min", "none"]
+    assert hybrid_of(build_parser().parse_args(argv)) == HybridSpec(
+        relevance_parametrisation="precision", r_min=None
+    )
+    run = tmp_path / "precision"
+    assert _train(*precision, "--r-min", "none", "--out", str(run)) == 0
+    saved = json.loads((run / "config.json").read_text())["hybrid"]
+    assert saved["relevance_parametrisation"] == "precision"
+    assert (saved["r_min"], saved["relevance_power"]) == (None, 1.0)
+    capsys.readouterr()
+    refused = tmp_path / "refused"
+    assert _train(*precision, "--r-min", "0.5", "--out", str(refused)) == 2
+    line = _error_line(capsys)
+    assert line.startswith("leoc train: error: --r-min: r_min"), line
+    assert "precision" in line
+    assert not refused.exists()

@@ -24,7 +24,7 @@ from stable_baselines3 import DDPG, TD3
 from stable_baselines3.common.torch_layers import FlattenExtractor
 
 from leoc.control import design_lqr
-from leoc.policies import HybridDesign, HybridSpec
+from leoc.policies import FlooredRelevance, HybridDesign, HybridSpec
 from leoc.sb3 import (
     DDPGConfig,
     HybridActor,
@@ -60,27 +60,93 @@ TINY_RUN = {
 
 pytestmark = pytest.mark.usefixtures("single_thread")
 
+#: The hybrid's relevance, as HybridSpec fields: "paper", the paper's r = (1 + d)^-2 as
+#: published (``log_lambda`` on the HybridPolicy itself; leoc's default before issue 40);
+#: "default", leoc's default HybridSpec() since issue 40, r = (1 + d^2)^-2 with Lambda floored
+#: (FlooredRelevance: lambda = floor (1 + e^q), q its ``log_excess``) so that r >= 0.5 on the
+#: LQR's proved region of attraction.
+RELEVANCE_FIELDS = {"paper": {"r_min": None, "relevance_power": 1.0}, "default": {}}
+RELEVANCES = tuple(RELEVANCE_FIELDS)
+#: The parameter Lambda is learned through, by relevance.
+RELEVANCE_PARAMETER = {
+    "paper": "hybrid.log_lambda",
+    "default": "hybrid.relevance_module.log_excess",
+}
 
-def _hybrid_model(system_name: str, algo=DDPG, learn_lambda: bool = True, seed: int = 0, **kw):
+
+def _hybrid_model(
+    system_name: str,
+    algo=DDPG,
+    learn_lambda: bool = True,
+    seed: int = 0,
+    relevance: str = "paper",
+    **kw,
+):
     env = make_env(system_name)
-    policy_kwargs = hybrid_policy_kwargs(system_name, learn_lambda=learn_lambda, net_arch=SMALL_NET)
-    return algo(HybridTD3Policy, env, policy_kwargs=policy_kwargs, seed=seed, device="cpu", **kw)
+    policy_kwargs = hybrid_policy_kwargs(
+        system_name, learn_lambda=learn_lambda, net_arch=SMALL_NET, **RELEVANCE_FIELDS[relevance]
+    )
+    model = algo(HybridTD3Policy, env, policy_kwargs=policy_kwargs, seed=seed, device="cpu", **kw)
+    _check_relevance(model.actor, relevance)
+    return model
+
+
+def _check_relevance(actor: HybridActor, relevance: str) -> None:
+    """The actor holds the relevance its label names: the paper's on the HybridPolicy itself,
+    or the floored p = 2 one on the floor its design resolved from the LQR's certificate."""
+    module = actor.hybrid.relevance_module
+    if relevance == "paper":
+        assert module is None
+        return
+    assert isinstance(module, FlooredRelevance) and module.power == 2.0
+    floor = actor.hybrid_design.relevance_data["lambda_floor"]
+    np.testing.assert_allclose(module.floor.double().numpy(), floor, rtol=1e-7, atol=0)
+
+
+def _relevance_parameter(actor: HybridActor) -> torch.Tensor:
+    """The tensor Lambda is held by: the paper's ``log_lambda`` or the floor's excess q."""
+    module = actor.hybrid.relevance_module
+    return actor.hybrid.log_lambda if module is None else module.log_excess
+
+
+def _lambda(actor: HybridActor, relevance: str) -> torch.Tensor:
+    """Lambda's diagonal in float64, from its parameter by the relevance's definition:
+    exp(log_lambda), or floor * (1 + exp(q)) for the floored relevance."""
+    if relevance == "paper":
+        return torch.exp(actor.hybrid.log_lambda.detach().double())
+    module = actor.hybrid.relevance_module
+    return module.floor.double() * (1.0 + torch.exp(module.log_excess.detach().double()))
+
+
+#: p of r = (1 + d^p)^-2, by relevance.
+RELEVANCE_POWER = {"paper": 1, "default": 2}
+
+
+def _reference_relevance(actor: HybridActor, relevance: str, obs: torch.Tensor, point):
+    """r(obs) from its formula: the paper's (1 + d)^-2, the default's (1 + d^2)^-2, with
+    d = sum((obs - a)^2 / lambda)."""
+    distance = ((obs - point) ** 2 / _lambda(actor, relevance)).sum(dim=1, keepdim=True)
+    return 1.0 / (1.0 + distance ** RELEVANCE_POWER[relevance]) ** 2
 
 
 def _randomise(actor: HybridActor, generator: torch.Generator) -> None:
-    """Random H (MLP weights far from their initialisation) and random positive Lambda."""
+    """Random H (MLP weights far from their initialisation) and random positive Lambda (its
+    parameter: log_lambda, or the floored relevance's excess q)."""
     with torch.no_grad():
         for param in actor.hybrid.nonlinear.parameters():
             param.copy_(torch.randn(param.shape, generator=generator))
-        log_lambda = torch.randn(actor.hybrid.log_lambda.shape, generator=generator)
-        actor.hybrid.log_lambda.copy_(log_lambda)
+        parameter = _relevance_parameter(actor)
+        parameter.copy_(torch.randn(parameter.shape, generator=generator))
 
 
-@pytest.mark.parametrize("system_name", SYSTEM_NAMES)
-def test_identity_at_operating_point_in_physical_units(system_name):
+@pytest.mark.parametrize(
+    ("system_name", "relevance"),
+    [(name, "paper") for name in SYSTEM_NAMES] + [(name, "default") for name in SYSTEM_NAMES],
+)
+def test_identity_at_operating_point_in_physical_units(system_name, relevance):
     system = make_system(system_name)
     design = design_lqr(system)  # independent reference for G(x) = W x + b
-    model = _hybrid_model(system_name)
+    model = _hybrid_model(system_name, relevance=relevance)
     _randomise(model.actor, torch.Generator().manual_seed(7))
     policy = physical_policy(model.actor)
     point = torch.as_tensor(system.operating_obs, dtype=torch.float64)
@@ -135,17 +201,16 @@ def test_identities_hold_in_the_model_leocs_defaults_build(algo, system_name):
     )
 
 
-def test_blend_away_from_operating_point_matches_formula():
+@pytest.mark.parametrize("kind", RELEVANCES)
+def test_blend_away_from_operating_point_matches_formula(kind):
     system = make_system("cartpole")
     design = design_lqr(system)
-    model = _hybrid_model("cartpole")
+    model = _hybrid_model("cartpole", relevance=kind)
     generator = torch.Generator().manual_seed(3)
     _randomise(model.actor, generator)
     obs = torch.randn(64, system.obs_dim, generator=generator, dtype=torch.float64)
-    lam = torch.exp(model.actor.hybrid.log_lambda.detach()).double()
     point = torch.as_tensor(system.operating_obs)
-    distance = ((obs - point) ** 2 / lam).sum(dim=1, keepdim=True)
-    relevance = 1.0 / (1.0 + distance) ** 2
+    relevance = _reference_relevance(model.actor, kind, obs, point)
     linear = obs @ torch.as_tensor(design.W).T + torch.as_tensor(design.b)
     with torch.no_grad():
         mlp_out = model.actor.hybrid.nonlinear(obs.float()).double()  # tanh(MLP), normalised
@@ -159,8 +224,9 @@ def test_blend_away_from_operating_point_matches_formula():
     assert float((expected.abs() >= system.action_limit - 1e-9).float().mean()) > 0  # clip used
 
 
-def test_fused_actor_forward_equals_hybrid_policy():
-    model = _hybrid_model("mountaincar")
+@pytest.mark.parametrize("relevance", RELEVANCES)
+def test_fused_actor_forward_equals_hybrid_policy(relevance):
+    model = _hybrid_model("mountaincar", relevance=relevance)
     generator = torch.Generator().manual_seed(11)
     _randomise(model.actor, generator)
     obs = 2.0 * torch.randn(128, 2, generator=generator)
@@ -170,7 +236,13 @@ def test_fused_actor_forward_equals_hybrid_policy():
     np.testing.assert_allclose(fused.numpy(), reference.numpy(), rtol=1e-6, atol=1e-6)
 
 
-def test_identity_with_asymmetric_action_box():
+#: A floor on Lambda for a hand-made design (any positive floor keeps the identities; the
+#: LQR's certificate is not under test here).
+HAND_MADE_FLOOR = [0.2, 1.5, 0.4]
+
+
+@pytest.mark.parametrize("relevance", RELEVANCES)
+def test_identity_with_asymmetric_action_box(relevance):
     obs_space = spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float64)
     act_space = spaces.Box(
         np.array([-1.0, 0.5], dtype=np.float32), np.array([3.0, 2.5], dtype=np.float32)
@@ -179,15 +251,20 @@ def test_identity_with_asymmetric_action_box():
     gain = rng.normal(size=(2, 3))
     point = rng.normal(size=3)
     bias = np.array([1.2, 1.4]) - gain @ point  # G(a) strictly inside the box
-    actor = HybridActor(
-        obs_space,
-        act_space,
-        SMALL_NET,
-        FlattenExtractor(obs_space),
-        3,
-        hybrid_spec=HybridSpec(lambda_init=(0.3, 2.0, 0.7)),
-        hybrid_design=HybridDesign(gain, bias, point),
-    )
+    spec = HybridSpec(lambda_init=(0.3, 2.0, 0.7), **RELEVANCE_FIELDS[relevance])
+    data = {} if relevance == "paper" else {"lambda_floor": HAND_MADE_FLOOR}
+
+    def actor_of(design: HybridDesign) -> HybridActor:
+        space = FlattenExtractor(obs_space)
+        return HybridActor(
+            obs_space, act_space, SMALL_NET, space, 3, hybrid_spec=spec, hybrid_design=design
+        )
+
+    if relevance == "default":  # the floor comes with the design (hybrid_design resolves it)
+        with pytest.raises(ValueError, match="r_min: expected the design's relevance_data"):
+            actor_of(HybridDesign(gain, bias, point))
+    actor = actor_of(HybridDesign(gain, bias, point, data))
+    _check_relevance(actor, relevance)
     _randomise(actor, torch.Generator().manual_seed(1))
     policy = physical_policy(actor)
     point_t = torch.as_tensor(point)
@@ -200,19 +277,24 @@ def test_identity_with_asymmetric_action_box():
     assert np.all(far >= act_space.low - 1e-12) and np.all(far <= act_space.high + 1e-12)
 
 
+@pytest.mark.parametrize("relevance", RELEVANCES)
 @pytest.mark.parametrize("algo", [DDPG, TD3])
-def test_target_actor_is_hybrid_and_matches(algo):
-    model = _hybrid_model("pendulum", algo=algo)
+def test_target_actor_is_hybrid_and_matches(algo, relevance):
+    model = _hybrid_model("pendulum", algo=algo, relevance=relevance)
     assert isinstance(model.actor, HybridActor)
     assert isinstance(model.actor_target, HybridActor)
     assert model.actor_target is not model.actor
     for key, value in model.actor.state_dict().items():
         torch.testing.assert_close(model.actor_target.state_dict()[key], value, rtol=0, atol=0)
     names = {name for name, _ in model.actor.named_parameters()}
-    assert "hybrid.log_lambda" in names
-    assert not any(name.endswith(("linear.W", "linear.b", "operating_point")) for name in names)
+    assert RELEVANCE_PARAMETER[relevance] in names
+    fixed = ("linear.W", "linear.b", "operating_point", "floor")
+    assert not any(name.endswith(fixed) for name in names)
     buffers = {name for name, _ in model.actor.named_buffers()}
     assert {"hybrid.linear.W", "hybrid.linear.b", "hybrid.operating_point"} <= buffers
+    if relevance == "default":
+        module = ("hybrid.relevance_module.floor", "hybrid.relevance_module.operating_point")
+        assert set(module) <= buffers
 
 
 def _actor_loss_grads(model, obs: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -223,16 +305,29 @@ def _actor_loss_grads(model, obs: torch.Tensor) -> dict[str, torch.Tensor]:
     return {name: p.grad for name, p in model.actor.named_parameters()}
 
 
-def test_gradient_flows_to_mlp_and_log_lambda():
+@pytest.mark.parametrize("relevance", RELEVANCES)
+def test_gradient_flows_to_mlp_and_log_lambda(relevance):
     system = make_system("pendulum")
-    model = _hybrid_model("pendulum")
+    model = _hybrid_model("pendulum", relevance=relevance)
     # Mid-range observations: relevance strictly between 0 and 1, actions inside the limits.
     angles = torch.linspace(0.3, 1.2, 32)
     obs = torch.stack([torch.cos(angles), torch.sin(angles), 0.5 * torch.ones(32)], dim=1)
+    if relevance == "default":
+        # The floored relevance keeps r near 1 there, where the LQR's action saturates (and the
+        # clip passes no gradient): take the velocity at which G (design_lqr) is zero instead,
+        # so that the blend (1 - r) H is inside the limits.
+        design = design_lqr(system)
+        gain, bias = torch.as_tensor(design.W[0]).float(), float(design.b[0])
+        obs[:, 2] = -(obs[:, :2] @ gain[:2] + bias) / gain[2]
+        with torch.no_grad():
+            relevance_value, blend = model.actor.relevance(obs), model.actor.hybrid.blend(obs)
+        assert torch.all((relevance_value > 0.0) & (relevance_value < 1.0))
+        assert torch.all(blend.abs() < 1.0)
     grads = _actor_loss_grads(model, obs)
-    assert grads["hybrid.log_lambda"] is not None
-    assert torch.all(torch.isfinite(grads["hybrid.log_lambda"]))
-    assert float(grads["hybrid.log_lambda"].abs().sum()) > 0
+    relevance_grad = grads[RELEVANCE_PARAMETER[relevance]]
+    assert relevance_grad is not None
+    assert torch.all(torch.isfinite(relevance_grad))
+    assert float(relevance_grad.abs().sum()) > 0
     mlp_grads = [g for name, g in grads.items() if name.startswith("hybrid.nonlinear")]
     assert mlp_grads and all(g is not None and float(g.abs().sum()) > 0 for g in mlp_grads)
     # At the operating point r = 1 and grad r = 0: the MLP gets no gradient there.
@@ -243,25 +338,35 @@ def test_gradient_flows_to_mlp_and_log_lambda():
             assert float(grad.abs().max()) == 0.0
 
 
-def test_training_updates_lambda_and_target_lambda():
-    model = _hybrid_model("pendulum", learning_starts=50, batch_size=32)
-    initial = model.actor.hybrid.log_lambda.detach().clone()
+@pytest.mark.parametrize("relevance", RELEVANCES)
+def test_training_updates_lambda_and_target_lambda(relevance):
+    model = _hybrid_model("pendulum", learning_starts=50, batch_size=32, relevance=relevance)
+    initial = _relevance_parameter(model.actor).detach().clone()
     model.learn(total_timesteps=120)
-    learned = model.actor.hybrid.log_lambda.detach()
-    target = model.actor_target.hybrid.log_lambda.detach()
+    learned = _relevance_parameter(model.actor).detach()
+    target = _relevance_parameter(model.actor_target).detach()
     assert not torch.equal(learned, initial)
     assert not torch.equal(target, initial)  # soft-updated along with the MLP
 
 
-def test_frozen_lambda_is_a_buffer_and_never_changes():
-    model = _hybrid_model("pendulum", learn_lambda=False, learning_starts=50, batch_size=32)
+@pytest.mark.parametrize("relevance", RELEVANCES)
+def test_frozen_lambda_is_a_buffer_and_never_changes(relevance):
+    model = _hybrid_model(
+        "pendulum", learn_lambda=False, learning_starts=50, batch_size=32, relevance=relevance
+    )
+    held = RELEVANCE_PARAMETER[relevance]
     names = {name for name, _ in model.actor.named_parameters()}
-    assert "hybrid.log_lambda" not in names
-    assert "hybrid.log_lambda" in dict(model.actor.named_buffers())
-    initial = model.actor.hybrid.log_lambda.clone()
+    assert held not in names
+    assert held in dict(model.actor.named_buffers())
+    initial = _relevance_parameter(model.actor).clone()
     model.learn(total_timesteps=120)
-    torch.testing.assert_close(model.actor.hybrid.log_lambda, initial, rtol=0, atol=0)
-    np.testing.assert_allclose(model.actor.hybrid.lambda_.numpy(), 1.0, rtol=1e-7)
+    torch.testing.assert_close(_relevance_parameter(model.actor), initial, rtol=0, atol=0)
+    if relevance == "paper":
+        np.testing.assert_allclose(model.actor.hybrid.lambda_.numpy(), 1.0, rtol=1e-7)
+    else:  # lambda_init = 1 raised to twice the floor the design resolved (FlooredRelevance)
+        floor = np.asarray(model.actor.hybrid_design.relevance_data["lambda_floor"])
+        lambda_ = model.actor.hybrid.relevance_module.lambda_
+        np.testing.assert_allclose(lambda_.numpy(), np.maximum(1.0, 2.0 * floor), rtol=1e-7)
 
 
 def test_actor_learning_rate_and_target_update_interval():
@@ -383,23 +488,53 @@ def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo, monkey
     assert rows[1]["interaction_seconds"] == pytest.approx(120 * make_system("pendulum").dt)
 
 
-def test_save_load_round_trip_in_fresh_process(tmp_path):
+def _relevance_state(actor) -> dict[str, list]:
+    """The relevance's entries of a hybrid actor's state: the paper's log_lambda, or the
+    relevance module's parameters and buffers (the floor's excess q, the floor, the point)."""
+    return {
+        key: value.double().tolist()
+        for key, value in actor.state_dict().items()
+        if key == "hybrid.log_lambda" or key.startswith("hybrid.relevance_module.")
+    }
+
+
+@pytest.mark.parametrize(
+    # the default on the mountain car: its trainer's LQR certificate takes a second to prove,
+    # the cart-pole's (its own: the trainer's step rules are in the certificate's key) > 10 s
+    ("system_name", "relevance"),
+    [("cartpole", "paper"), ("mountaincar", "default")],
+)
+def test_save_load_round_trip_in_fresh_process(tmp_path, system_name, relevance):
+    # leoc's default hybrid is train_ddpg's hybrid=True; the paper's is spelt out
+    hybrid = True if relevance == "default" else HybridSpec(**RELEVANCE_FIELDS[relevance])
     result = train_ddpg(
-        "cartpole", "td3", hybrid=True, seed=1, run_dir=tmp_path / "run", **TINY_RUN
+        system_name, "td3", hybrid=hybrid, seed=1, run_dir=tmp_path / "run", **TINY_RUN
     )
+    _check_relevance(result.model.actor, relevance)
     generator = torch.Generator().manual_seed(0)
-    obs = torch.randn(8, 5, generator=generator, dtype=torch.float64)
+    obs_dim = make_system(system_name).obs_dim
+    obs = torch.randn(8, obs_dim, generator=generator, dtype=torch.float64)
     final = physical_policy(result.model.actor)
     expected = final(obs).detach().numpy()
-    expected_lambda = result.model.actor.hybrid.lambda_.detach().double().numpy()
+    hybrid_policy = result.model.actor.hybrid
+    module = hybrid_policy.relevance_module
+    lambda_ = (hybrid_policy if module is None else module).lambda_
+    expected_lambda = lambda_.detach().double().numpy()
+    expected_state = _relevance_state(result.model.actor)
+    assert RELEVANCE_PARAMETER[relevance] in expected_state
     script = (
         "import json, sys, torch\n"
         "from leoc.sb3 import load_ddpg_controller, load_ddpg_model\n"
         "run, obs = sys.argv[1], torch.tensor(json.loads(sys.argv[2]), dtype=torch.float64)\n"
         "policy = load_ddpg_controller(run, 'final')\n"
         "model = load_ddpg_model(run, 'final')\n"
+        "h = model.actor.hybrid\n"
+        "lambda_ = (h if h.relevance_module is None else h.relevance_module).lambda_\n"
+        "state = {k: v.double().tolist() for k, v in model.actor.state_dict().items()\n"
+        "  if k == 'hybrid.log_lambda' or k.startswith('hybrid.relevance_module.')}\n"
         "print(json.dumps({'actions': policy(obs).tolist(),\n"
-        "  'lambda': model.actor.hybrid.lambda_.double().tolist(),\n"
+        "  'lambda': lambda_.double().tolist(), 'state': state,\n"
+        "  'relevance': type(h.relevance_module).__name__,\n"
         "  'target_hybrid': type(model.actor_target).__name__,\n"
         "  'hybrid': policy.is_hybrid}))\n"
     )
@@ -413,6 +548,11 @@ def test_save_load_round_trip_in_fresh_process(tmp_path):
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     np.testing.assert_allclose(np.array(loaded["actions"]), expected, rtol=0, atol=F64_ATOL)
     np.testing.assert_allclose(np.array(loaded["lambda"]), expected_lambda, rtol=0, atol=0)
+    assert loaded["state"].keys() == expected_state.keys()
+    for key, value in expected_state.items():
+        np.testing.assert_array_equal(np.array(loaded["state"][key]), value, err_msg=key)
+    kind = {"paper": "NoneType", "default": "FlooredRelevance"}[relevance]
+    assert loaded["relevance"] == kind
     assert loaded["target_hybrid"] == "HybridActor" and loaded["hybrid"] is True
     best = load_ddpg_controller(result.run_dir)  # the run's (final) controller, in this process
     np.testing.assert_allclose(best(obs).numpy(), result.policy(obs).numpy(), rtol=0, atol=F64_ATOL)

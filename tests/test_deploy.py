@@ -130,10 +130,51 @@ def test_load_reports_period_design_spec_and_certificate(runs, name):
         # the linear part of the hybrid is the design the controller reports
         np.testing.assert_allclose(hybrid.linear.W.numpy(), controller.design.W, rtol=1e-9)
         assert controller.hybrid_spec.to_dict() == config["hybrid"]
-    certified = name.endswith(("roa", "lyapunov", "floor"))
+    # every hybrid's relevance rests on the LQR's certificate: the ROA and Lyapunov ones, and
+    # the paper's, floored (r_min 0.5) by default since issue 40
+    certified = "baseline" not in name
     assert (controller.certificate is not None) == certified
     if certified:
-        assert controller.certificate.rho > 0
+        _check_certificate(controller, hybrid, config, steps, name)
+
+
+def _check_certificate(controller, hybrid, config, steps: int, name: str) -> None:
+    """The certificate is leoc.control.certify_lqr's for the LQR designed here at the run's
+    period, of the loop it runs in (PILCO: u_max sin(G / u_max), written out here; else G
+    clipped by the actuator); a paper hybrid (floored) has r >= 0.5 in the proved set."""
+    from leoc.control import certify_lqr, design_lqr
+
+    system = controller.system
+    design = design_lqr(system, action_repeat=steps)
+    np.testing.assert_allclose(controller.design.W, design.W, rtol=1e-12)
+    if name.startswith("pilco"):
+        gain = torch.as_tensor(np.asarray(design.W), dtype=torch.float64)
+        bias = torch.as_tensor(np.asarray(design.b), dtype=torch.float64)
+        limit = float(system.action_limit)
+        expected = certify_lqr(
+            system, design, lambda obs: limit * torch.sin((obs @ gain.T + bias) / limit)
+        )
+    else:
+        expected = certify_lqr(system, design)
+    certificate = controller.certificate
+    assert expected.certified and certificate.rho > 0
+    assert certificate.rho == expected.rho and certificate.action_repeat == steps
+    np.testing.assert_array_equal(certificate.P, expected.P)
+    if config["hybrid"]["relevance"] != "paper":
+        return
+    assert config["hybrid"]["r_min"] == 0.5
+    # states in {z^T P z <= rho}: on its boundary (where r is smallest) and inside
+    rng = np.random.default_rng(2)
+    P, rho = np.asarray(expected.P), expected.rho
+    u = rng.standard_normal((4000, P.shape[0]))
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    u[2000:] *= rng.uniform(0.0, 1.0, (2000, 1))
+    z = np.sqrt(rho) * np.linalg.solve(np.linalg.cholesky(P).T, u.T).T
+    assert np.all(np.einsum("ni,ij,nj->n", z, P, z) <= rho * (1 + 1e-12))
+    states = torch.as_tensor(np.asarray(system.operating_state) + z, dtype=torch.float64)
+    with torch.no_grad():
+        r = hybrid.relevance(system.observe(states)).numpy()[:, 0]
+    assert r.min() >= 0.5 and r.max() <= 1.0
 
 
 def test_lqr_alone_is_the_saturated_design_in_numpy():

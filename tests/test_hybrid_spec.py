@@ -21,6 +21,8 @@ from torch import nn
 from leoc.control import certify_lqr, design_lqr
 from leoc.pilco.config import PilcoConfig
 from leoc.policies.spec import (
+    DEFAULT_R_MIN,
+    DEFAULT_RELEVANCE_POWER,
     RELEVANCE_DESIGNS,
     HybridDesign,
     HybridSpec,
@@ -42,6 +44,9 @@ pytestmark = pytest.mark.usefixtures("single_thread")
 
 DTYPE = torch.float64
 ATOL = 1e-12  # float64 hybrid against its numpy formula
+#: The paper's relevance as published, r = (1 + d)^-2 unfloored (leoc's defaults floor it and
+#: square d since issue 40): the tests of that formula name it.
+PAPER = {"r_min": None, "relevance_power": 1.0}
 NET = [16, 16]
 # Sampled certificate only (no interval proof): the proof costs ~35 s on the pendulum and the
 # arithmetic that turns a certificate into rho_in is the same for either.
@@ -139,6 +144,50 @@ def test_hybrid_config_value_not_a_spec_is_refused():
             as_hybrid_spec(value)
     assert as_hybrid_spec(None) is None and as_hybrid_spec(False) is None
     assert as_hybrid_spec(True) == HybridSpec()
+
+
+def test_the_floor_and_the_power_default_to_the_designs_own():
+    """leoc's default hybrid (issue 40): the paper relevance as log lambda is floored at r >= 0.5
+    with p = 2; every other design takes no floor and p = 1, which it could not use."""
+    spec = HybridSpec()
+    assert (spec.r_min, spec.relevance_power) == (0.5, 2.0)
+    assert (DEFAULT_R_MIN, DEFAULT_RELEVANCE_POWER) == (0.5, 2.0)
+    others = [
+        HybridSpec(relevance="roa"),
+        HybridSpec(relevance="lyapunov"),
+        HybridSpec(relevance_parametrisation="precision"),
+        spec.replace(relevance="lyapunov"),  # a defaulted field follows the design
+        spec.replace(relevance_parametrisation="precision"),
+        spec.replace(relevance="roa").replace(
+            relevance="paper", relevance_parametrisation="precision"
+        ),
+    ]
+    for other in others:
+        assert (other.r_min, other.relevance_power) == (None, 1.0), other
+    assert spec.replace(relevance="roa").replace(relevance="paper") == spec
+    # a value given is kept, and checked against the design
+    assert HybridSpec(r_min=0.9).replace(relevance_power=3.0).r_min == 0.9
+    assert HybridSpec(r_min=None).relevance_power == 2.0
+    with pytest.raises(ValueError, match="^r_min: expected None with relevance='lyapunov'"):
+        HybridSpec(r_min=0.5).replace(relevance="lyapunov")
+    # equal specs whether a value was defaulted or given
+    assert spec == HybridSpec(r_min=0.5, relevance_power=2.0)
+    assert "_defaulted" not in spec.to_dict() and "_defaulted" not in HybridSpec.field_names()
+
+
+def test_a_saved_spec_reads_as_it_ran_and_a_users_dict_takes_the_defaults():
+    """A run saved before ``r_min`` and ``relevance_power`` existed trained the paper's
+    relevance: its dict, without them, must not read as today's floored default."""
+    saved = HybridSpec(**PAPER).to_dict()
+    for missing in (["relevance_power"], ["r_min", "relevance_power"]):
+        old = {key: value for key, value in saved.items() if key not in missing}
+        assert HybridSpec.from_dict(old) == HybridSpec(**PAPER)
+        assert legacy_hybrid_config({"hybrid": old})["hybrid"] == saved
+    assert HybridSpec.from_dict(HybridSpec().to_dict()) == HybridSpec()
+    assert as_hybrid_spec({"relevance": "paper"}) == HybridSpec()
+    assert as_hybrid_spec({}) == HybridSpec()
+    with pytest.raises(ValueError, match=r"unknown fields \['floor'\]"):
+        as_hybrid_spec({"floor": 0.5})
 
 
 ROUND_TRIP_SPECS = [
@@ -246,7 +295,7 @@ def test_build_hybrid_in_physical_units_is_the_formula(parametrisation, learn):
     design = _random_design(np.zeros(F))
     H = _TanhLayer()
     spec = HybridSpec(
-        lambda_init=LAMBDA, learn_lambda=learn, relevance_parametrisation=parametrisation
+        lambda_init=LAMBDA, learn_lambda=learn, relevance_parametrisation=parametrisation, **PAPER
     )
     policy = build_hybrid(spec, design, H, action_limit=LIMIT)
     x = _points(design)
@@ -269,7 +318,7 @@ def test_build_hybrid_in_physical_units_is_the_formula(parametrisation, learn):
 def test_build_hybrid_in_an_action_box_is_the_normalised_formula(parametrisation):
     design = _random_design(BOX_CENTRE)
     H = _TanhLayer()
-    spec = HybridSpec(lambda_init=LAMBDA, relevance_parametrisation=parametrisation)
+    spec = HybridSpec(lambda_init=LAMBDA, relevance_parametrisation=parametrisation, **PAPER)
     policy = build_hybrid(spec, design, H, action_limit=1.0, action_box=(BOX_CENTRE, BOX_HALF))
     x = _points(design)
     expected, r = _reference(design, H, x, LAMBDA, BOX_CENTRE, BOX_HALF, limit=1.0)
@@ -292,7 +341,7 @@ def test_build_hybrid_in_an_action_box_is_the_normalised_formula(parametrisation
 def test_identities_at_the_operating_point(parametrisation, box):
     centre = BOX_CENTRE if box else np.zeros(F)
     design = _random_design(centre)
-    spec = HybridSpec(lambda_init=LAMBDA, relevance_parametrisation=parametrisation)
+    spec = HybridSpec(lambda_init=LAMBDA, relevance_parametrisation=parametrisation, **PAPER)
     kwargs = {"action_limit": 1.0, "action_box": (centre, BOX_HALF)} if box else {}
     policy = build_hybrid(spec, design, _TanhLayer(), **({"action_limit": LIMIT} | kwargs))
     W, b, a = (np.asarray(v) for v in (design.gain, design.bias, design.operating_obs))
@@ -349,7 +398,7 @@ def test_hybrid_design_resolves_rho_in_from_the_certificate(pendulum_roa):
     assert resolved.operating_obs == (1.0, 0.0, 0.0)
     # a given certificate gives the same numbers; the paper's relevance needs none
     assert hybrid_design(spec, system, design, certificate=certificate) == resolved
-    assert hybrid_design(HybridSpec(), system, design).relevance_data == {}
+    assert hybrid_design(HybridSpec(**PAPER), system, design).relevance_data == {}
     json.dumps(resolved.to_dict())
 
 
@@ -534,7 +583,10 @@ def test_ddpg_config_from_an_old_dict_equals_for_system(hybrid):
 
 
 def test_pilco_config_from_an_old_dict_equals_for_system():
-    expected = PilcoConfig.for_system("pendulum", hybrid=True, lambda_init=0.5, learn_lambda=False)
+    # a config saved before the floor and the power existed: the paper's relevance, as it ran
+    expected = PilcoConfig.for_system(
+        "pendulum", hybrid=True, lambda_init=0.5, learn_lambda=False, **PAPER
+    )
     old = expected.to_dict()
     old.update(hybrid=True, lambda_init=0.5, learn_lambda=False, relevance="paper")
     assert PilcoConfig.from_dict(old) == expected
@@ -616,7 +668,7 @@ def test_sb3_actor_from_old_paper_keywords_is_the_new_one(parametrisation):
     design = design_lqr(system)
     old_model = _ddpg(_old_paper_keywords(system, design, parametrisation))
     spec = HybridSpec(
-        lambda_init=2.0, learn_lambda=False, relevance_parametrisation=parametrisation
+        lambda_init=2.0, learn_lambda=False, relevance_parametrisation=parametrisation, **PAPER
     )
     new_model = _ddpg(hybrid_policy_kwargs(system, spec))
     _assert_same_actor(old_model, new_model)

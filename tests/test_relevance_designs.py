@@ -218,7 +218,7 @@ def test_floored_relevance_module():
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_spec_with_r_min_builds_the_floored_relevance(plants, name):
     system, design, certificate = plants[name]
-    spec = HybridSpec(r_min=0.95, lambda_init=0.5)
+    spec = HybridSpec(r_min=0.95, lambda_init=0.5, relevance_power=1.0)
     resolved = hybrid_design(spec, system, design, certificate=certificate)
     data = resolved.relevance_data
     expected = relevance_floor(system.observation.to_list(), design.P, certificate.rho, 0.95)
@@ -241,13 +241,43 @@ def test_spec_with_r_min_builds_the_floored_relevance(plants, name):
     assert not list(frozen.relevance_module.parameters())
 
 
+@pytest.mark.parametrize("name", SYSTEMS)
+def test_the_default_spec_is_the_squared_relevance_floored_at_one_half(plants, name):
+    """``HybridSpec()``: r = (1 + d^2)^-2 (numpy, from the module's lambda), Lambda never below
+    the floor that keeps r >= 0.5 on the LQR's proved set (sampled: inside and on the boundary),
+    and the floor not vacuous (r well below 1 there, and below 0.5 beyond the set)."""
+    system, design, certificate = plants[name]
+    spec = HybridSpec()
+    resolved = hybrid_design(spec, system, design, certificate=certificate)
+    assert resolved.relevance_data["r_min"] == 0.5
+    policy = build_hybrid(spec, resolved, nn.Linear(len(system.operating_obs), 1, dtype=DTYPE))
+    module, point = policy.relevance_module, np.asarray(system.operating_obs)
+    assert isinstance(module, FlooredRelevance)
+    with torch.no_grad():
+        module.log_excess.fill_(-50.0)  # trained down to the floor
+    lam = module.lambda_.detach().numpy()
+    np.testing.assert_allclose(lam, resolved.relevance_data["lambda_floor"], rtol=1e-12)
+    obs = _observe(system, _proved_set_deviations(design.P, certificate.rho, 2_000, seed=11))
+    r = policy.relevance(torch.as_tensor(obs)).detach().numpy()[:, 0]
+    d = ((obs - point) ** 2 / lam).sum(axis=-1)
+    np.testing.assert_allclose(r, 1.0 / (1.0 + d**2) ** 2, rtol=1e-12)
+    assert r.min() >= 0.5 and r.min() < 0.9
+    outside = _observe(
+        system, 3.0 * _proved_set_deviations(design.P, certificate.rho, 200, seed=12)
+    )
+    assert policy.relevance(torch.as_tensor(outside)).detach().numpy().min() < 0.5
+
+
 def test_r_min_none_is_todays_paper_relevance(plants):
     system, design, certificate = plants["pendulum"]
 
     def no_proof():
         raise AssertionError("the paper relevance without r_min needs no certificate")
 
-    for spec in (HybridSpec(), HybridSpec(r_min=None, lambda_init=(1.0, 2.0, 3.0))):
+    for spec in (
+        HybridSpec(r_min=None, relevance_power=1.0),
+        HybridSpec(r_min=None, relevance_power=1.0, lambda_init=(1.0, 2.0, 3.0)),
+    ):
         resolved = hybrid_design(spec, system, design, certificate=no_proof)
         assert resolved.relevance_data == {}
         torch.manual_seed(0)
@@ -457,7 +487,7 @@ def test_power_spec_builds_its_relevance_and_power_one_is_todays(plants):
     system, design, certificate = plants["pendulum"]
     H = nn.Linear(3, 1, dtype=DTYPE)
     for power, kind in ((2.0, PaperRelevance), (1.0, type(None))):
-        spec = HybridSpec(relevance_power=power, lambda_init=0.7)
+        spec = HybridSpec(relevance_power=power, lambda_init=0.7, r_min=None)
         policy = build_hybrid(spec, hybrid_design(spec, system, design, certificate=certificate), H)
         assert isinstance(policy.relevance_module, kind)
         obs = _observe(system, _proved_set_deviations(design.P, certificate.rho, 500, seed=9))
@@ -476,9 +506,10 @@ def test_power_spec_builds_its_relevance_and_power_one_is_todays(plants):
 @pytest.mark.parametrize(
     "spec",
     [
-        HybridSpec(r_min=0.9),
+        HybridSpec(),  # leoc's default: p = 2, floored at r >= 0.5
+        HybridSpec(r_min=0.9, relevance_power=1.0),
         HybridSpec(relevance="lyapunov", lambda_init=0.2),
-        HybridSpec(relevance_power=2.0, lambda_init=0.3),
+        HybridSpec(relevance_power=2.0, lambda_init=0.3, r_min=None),
         HybridSpec(relevance_power=1.5, r_min=0.5),
     ],
 )

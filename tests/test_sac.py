@@ -20,7 +20,7 @@ from stable_baselines3.common.torch_layers import FlattenExtractor
 from torch import nn
 
 from leoc.control import design_lqr
-from leoc.policies import HybridDesign, HybridSpec
+from leoc.policies import FlooredRelevance, HybridDesign, HybridSpec
 from leoc.sb3 import (
     SAC_DEFAULTS,
     DDPGConfig,
@@ -61,6 +61,18 @@ TINY_RUN = {
 
 pytestmark = pytest.mark.usefixtures("single_thread")
 
+#: The paper's relevance as published, r = (1 + d)^-2 with ``log_lambda`` on the HybridPolicy
+#: itself (leoc's default before issue 40), as HybridSpec fields. "default" below is leoc's
+#: default HybridSpec() since issue 40: r = (1 + d^2)^-2 with Lambda floored (FlooredRelevance:
+#: lambda = floor (1 + e^q), q its ``log_excess``) so that r >= 0.5 on the LQR's proved region
+#: of attraction.
+PAPER_FIELDS = {"r_min": None, "relevance_power": 1.0}
+#: The parameter Lambda is learned through, by relevance.
+RELEVANCE_PARAMETER = {
+    "paper": "hybrid.log_lambda",
+    "default": "hybrid.relevance_module.log_excess",
+}
+
 
 def _roa_kwargs(system, design) -> dict:
     """The ROA hybrid's spec and design at a fixed level (the proof of the level is
@@ -78,28 +90,43 @@ def _roa_kwargs(system, design) -> dict:
 
 
 def _sac_model(system_name: str, relevance: str = "paper", seed: int = 0, **kw) -> SAC:
+    """The SAC hybrid with relevance "paper" (PAPER_FIELDS), "default" (HybridSpec()'s,
+    floored p = 2, on the floor its design resolves from the LQR's certificate) or "roa"."""
     system = make_system(system_name)
-    kwargs = hybrid_policy_kwargs(system, net_arch=SMALL_NET)
+    fields = {} if relevance == "default" else PAPER_FIELDS  # roa: replaced below, unproved
+    kwargs = hybrid_policy_kwargs(system, net_arch=SMALL_NET, **fields)
     if relevance == "roa":
         kwargs.update(_roa_kwargs(system, design_lqr(system)))
     env = make_env(system_name)
-    return SAC(HybridSACPolicy, env, policy_kwargs=kwargs, seed=seed, device="cpu", **kw)
+    model = SAC(HybridSACPolicy, env, policy_kwargs=kwargs, seed=seed, device="cpu", **kw)
+    module = model.actor.hybrid.relevance_module
+    if relevance == "paper":
+        assert module is None
+    elif relevance == "default":
+        assert isinstance(module, FlooredRelevance) and module.power == 2.0
+        floor = model.actor.hybrid_design.relevance_data["lambda_floor"]
+        np.testing.assert_allclose(module.floor.double().numpy(), floor, rtol=1e-7, atol=0)
+    return model
 
 
 def _randomise(actor: HybridSACActor, generator: torch.Generator) -> None:
     """Random H (mean head and hidden layers far from their initialisation), a random log-std
     head (small weights: a std of order 1, neither vanishing nor at SB3's cap) and random
-    relevance parameters (Lambda, or the ROA band width)."""
+    relevance parameters (Lambda, the floored relevance's excess q over its floor, or the ROA
+    band width)."""
     with torch.no_grad():
         for param in actor.hybrid.nonlinear.parameters():
             param.copy_(torch.randn(param.shape, generator=generator))
         weight, bias = actor.log_std.weight, actor.log_std.bias
         weight.copy_(LOG_STD_WEIGHT_SCALE * torch.randn(weight.shape, generator=generator))
         bias.copy_(LOG_STD_BIAS_SCALE * torch.randn(bias.shape, generator=generator))
-        if actor.hybrid.relevance_module is None:
+        module = actor.hybrid.relevance_module
+        if module is None:
             actor.hybrid.log_lambda.copy_(torch.randn(actor.hybrid.log_lambda.shape))
+        elif isinstance(module, FlooredRelevance):
+            module.log_excess.copy_(torch.randn(module.log_excess.shape, generator=generator))
         else:
-            width = actor.hybrid.relevance_module.width_param
+            width = module.width_param
             width.copy_(torch.randn(width.shape, generator=generator))
 
 
@@ -121,7 +148,7 @@ def _deterministic64(actor: HybridSACActor):
         actor64.hybrid.linear.b.copy_((actor.physical_bias - centre) / half)
         actor64.hybrid.operating_point.copy_(actor.operating_obs)
         module = actor64.hybrid.relevance_module
-        if module is not None and hasattr(module, "operating_point"):  # precision relevance
+        if module is not None and hasattr(module, "operating_point"):  # precision, floored
             module.operating_point.copy_(actor.operating_obs)
 
     def action(obs: torch.Tensor) -> torch.Tensor:
@@ -137,7 +164,8 @@ def _deterministic64(actor: HybridSACActor):
 
 @pytest.mark.parametrize(
     ("system_name", "relevance"),
-    [(name, "paper") for name in SYSTEM_NAMES] + [("mountaincar", "roa"), ("cartpole", "roa")],
+    [(name, relevance) for relevance in ("paper", "default") for name in SYSTEM_NAMES]
+    + [("mountaincar", "roa"), ("cartpole", "roa")],
 )
 def test_identities_at_the_operating_point_after_squashing(system_name, relevance):
     system = make_system(system_name)
@@ -163,25 +191,41 @@ def test_identities_at_the_operating_point_after_squashing(system_name, relevanc
     np.testing.assert_allclose(jacobian32.double().numpy() * limit, design.W, rtol=1e-4, atol=1e-4)
 
 
+#: A floor on Lambda for a hand-made design (any positive floor keeps the identities; the
+#: LQR's certificate is not under test here).
+HAND_MADE_FLOOR = [0.2, 1.5, 0.4]
+
+
 def test_identities_with_an_asymmetric_box_where_g_of_a_is_not_zero():
     """G(a) = 1.3 in a box [-1, 3] (normalised G(a) = 0.15): value and slope survive the
-    atanh / tanh pair, for the paper's relevance in both parametrisations."""
+    atanh / tanh pair, for the paper's relevance in both parametrisations and for leoc's
+    default (Lambda floored, p = 2; the floor hand-made)."""
     generator = torch.Generator().manual_seed(5)
     gain = np.array([[0.7, -1.1, 0.4]])
     point = np.array([0.2, -0.5, 1.0])
     bias = np.array([1.3]) - gain @ point
     box = spaces.Box(low=-1.0, high=3.0, shape=(1,), dtype=np.float32)
     obs_space = spaces.Box(low=-10.0, high=10.0, shape=(3,), dtype=np.float32)
-    for parametrisation in ("log_lambda", "precision"):
+    cases = [
+        (HybridSpec(lambda_init=0.3, **PAPER_FIELDS), {}),
+        (HybridSpec(lambda_init=0.3, relevance_parametrisation="precision"), {}),
+        (HybridSpec(lambda_init=0.3), {"lambda_floor": HAND_MADE_FLOOR}),  # leoc's default
+    ]
+    for spec, data in cases:
         actor = HybridSACActor(
             obs_space,
             box,
             SMALL_NET,
             FlattenExtractor(obs_space),
             3,
-            hybrid_spec=HybridSpec(lambda_init=0.3, relevance_parametrisation=parametrisation),
-            hybrid_design=HybridDesign(gain, bias, point),
+            hybrid_spec=spec,
+            hybrid_design=HybridDesign(gain, bias, point, data),
         )
+        if data:  # the default relevance: floored, p = 2
+            module = actor.hybrid.relevance_module
+            assert isinstance(module, FlooredRelevance) and module.power == 2.0
+            with torch.no_grad():
+                module.log_excess.copy_(torch.randn(3, generator=generator))
         with torch.no_grad():
             for param in actor.hybrid.nonlinear.parameters():
                 param.copy_(2.0 * torch.randn(param.shape, generator=generator))
@@ -196,21 +240,29 @@ def test_identities_with_an_asymmetric_box_where_g_of_a_is_not_zero():
             np.testing.assert_allclose(jacobian.numpy(), gain, rtol=0, atol=1e-10)
 
 
-def test_squashed_mean_is_the_ddpg_blend_away_from_the_operating_point():
+@pytest.mark.parametrize("kind", ["paper", "default"])
+def test_squashed_mean_is_the_ddpg_blend_away_from_the_operating_point(kind):
     """tanh(mu) = clip(r G~ + (1 - r) tanh M), recomputed from the formula (relevance from
-    Lambda, G from the LQR design, M from SB3's layers), on states far and near."""
+    Lambda, G from the LQR design, M from SB3's layers), on states far and near: the paper's
+    r = (1 + d)^-2 with lambda = exp(log_lambda), and leoc's default r = (1 + d^2)^-2 with
+    lambda = floor (1 + exp(q))."""
     system = make_system("cartpole")
     design = design_lqr(system)
-    model = _sac_model("cartpole")
+    model = _sac_model("cartpole", kind)
     generator = torch.Generator().manual_seed(3)
     _randomise(model.actor, generator)
     actor = model.actor
     obs = torch.as_tensor(system.operating_obs) + torch.randn(
         256, system.obs_dim, generator=generator, dtype=torch.float64
     ) * torch.logspace(-2, 0.5, 256, dtype=torch.float64).unsqueeze(1)
-    lam = torch.exp(actor.hybrid.log_lambda.detach()).double()
+    if kind == "paper":
+        lam, power = torch.exp(actor.hybrid.log_lambda.detach()).double(), 1
+    else:
+        module = actor.hybrid.relevance_module
+        excess = torch.exp(module.log_excess.detach().double())
+        lam, power = module.floor.double() * (1.0 + excess), 2
     distance = ((obs - torch.as_tensor(system.operating_obs)) ** 2 / lam).sum(1, keepdim=True)
-    relevance = 1.0 / (1.0 + distance) ** 2
+    relevance = 1.0 / (1.0 + distance**power) ** 2
     limit = system.action_limit
     linear = (obs @ torch.as_tensor(design.W).T + torch.as_tensor(design.b)) / limit
     layers = copy.deepcopy(actor.hybrid.nonlinear).double()
@@ -275,11 +327,12 @@ def test_the_flat_top_action_is_g_exactly(system_name):
 # ------------------------------------------------------------------------------ exploration
 
 
-def test_sampled_actions_are_sacs_gaussian_around_the_deterministic_one():
+@pytest.mark.parametrize("relevance", ["paper", "default"])
+def test_sampled_actions_are_sacs_gaussian_around_the_deterministic_one(relevance):
     """Monte Carlo: the pre-tanh samples have mean atanh(deterministic action) and SAC's std
     exp(log_std head), at the operating point and away from it."""
     system = make_system("pendulum")
-    model = _sac_model("pendulum")
+    model = _sac_model("pendulum", relevance)
     _randomise(model.actor, torch.Generator().manual_seed(11))
     actor = model.actor
     samples = 40_000
@@ -305,9 +358,10 @@ def test_sampled_actions_are_sacs_gaussian_around_the_deterministic_one():
 # ------------------------------------------------------------------------ training, saving
 
 
-def test_training_moves_mean_log_std_lambda_and_entropy_and_repeats_exactly(tmp_path):
+@pytest.mark.parametrize("relevance", ["paper", "default"])
+def test_training_moves_mean_log_std_lambda_and_entropy_and_repeats_exactly(tmp_path, relevance):
     def run():
-        model = _sac_model("pendulum", seed=4, learning_starts=20, batch_size=16)
+        model = _sac_model("pendulum", relevance, seed=4, learning_starts=20, batch_size=16)
         before = copy.deepcopy(model.actor.state_dict())
         coef_before = float(model.log_ent_coef.detach())
         model.learn(60)
@@ -315,7 +369,8 @@ def test_training_moves_mean_log_std_lambda_and_entropy_and_repeats_exactly(tmp_
 
     model, before, coef_before = run()
     after = model.actor.state_dict()
-    for name in ("hybrid.log_lambda", "log_std.weight", "hybrid.nonlinear.mean.weight"):
+    moved = (RELEVANCE_PARAMETER[relevance], "log_std.weight", "hybrid.nonlinear.mean.weight")
+    for name in moved:
         assert not torch.equal(before[name], after[name]), name
     assert float(model.log_ent_coef.detach()) != coef_before
     again, _, _ = run()

@@ -194,6 +194,7 @@ ABLATION_ALL_SETTINGS = (
     "sac_huber",
     "sac_critic",
     "sac_ou",
+    "relevance_paper",
     "relevance_precision",
     "relevance_frozen",
     "relevance_init_10",

@@ -117,7 +117,8 @@ def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
         "--relevance",
         type=relevance_name,
         metavar="{" + ",".join(RELEVANCE_NAMES) + "}",
-        help="the relevance design: 'paper', r(x) = (1 + d)^-2 (default), 'roa', exactly 1 on the "
+        help="the relevance design: 'paper', r(x) = (1 + d^p)^-2 (default; see --r-min and "
+        "--relevance-power), 'roa', exactly 1 on the "
         "LQR's proved region of attraction, 'lyapunov', the paper's form with the LQR's V as d, "
         "or another of leoc.policies.RELEVANCE_DESIGNS",
     )
@@ -143,10 +144,11 @@ def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
     )
     relevance.add_argument(
         "--r-min",
-        type=float,
-        metavar="FLOAT",
+        type=floor_value,
+        metavar="FLOAT|none",
         help="paper relevance: floor Lambda so that r is at least this on the LQR's proved "
-        "region of attraction, in (0, 1) (default: no floor)",
+        "region of attraction, in (0, 1), or 'none', no floor (the paper's); default 0.5 "
+        "(log lambda)",
     )
     relevance.add_argument(
         "--relevance-lr-scale",
@@ -159,10 +161,19 @@ def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
         "--relevance-power",
         type=float,
         metavar="FLOAT",
-        help="paper relevance (log lambda): p >= 1 of r = (1 + d^p)^-2 (default 1, the paper's; "
-        "2: the learned part leaks into the LQR's neighbourhood at fourth order, not second)",
+        help="paper relevance (log lambda): p >= 1 of r = (1 + d^p)^-2 (default 2: the learned "
+        "part leaks into the LQR's neighbourhood at fourth order, not second; 1: the paper's)",
     )
     add_roa_relevance_arguments(relevance)
+
+
+NO_FLOOR = "none"
+"""``--r-min``'s word for no floor on Lambda (``r_min=None``, the paper's relevance)."""
+
+
+def floor_value(text: str) -> float | str:
+    """``--r-min``'s value: a number, or :data:`NO_FLOOR` (argparse reports a bad one)."""
+    return NO_FLOOR if text.strip().lower() == NO_FLOOR else float(text)
 
 
 def add_roa_relevance_arguments(relevance: Any) -> None:
@@ -196,6 +207,8 @@ def hybrid_changes(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, flag.lstrip("-").replace("-", "_"), None)
         if value is not None:
             changes[field] = not value if flag.startswith("--freeze-") else value
+    if changes.get("r_min") == NO_FLOOR:
+        changes["r_min"] = None
     return changes
 
 

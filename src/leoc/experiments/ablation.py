@@ -197,11 +197,20 @@ SAC_TUNING_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
         {"sac_action_noise": True},
     ),
 }
-#: How the paper's relevance is learned (issue 40), one choice switched from leoc's defaults
-#: each (like ``defaults``, on the running code's defaults, so a cell differs from
-#: ``defaults`` in that choice only), for the hybrids with the paper's relevance of DDPG, TD3
-#: and SAC: name -> (label, :class:`~leoc.policies.HybridSpec` fields).
+#: The paper relevance's fields as leoc's defaults had them when issue 40's ablation ran
+#: (:math:`r = (1 + d)^{-2}`, no floor), written out: every setting measured from those
+#: defaults keeps them now that the defaults floor :math:`\Lambda` and square :math:`d`.
+PAPER_RELEVANCE_BASE: dict[str, Any] = {"r_min": None, "relevance_power": 1.0}
+#: How the paper's relevance is learned (issue 40), one choice switched from leoc's defaults as
+#: they were when it ran (:data:`PAPER_RELEVANCE_BASE` on the running code's other defaults,
+#: so a cell differs from ``relevance_paper`` in that choice only), for the hybrids with the
+#: paper's relevance of DDPG, TD3 and SAC: name -> (label, :class:`~leoc.policies.HybridSpec`
+#: fields). ``relevance_power_2_floor_0.5`` is what leoc's defaults took from it.
 RELEVANCE_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "relevance_paper": (
+        "the paper's r = (1 + d)^-2, Lambda learned (leoc's defaults before issue 40)",
+        {},
+    ),
     "relevance_precision": (
         "authors' precision parametrisation (S = Lambda^-1, unconstrained)",
         {"relevance_parametrisation": "precision"},
@@ -225,7 +234,7 @@ RELEVANCE_SETTINGS: dict[str, tuple[str, dict[str, Any]]] = {
     ),
     "relevance_power_2": ("r = (1 + d^2)^-2 (Lambda learned, no floor)", {"relevance_power": 2.0}),
     "relevance_power_2_floor_0.5": (
-        "r = (1 + d^2)^-2, Lambda floored: r >= 0.5 on the LQR's proved set",
+        "r = (1 + d^2)^-2, Lambda floored: r >= 0.5 on the LQR's proved set (leoc's defaults)",
         {"relevance_power": 2.0, "r_min": 0.5},
     ),
     "relevance_power_2_floor_0.9": (
@@ -275,6 +284,7 @@ LEOC_ABLATION_BASE: dict[str, Any] = {
     "relevance_parametrisation": "log_lambda",
     "lambda_init": 1.0,
     "learn_lambda": True,
+    **PAPER_RELEVANCE_BASE,
     "actor_output_clip": True,
     "model_selection": "final",
     "eval_episodes": 5,
@@ -306,6 +316,7 @@ SB3_SAC_CRITIC: dict[str, Any] = {
 #: final actor on 5 evaluation episodes and SB3's critics (SAC's other hyperparameters,
 #: :data:`~leoc.sb3.SAC_DEFAULTS`, did not change).
 SAC_ABLATION_BASE: dict[str, Any] = {
+    **PAPER_RELEVANCE_BASE,
     "step_rules": {},
     "model_selection": "final",
     "eval_episodes": 5,
@@ -414,9 +425,13 @@ def setting_overrides(
     if setting == DEFAULTS_SETTING:
         return {}
     if setting in RELEVANCE_SETTINGS:
-        return copy.deepcopy(RELEVANCE_SETTINGS[setting][1])
+        return {**PAPER_RELEVANCE_BASE, **copy.deepcopy(RELEVANCE_SETTINGS[setting][1])}
     if setting in SAC_TUNING_SETTINGS:
-        return {**SB3_SAC_CRITIC, **copy.deepcopy(SAC_TUNING_SETTINGS[setting][1])}
+        return {
+            **SB3_SAC_CRITIC,
+            **PAPER_RELEVANCE_BASE,
+            **copy.deepcopy(SAC_TUNING_SETTINGS[setting][1]),
+        }
     base = LEOC_ABLATION_BASE if algo != "sac" else SAC_ABLATION_BASE
     return {**copy.deepcopy(base), **_switched(setting, system, hybrid, budget)}
 

@@ -456,5 +456,8 @@ def authors_pilco_overrides(system: str, hybrid: bool, budget: int | None = None
             lqr_method=AUTHORS_LQR_METHOD,
             hybrid_method=AUTHORS_HYBRID_METHOD,
             lambda_init=AUTHORS_LAMBDA_INIT,
+            # the paper's relevance as the authors wrote it: r = (1 + d)^-2, Lambda unbounded
+            r_min=None,
+            relevance_power=1.0,
         )
     return overrides

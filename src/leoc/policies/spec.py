@@ -54,6 +54,10 @@ from .relevance import (
 )
 
 __all__ = [
+    "DEFAULT",
+    "DEFAULT_RELEVANCE_POWER",
+    "DEFAULT_R_MIN",
+    "LEGACY_FIELD_VALUES",
     "RELEVANCE_DESIGNS",
     "HybridDesign",
     "HybridSpec",
@@ -80,6 +84,21 @@ def _flag(value: object, name: str) -> bool:
     if not isinstance(value, bool):
         raise ValueError(f"{name}: expected a bool, found {value!r}")
     return value
+
+
+DEFAULT = "default"
+"""A :class:`HybridSpec` field's value meaning "the default of the chosen relevance design"."""
+DEFAULT_R_MIN = 0.5
+"""The paper relevance's default floor: :math:`r \\ge 0.5` on the LQR's proved region."""
+DEFAULT_RELEVANCE_POWER = 2.0
+"""The paper relevance's default :math:`p` of :math:`r = (1 + d^p)^{-2}`."""
+LEGACY_FIELD_VALUES: dict[str, Any] = {
+    "r_min": None,
+    "relevance_lr_scale": 1.0,
+    "relevance_power": 1.0,
+}
+"""The value every run had of a :class:`HybridSpec` field added after specs were first saved:
+what a saved spec without that field reads as (:meth:`HybridSpec.from_dict`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,17 +136,28 @@ class HybridSpec:
         Paper relevance (``log_lambda``): a floor on :math:`\Lambda` such that
         :math:`r \ge r_{min}` on the LQR's proved region of attraction :math:`\{V \le \rho\}`
         (:class:`~leoc.policies.FlooredRelevance`, :func:`~leoc.policies.relevance_floor`);
-        None (default): no floor. Not with the ``precision`` parametrisation (no floor on an
-        unconstrained :math:`S`) nor the Lyapunov relevance; the ROA relevance ignores it.
+        None: no floor (the paper's). Default: :data:`DEFAULT_R_MIN` (0.5) with the paper
+        relevance held as log lambda, None with any other design. Not with the ``precision``
+        parametrisation (no floor on an unconstrained :math:`S`) nor the Lyapunov relevance;
+        the ROA relevance ignores it.
     relevance_lr_scale : float
         The relevance's parameters train in their own optimiser group, at the actor's learning
         rate times this (> 0; default 1: one group, as before). Stable-Baselines3 learners only.
     relevance_power : float
         Paper relevance (``log_lambda``, floored or not): :math:`p \ge 1` of
-        :math:`r = (1 + d^p)^{-2}` (:func:`~leoc.policies.relevance_of_distance`); 1 (default):
-        the paper's. With :math:`p = 2` the learned part leaks into the LQR's neighbourhood at
-        fourth order in the deviation instead of second. Not with the ``precision``
-        parametrisation, the ROA or the Lyapunov relevance.
+        :math:`r = (1 + d^p)^{-2}` (:func:`~leoc.policies.relevance_of_distance`); 1: the
+        paper's. Default: :data:`DEFAULT_RELEVANCE_POWER` (2) with the paper relevance held as
+        log lambda, 1 with any other design. With :math:`p = 2` the learned part leaks into the
+        LQR's neighbourhood at fourth order in the deviation instead of second. Not with the
+        ``precision`` parametrisation, the ROA or the Lyapunov relevance.
+
+    The defaults of ``r_min`` and ``relevance_power`` (issue 40's ablation,
+    ``results/relevance-ablation``): the paper's relevance learned as it is (``r_min=None,
+    relevance_power=1``) left its LQR's impulse response by 2-400 % on 44 of 45 trained
+    hybrids; floored at 0.5 with :math:`p = 2` it keeps it within 2 %. Pass
+    ``r_min=None, relevance_power=1`` for the paper's relevance as published. A field left at
+    its default follows the design: :meth:`replace` with another ``relevance`` or
+    ``relevance_parametrisation`` resolves it again.
 
     Raises
     ------
@@ -142,15 +172,19 @@ class HybridSpec:
     rho_in_fraction: float = 1.0
     width_init: float = DEFAULT_ROA_WIDTH
     learn_width: bool = True
-    r_min: float | None = None
+    r_min: float | None | str = DEFAULT
     relevance_lr_scale: float = 1.0
-    relevance_power: float = 1.0
+    relevance_power: float | str = DEFAULT
+    _defaulted: frozenset[str] = dataclasses.field(
+        default=frozenset(), init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         if self.relevance not in RELEVANCE_DESIGNS:
             raise ValueError(
                 f"relevance: expected one of {tuple(RELEVANCE_DESIGNS)}, found {self.relevance!r}"
             )
+        self._resolve_defaults()
         if isinstance(self.lambda_init, (list, tuple)):
             values = tuple(_positive(value, "lambda_init") for value in self.lambda_init)
             object.__setattr__(self, "lambda_init", values)
@@ -169,6 +203,21 @@ class HybridSpec:
         for design in RELEVANCE_DESIGNS.values():
             design.check(self)
 
+    def _resolve_defaults(self) -> None:
+        """Give the fields left at :data:`DEFAULT` the value their design takes (class
+        docstring) and remember which they were, for :meth:`replace`."""
+        floored = self.relevance == "paper" and self.relevance_parametrisation == "log_lambda"
+        values = {
+            "r_min": DEFAULT_R_MIN if floored else None,
+            "relevance_power": DEFAULT_RELEVANCE_POWER if floored else 1.0,
+        }
+        defaulted = set(self._defaulted)
+        for name, value in values.items():
+            if isinstance(getattr(self, name), str) and getattr(self, name) == DEFAULT:
+                object.__setattr__(self, name, value)
+                defaulted.add(name)
+        object.__setattr__(self, "_defaulted", frozenset(defaulted))
+
     @property
     def design(self) -> RelevanceDesign:
         """The relevance design this spec names."""
@@ -177,28 +226,37 @@ class HybridSpec:
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
         """Every field, in order (the settings a run's overrides may name)."""
-        return tuple(field.name for field in dataclasses.fields(cls))
+        return tuple(field.name for field in dataclasses.fields(cls) if field.init)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly dict of every field (tuples become lists)."""
-        data = dataclasses.asdict(self)
+        """JSON-friendly dict of every field, defaults resolved (tuples become lists)."""
+        data = {name: getattr(self, name) for name in self.field_names()}
         if isinstance(self.lambda_init, tuple):
             data["lambda_init"] = list(self.lambda_init)
         return data
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> HybridSpec:
-        """Inverse of :meth:`to_dict`; an unknown key is an error naming it."""
+    def check_keys(cls, data: Mapping[str, Any]) -> dict[str, Any]:
+        """``data`` as a dict, checked to name fields only (an unknown key is an error)."""
         unknown = sorted(set(data) - set(cls.field_names()))
         if unknown:
             raise ValueError(
                 f"hybrid spec: unknown fields {unknown}; expected some of {list(cls.field_names())}"
             )
-        return cls(**dict(data))
+        return dict(data)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> HybridSpec:
+        """Inverse of :meth:`to_dict`, for saved specs: a field missing from ``data`` was saved
+        before it existed and takes the value every run had then (:data:`LEGACY_FIELD_VALUES`),
+        not today's default; an unknown key is an error naming it."""
+        return cls(**{**LEGACY_FIELD_VALUES, **cls.check_keys(data)})
 
     def replace(self, **changes: Any) -> HybridSpec:
-        """A copy with ``changes`` applied (and validated)."""
-        return dataclasses.replace(self, **changes)
+        """A copy with ``changes`` applied (and validated); fields left at their default follow
+        a changed design (class docstring)."""
+        kept = {name: DEFAULT for name in self._defaulted if name not in changes}
+        return dataclasses.replace(self, **kept, **changes)
 
 
 def as_hybrid_spec(value: object) -> HybridSpec | None:
@@ -217,7 +275,7 @@ def as_hybrid_spec(value: object) -> HybridSpec | None:
     if isinstance(value, HybridSpec):
         return value
     if isinstance(value, Mapping):
-        return HybridSpec.from_dict(value)
+        return HybridSpec(**HybridSpec.check_keys(value))
     raise ValueError(
         f"hybrid: expected None (a baseline), True, a HybridSpec or its dict, found {value!r}"
     )
@@ -247,10 +305,11 @@ LEGACY_FIELD_NAMES = {"roa_rho_fraction": "rho_in_fraction", "roa_width": "width
 def legacy_hybrid_config(data: Mapping[str, Any]) -> dict[str, Any]:
     """A learner's saved config in today's form: one saved before :class:`HybridSpec` (``hybrid``
     a bool, the hybrid's fields beside it) gets its ``hybrid`` spec dict (None for a baseline)
-    and loses those fields; a spec dict saved before a field existed gets that field's default;
+    and loses those fields; a spec dict saved before a field existed gets the value runs had
+    then (:data:`LEGACY_FIELD_VALUES`);
     any other config is returned as it is (a copy)."""
     out = dict(data)
-    if isinstance(out.get("hybrid"), Mapping):  # fields added since take their defaults
+    if isinstance(out.get("hybrid"), Mapping):  # fields added since take their values of then
         out["hybrid"] = HybridSpec.from_dict(out["hybrid"]).to_dict()
     if not isinstance(out.get("hybrid"), bool):
         return out
@@ -408,6 +467,12 @@ class PaperRelevanceDesign(RelevanceDesign):
     def build(
         self, spec: HybridSpec, data: Mapping[str, Any], operating_obs: np.ndarray, dtype: Any
     ) -> dict[str, Any]:
+        if spec.r_min is not None and "lambda_floor" not in data:
+            raise ValueError(
+                f"r_min: expected the design's relevance_data to hold the floor on Lambda "
+                f"(hybrid_design resolves it from the LQR's certificate), found none for "
+                f"r_min={spec.r_min!r}; resolve the design with hybrid_design, or pass r_min=None"
+            )
         if "lambda_floor" in data:
             floored = FlooredRelevance(
                 operating_obs,
