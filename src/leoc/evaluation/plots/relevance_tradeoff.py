@@ -30,7 +30,7 @@ MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
 #: Where runs that never held are drawn, as a fraction above the largest first-hold time.
 NEVER_MARGIN = 1.15
 #: Smallest distance drawn on the log axis [%] (a run equal to its LQR to round-off).
-DISTANCE_FLOOR = 1e-3
+DISTANCE_FLOOR = 1e-5
 
 
 def _panels(points: Sequence[Mapping[str, Any]]) -> list[tuple[str, str]]:
