@@ -220,3 +220,51 @@ def test_the_default_folder(tmp_path, monkeypatch) -> None:
     assert roa.certificate_cache_dir() == expected
     monkeypatch.setenv(roa.CACHE_DIR_VARIABLE, str(tmp_path / "mine"))
     assert roa.certificate_cache_dir() == tmp_path / "mine" / roa.CERTIFICATE_FOLDER
+
+
+def test_a_saturated_lqr_is_cached_under_its_own_key_and_proved_the_same(
+    mountaincar, cache, monkeypatch
+) -> None:
+    """PILCO's hybrid certifies ``sin(G)``, not the clipped ``G``: leoc.policies.lqr_certificate
+    caches it too, under a key of its saturation and limit, and the cached certificate is the
+    one certify_level proves for that closed loop without any cache."""
+    from leoc.policies.hybrid import lqr_certificate, saturated_lqr
+
+    system, design = mountaincar
+    expected = roa.certify_level(
+        system,
+        design.P,
+        saturated_lqr(system, design, "sin"),
+        action_repeat=design.action_repeat,
+    )
+    counted = _Counted()
+    monkeypatch.setattr(roa, "certify_level", counted)
+    first = lqr_certificate(system, design, "sin")
+    _assert_same(first, expected)
+    assert counted.calls == 1
+    assert len(list(cache.iterdir())) == 1
+    roa._CERTIFICATES.clear()  # a new process
+    monkeypatch.setattr(roa, "certify_level", _refuse)
+    _assert_same(lqr_certificate(system, design, "sin"), expected)
+    # another saturation or limit is another closed loop: proved, not read from sin's file
+    monkeypatch.setattr(roa, "certify_level", counted)
+    lqr_certificate(system, design, "tanh")
+    lqr_certificate(system, design, "sin", action_limit=0.5 * system.action_limit)
+    assert counted.calls == 3
+    assert len(list(cache.iterdir())) == 3
+    # and the clipped design's own certificate has a key of its own
+    lqr_certificate(system, design, "clip")
+    assert counted.calls == 4
+
+
+def test_a_controller_without_a_key_is_proved_at_every_call(mountaincar, cache, monkeypatch):
+    """A controller certify_lqr cannot name (no controller_key) is never served from a cache:
+    two calls, two proofs, nothing written."""
+    system, design = mountaincar
+    counted = _Counted()
+    monkeypatch.setattr(roa, "certify_level", counted)
+    controller = roa.lqr_closed_loop(design)
+    roa.certify_lqr(system, design, controller)
+    roa.certify_lqr(system, design, controller)
+    assert counted.calls == 2
+    assert not cache.exists()

@@ -567,7 +567,13 @@ def lqr_closed_loop(design: Any) -> LinearClosedLoop:
 
 
 def certify_lqr(
-    system: System, design: Any, controller: Controller | None = None, **options: Any
+    system: System,
+    design: Any,
+    controller: Controller | None = None,
+    *,
+    controller_key: str | None = None,
+    controller_modules: Sequence[str] = (),
+    **options: Any,
 ) -> LyapunovCertificate:
     """Certificate of an LQR design's region of attraction (:func:`certify_level` with the
     design's ``P`` and control period).
@@ -579,15 +585,18 @@ def certify_lqr(
     controller : callable, optional
         The saturated linear closed loop to certify; default ``G(o) = W o + b`` clipped by the
         actuator (a hybrid with another saturation, e.g. PILCO's sine, passes ``sat(G)``).
+    controller_key : str, optional
+        What fixes ``controller`` given system and design (its saturation and limit, say):
+        the certificate is then cached as the design's own; without it, proved at every call.
+    controller_modules : sequence of str
+        Modules that define ``controller``: their source enters the key.
     **options
         :func:`certify_level`'s keywords (``samples``, ``confidence``, ``seed``, ...).
 
     Notes
     -----
-    The certificate of the design's own ``G`` (no ``controller`` given) is computed once per
-    system, design and options, and copied out afterwards: the search and the proof are
-    deterministic (seeded), and the proof costs seconds (pendulum) to minutes (acrobot), which
-    every ROA-hybrid run would pay again when it builds its relevance. It is kept twice:
+    A certificate (of ``G``, or of a keyed ``controller``) is computed once per key and copied
+    out: the proof is deterministic (seeded) and costs seconds to minutes. It is kept twice:
 
     - in the process (the last :data:`~leoc.control.roa.CERTIFICATE_CACHE_SIZE`), and
     - on disk, for the next process (xdist workers, each ``leoc train``, each ablation run):
@@ -606,14 +615,31 @@ def certify_lqr(
     found; delete the folder to prove again. Point ``LEOC_CACHE_DIR`` only at a folder no one
     else can write: the files are unpickled.
     """
-    if controller is not None:
+    if controller is not None and controller_key is None:
         return certify_level(
             system, design.P, controller, action_repeat=design.action_repeat, **options
         )
-    key = _certificate_key(system, design, options)
+    if controller is None:
+        controller_key, controller_modules = None, ()
+    key = _certificate_key(system, design, options, controller_key, controller_modules)
+    closed_loop = lqr_closed_loop(design) if controller is None else controller
+    modules = (type(system).__module__, *controller_modules)
+    return _held_stored_or_computed(system, design, closed_loop, key, options, modules)
+
+
+def _held_stored_or_computed(
+    system: System,
+    design: Any,
+    controller: Controller,
+    key: str,
+    options: Mapping[str, Any],
+    modules: Sequence[str],
+) -> LyapunovCertificate:
+    """A copy of the certificate of ``key``: held in the process (the last
+    :data:`CERTIFICATE_CACHE_SIZE`), else :func:`_stored_or_computed`."""
     cached = _CERTIFICATES.get(key)
     if cached is None:
-        cached = _stored_or_computed(system, design, key, options)
+        cached = _stored_or_computed(system, design, controller, key, options, modules)
         _CERTIFICATES[key] = cached
         while len(_CERTIFICATES) > CERTIFICATE_CACHE_SIZE:
             _CERTIFICATES.popitem(last=False)
@@ -623,18 +649,25 @@ def certify_lqr(
 
 
 def _stored_or_computed(
-    system: System, design: Any, key: str, options: Mapping[str, Any]
+    system: System,
+    design: Any,
+    controller: Controller,
+    key: str,
+    options: Mapping[str, Any],
+    modules: Sequence[str],
 ) -> LyapunovCertificate:
-    """The LQR certificate of ``key`` from the disk cache, or computed (and stored there)."""
+    """The certificate of ``controller`` (``key``) from the disk cache, or computed (and
+    stored there; not if the source of one of ``modules`` cannot be read, since the key
+    would not change with it)."""
     folder = certificate_cache_dir()
-    if _module_digest(type(system).__module__) is None:
-        folder = None  # a system without readable source: its dynamics are not in the key
+    if any(_module_digest(name) is None for name in modules):
+        folder = None  # dynamics or a controller without readable source: not in the key
     path = None if folder is None else folder / f"{key}.pkl"
     stored = None if path is None else _load_certificate(path)
     if stored is not None:
         return stored
     certificate = certify_level(
-        system, design.P, lqr_closed_loop(design), action_repeat=design.action_repeat, **options
+        system, design.P, controller, action_repeat=design.action_repeat, **options
     )
     if path is not None:
         _store_certificate(path, certificate)
@@ -735,12 +768,19 @@ def _store_certificate(path: Path, certificate: LyapunovCertificate) -> None:
         pass
 
 
-def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) -> str:
+def _certificate_key(
+    system: System,
+    design: Any,
+    options: Mapping[str, Any],
+    controller_key: str | None = None,
+    controller_modules: Sequence[str] = (),
+) -> str:
     """What an LQR certificate depends on, hashed: the system's class and attributes
     (parameters, step rules; not the cached derived ones), the design's ``W, b, P`` and
-    control period, the options, and the code (:func:`_source_digest`, the source of the
-    system's module). The search is deterministic (seeded), so equal keys give equal
-    certificates."""
+    control period, the options, the closed loop (``controller_key`` and the source of
+    ``controller_modules``, for a controller other than the design's own), and the code
+    (:func:`_source_digest`, the source of the system's module). The search is deterministic
+    (seeded), so equal keys give equal certificates."""
     digest = hashlib.sha256()
     digest.update(f"{type(system).__module__}.{type(system).__qualname__}".encode())
     for name, value in sorted(vars(system).items()):
@@ -757,4 +797,8 @@ def _certificate_key(system: System, design: Any, options: Mapping[str, Any]) ->
     digest.update(repr(sorted(options.items())).encode())
     digest.update(_source_digest().encode())
     digest.update(str(_module_digest(type(system).__module__)).encode())
+    if controller_key is not None:
+        digest.update(f"controller={controller_key}".encode())
+        for name in controller_modules:
+            digest.update(f"{name}={_module_digest(name)}".encode())
     return digest.hexdigest()

@@ -440,7 +440,9 @@ def lqr_certificate(
     a DDPG/TD3/SAC hybrid's is the ``clip`` case, :func:`leoc.policies.hybrid_design`), and the one
     ``leoc roa --controller`` certifies for a trained run.
 
-    ``clip``/``none`` at the system's limit is the design's own certificate (cached per process);
+    Every saturation is cached as :func:`~leoc.control.certify_lqr` caches (in the process and
+    on disk): ``clip``/``none`` at the system's limit is the design's own certificate, any other
+    is keyed by its saturation, limit and :data:`SATURATED_LQR_MODULES`.
     ``certify_options`` are :func:`~leoc.control.certify_level`'s keywords.
     """
     from leoc.control.roa import LinearClosedLoop, certify_lqr
@@ -448,7 +450,19 @@ def lqr_certificate(
     closed_loop = saturated_lqr(system, design, saturation, action_limit)
     if isinstance(closed_loop, LinearClosedLoop):
         return certify_lqr(system, design, **certify_options)
-    return certify_lqr(system, design, closed_loop, **certify_options)
+    limit = float(system.action_limit if action_limit is None else action_limit)
+    return certify_lqr(
+        system,
+        design,
+        closed_loop,
+        controller_key=f"saturated_lqr(saturation={saturation!r}, action_limit={limit!r})",
+        controller_modules=SATURATED_LQR_MODULES,
+        **certify_options,
+    )
+
+
+SATURATED_LQR_MODULES = ("leoc.policies.hybrid", "leoc.policies.saturation", "leoc.policies.held")
+"""Modules whose source writes :func:`saturated_lqr` (its certificate's cache key holds them)."""
 
 
 class _Callable(nn.Module):
