@@ -77,15 +77,22 @@ def plot_relevance_tradeoff(
 ) -> Path:
     """One point per run: ``distance_pct`` (log x) against ``first_hold_s`` (y; None drawn on
     a dotted "never held" line above the others), coloured by ``setting``, one panel per
-    system and learner; a vertical line at ``tolerance_pct``."""
+    system (columns) and learner (rows; a learner without runs on a system leaves its panel
+    empty); a vertical line at ``tolerance_pct``."""
     panels = _panels(points)
     settings = list(dict.fromkeys(p["setting"] for p in points))
     style = {
         name: (PALETTE[i % len(PALETTE)], MARKERS[i % len(MARKERS)])
         for i, name in enumerate(settings)
     }
-    figure, axes = new_figure(1, max(1, len(panels)), panel=(4.6, 3.4))
-    for axis, (system, learner) in zip(np.ravel(axes), panels, strict=False):
+    systems = list(dict.fromkeys(system for system, _ in panels)) or [""]
+    learners = sorted({learner for _, learner in panels}) or [""]
+    figure, axes = new_figure(len(learners), len(systems), panel=(4.6, 3.4))
+    for axis in np.ravel(axes):
+        axis.set_visible(False)  # shown again below where a system has runs of that learner
+    for system, learner in panels:
+        axis = axes[learners.index(learner), systems.index(system)]
+        axis.set_visible(True)
         mine = [p for p in points if p["system"] == system and p["controller"].startswith(learner)]
         axis.set_xscale("log")
         _draw(axis, mine, style, labels)
