@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from leoc.control import design_lqr, roa
 from leoc.systems.registry import make_system
@@ -53,6 +54,7 @@ class _Counted:
 
     def __call__(self, *args, **kwargs):
         self.calls += 1
+        self.controller = args[2]  # certify_level(system, P, controller, ...)
         return self.real(*args, **kwargs) if self.result is None else self.result
 
 
@@ -242,6 +244,20 @@ def test_a_saturated_lqr_is_cached_under_its_own_key_and_proved_the_same(
     first = lqr_certificate(system, design, "sin")
     _assert_same(first, expected)
     assert counted.calls == 1
+    # the loop proved is sin(G), not the clipped G (the mountain car proves the same level for
+    # both, limited by its region, so the level alone would not tell): compared where G is
+    # beyond the limit, where sin and clip differ
+    observations = torch.as_tensor(
+        np.asarray(system.operating_obs) + np.linspace(-3.0, 3.0, 7)[:, None], dtype=torch.float64
+    )
+    with torch.no_grad():
+        proved = counted.controller(observations)
+        sine = saturated_lqr(system, design, "sin")(observations)
+        clipped = roa.lqr_closed_loop(design)(observations).clamp(
+            -system.action_limit, system.action_limit
+        )
+    torch.testing.assert_close(proved, sine, rtol=0, atol=1e-12)
+    assert (proved - clipped).abs().max() > 1e-3
     assert len(list(cache.iterdir())) == 1
     roa._CERTIFICATES.clear()  # a new process
     monkeypatch.setattr(roa, "certify_level", _refuse)
