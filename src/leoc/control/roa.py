@@ -615,31 +615,26 @@ def certify_lqr(
     found; delete the folder to prove again. Point ``LEOC_CACHE_DIR`` only at a folder no one
     else can write: the files are unpickled.
     """
+    closed_loop = lqr_closed_loop(design) if controller is None else controller
+    prove = functools.partial(
+        certify_level, system, design.P, closed_loop, action_repeat=design.action_repeat, **options
+    )
     if controller is not None and controller_key is None:
-        return certify_level(
-            system, design.P, controller, action_repeat=design.action_repeat, **options
-        )
+        return prove()
     if controller is None:
         controller_key, controller_modules = None, ()
     key = _certificate_key(system, design, options, controller_key, controller_modules)
-    closed_loop = lqr_closed_loop(design) if controller is None else controller
-    modules = (type(system).__module__, *controller_modules)
-    return _held_stored_or_computed(system, design, closed_loop, key, options, modules)
+    return _held_stored_or_computed(key, prove, (type(system).__module__, *controller_modules))
 
 
 def _held_stored_or_computed(
-    system: System,
-    design: Any,
-    controller: Controller,
-    key: str,
-    options: Mapping[str, Any],
-    modules: Sequence[str],
+    key: str, prove: Callable[[], LyapunovCertificate], modules: Sequence[str]
 ) -> LyapunovCertificate:
     """A copy of the certificate of ``key``: held in the process (the last
     :data:`CERTIFICATE_CACHE_SIZE`), else :func:`_stored_or_computed`."""
     cached = _CERTIFICATES.get(key)
     if cached is None:
-        cached = _stored_or_computed(system, design, controller, key, options, modules)
+        cached = _stored_or_computed(key, prove, modules)
         _CERTIFICATES[key] = cached
         while len(_CERTIFICATES) > CERTIFICATE_CACHE_SIZE:
             _CERTIFICATES.popitem(last=False)
@@ -649,16 +644,11 @@ def _held_stored_or_computed(
 
 
 def _stored_or_computed(
-    system: System,
-    design: Any,
-    controller: Controller,
-    key: str,
-    options: Mapping[str, Any],
-    modules: Sequence[str],
+    key: str, prove: Callable[[], LyapunovCertificate], modules: Sequence[str]
 ) -> LyapunovCertificate:
-    """The certificate of ``controller`` (``key``) from the disk cache, or computed (and
-    stored there; not if the source of one of ``modules`` cannot be read, since the key
-    would not change with it)."""
+    """The certificate of ``key`` from the disk cache, or ``prove()`` (and stored there; not
+    if the source of one of ``modules`` cannot be read, since the key would not change with
+    it)."""
     folder = certificate_cache_dir()
     if any(_module_digest(name) is None for name in modules):
         folder = None  # dynamics or a controller without readable source: not in the key
@@ -666,9 +656,7 @@ def _stored_or_computed(
     stored = None if path is None else _load_certificate(path)
     if stored is not None:
         return stored
-    certificate = certify_level(
-        system, design.P, controller, action_repeat=design.action_repeat, **options
-    )
+    certificate = prove()
     if path is not None:
         _store_certificate(path, certificate)
     return certificate
