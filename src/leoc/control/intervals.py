@@ -9,29 +9,51 @@ A :class:`Jet` encloses, over a box of inputs :math:`\xi \in [c - h, c + h] \sub
     q(\xi) \in [m - r,\ m + r], \qquad \frac{\partial q}{\partial \xi_s}(\xi)
     \in [m'_s - r'_s,\ m'_s + r'_s] \quad \text{for every } \xi \text{ in the box.}
 
-The existing pure torch step functions, observation maps and linear controllers run on jets
-unchanged: arithmetic operators are overloaded and the torch functions they call (``sin``,
-``cos``, ``tanh``, ``clamp``, ``minimum``, ``maximum``, ``abs``, ``stack``, ``matmul``,
-``nn.functional.linear``) are dispatched through ``__torch_function__``. Any other torch
-function raises :class:`UnsupportedOperation`, so a proof never silently uses an unsound
-enclosure.
+The existing pure torch step functions, observation maps, linear controllers and the learned
+parts leoc trains (MLP actors, PILCO's RBF network, the relevances and saturations of
+:mod:`leoc.policies`) run on jets unchanged: arithmetic operators are overloaded and the torch
+functions they call (``sin``, ``cos``, ``tanh``, ``exp``, ``atan2``, ``remainder``, ``pow``,
+``relu``, ``clamp``, ``minimum``, ``maximum``, ``abs``, ``sum``, ``stack``, ``matmul``,
+``nn.functional.linear``, ``nn.functional.relu``) are dispatched through
+``__torch_function__``. Any other torch function raises :class:`UnsupportedOperation`, so a
+proof never silently uses an unsound enclosure. (``torch.where`` is deliberately absent: its
+condition would come from the "possibly" comparisons below, and selecting by a "possibly"
+is not sound.)
 
 Rules (Moore, Kearfott and Cloud 2009, ch. 2-5; Rump 1999 for the midpoint-radius form):
 products :math:`m = m_a m_b`, :math:`r = |m_a| r_b + r_a |m_b| + r_a r_b`; ``sin`` and ``cos``
 by the addition theorem, :math:`|\sin(m + t) - \sin m| \le |\sin m| \min(t^2/2, 2) + |\cos m|
-\min(|t|, 1)`; monotone functions (``tanh``, reciprocal) and ``clamp`` by their endpoints;
-derivatives by the chain rule on intervals. ``clamp``, ``minimum``, ``maximum`` and ``abs`` are
-not differentiable at their kinks: where an interval straddles a kink the derivative enclosure
-is the hull of both one-sided derivatives (it contains Clarke's generalised gradient, which is
-what the mean-value form of a piecewise smooth map needs).
+\min(|t|, 1)`; monotone functions by their endpoints (``exp``, ``tanh``, reciprocal,
+:math:`x^p` for real :math:`p \ge 1` on :math:`x \ge 0`, ``relu`` and ``clamp``), with the
+slopes :math:`\exp' = \exp`, :math:`\tanh' = 1/\cosh^2` (at the point of the interval nearest
+0 and at the farthest end), :math:`(x^p)' = p x^{p-1}`; ``atan2(y, x)`` over a box that misses
+its branch cut :math:`\{x \le 0, y = 0\}` by the hull of its four corners (the angle of a
+convex set that misses the origin is extreme at a vertex), with the gradient
+:math:`(x y' - y x') / (x^2 + y^2)` in interval arithmetic; a box that meets the cut gets
+:math:`[-\pi, \pi]` and an unbounded derivative; ``remainder`` by a positive constant
+:math:`m` is the shift :math:`x - k m` where the box stays in one period and :math:`[0, m]`
+with an unbounded derivative where it crosses a jump; :func:`smootherstep` (the ROA
+relevance's quintic) by its monotonicity; derivatives by the chain rule on intervals.
+``clamp``, ``relu``, ``minimum``, ``maximum`` and ``abs`` are not differentiable at their kinks:
+where an interval straddles a kink the derivative enclosure is the hull of both one-sided
+derivatives (ReLU's slope is :math:`[0, 1]` there; the hull contains Clarke's generalised
+gradient, which is what the mean-value form of a piecewise smooth map needs). An unbounded
+derivative (a jump) or an overflow gives an infinite radius, which every proof rejects
+(:mod:`leoc.control.proof` fails a box whose enclosure is not finite).
 
 Rounding: every result's radius is widened by ``ROUNDING`` (four units of roundoff) relative
 to its midpoint and radius, plus the smallest subnormal number. That covers the at most half-ulp
 error of IEEE 754 ``+ - * /`` (correctly rounded) and the at most one-ulp error of the
-platform's ``sin``, ``cos`` and ``tanh``, so the enclosures hold for the exact real-number
-functions, not only for the floating-point evaluation (emulated outward rounding; the one
-assumption is libm's documented accuracy). Matrix products add the standard bound
-:math:`\gamma_n |x|\,|M|` with :math:`\gamma_n = n u / (1 - n u)` (Higham 2002, sec. 3.5).
+platform's ``sin`` and ``cos``, so the enclosures hold for the exact real-number functions, not
+only for the floating-point evaluation (emulated outward rounding; the one assumption is libm's
+documented accuracy). The rules for ``exp``, ``tanh``, ``atan2`` and ``pow`` allow each libm
+call a further ``LIBM_ERROR`` (four ulps, above the measured maximum errors of glibc's double
+functions, Zimmermann 2021) and evaluate it at the ends of the enclosure rounded outward
+(``nextafter``), which matters for ``exp``, whose relative condition number is :math:`|x|`.
+Matrix products and sums of :math:`n` terms add the standard bound :math:`\gamma_n |x|\,|M|`
+(:math:`\gamma_n |x|` for sums) with :math:`\gamma_n = n u / (1 - n u)` (Higham 2002, sec.
+3.1 and 3.5; any order of summation, blocked or pairwise), and divide the accumulated radius by
+:math:`1 - \gamma_n`, as its own computation is a sum of :math:`n` non-negative terms.
 
 Comparisons (``<``, ``>``, ``<=``, ``>=``) answer "possibly": ``jet > c`` is true where some
 value in the enclosure exceeds ``c``. A region predicate such as ``System.out_of_bounds``
@@ -46,6 +68,8 @@ References
   2009.
 - Rump, S. M., "Fast and parallel interval arithmetic", BIT 39(3), 1999.
 - Higham, N. J., *Accuracy and Stability of Numerical Algorithms*, 2nd ed., SIAM 2002.
+- Zimmermann, P., "Accuracy of mathematical functions in single, double, double extended, and
+  quadruple precision", HAL hal-03141101, 2021.
 """
 
 from __future__ import annotations
@@ -57,13 +81,18 @@ from typing import Any
 import torch
 from torch import Tensor
 
-__all__ = ["Jet", "UnsupportedOperation", "box_jet", "point_jet"]
+__all__ = ["SMOOTHERSTEP", "Jet", "UnsupportedOperation", "box_jet", "point_jet", "smootherstep"]
 
 UNIT_ROUNDOFF = 2.0**-53
 ROUNDING = 4.0 * UNIT_ROUNDOFF
 """Relative widening of every computed radius and midpoint (emulated outward rounding)."""
 TINY = 2.0**-1074
 """Smallest subnormal double: the absolute error of a rounding that underflows."""
+LIBM_ERROR = 8.0 * UNIT_ROUNDOFF
+"""Relative error allowed to one call of the platform's ``exp``, ``tanh``, ``cosh``, ``atan2``
+or ``pow`` (four units in the last place), on top of ``ROUNDING``."""
+LIBM_TINY = 4.0 * TINY
+"""Absolute error allowed to a libm result that underflows into the subnormal range."""
 
 
 class UnsupportedOperation(TypeError):
@@ -89,6 +118,38 @@ def _last_dim(dim: int, ndim: int) -> int:
     return dim - 1 if dim < 0 else dim
 
 
+def _gamma(count: int) -> float:
+    r""":math:`\gamma_n = n u / (1 - n u)`, the relative error bound of a sum of n products."""
+    return count * UNIT_ROUNDOFF / (1.0 - count * UNIT_ROUNDOFF)
+
+
+def _accumulated(radius_sum: Tensor, magnitude_sum: Tensor, gamma: float) -> Tensor:
+    r"""Radius of a computed sum: the summed radii plus :math:`\gamma_n` times the summed
+    magnitudes (the midpoint's rounding), over :math:`1 - \gamma_n` (both sums are computed
+    sums of non-negative terms, which can fall short by that factor)."""
+    return (radius_sum + gamma * magnitude_sum) / (1.0 - gamma)
+
+
+def _outer_ends(x: Jet) -> tuple[Tensor, Tensor]:
+    """Ends of the enclosure rounded outward: below :math:`m - r` and above :math:`m + r` in
+    exact arithmetic (one ``nextafter`` past a correctly rounded difference or sum)."""
+    low, high = x.mid - x.rad, x.mid + x.rad
+    return (
+        torch.nextafter(low, torch.full_like(low, -math.inf)),
+        torch.nextafter(high, torch.full_like(high, math.inf)),
+    )
+
+
+def _enclose_ends(low: Tensor, high: Tensor, relative: float) -> tuple[Tensor, Tensor]:
+    """Midpoint and radius of ``[low, high]``, ends computed with at most ``relative`` error
+    (plus ``LIBM_TINY`` where they underflow); an infinite or NaN end gives the whole line."""
+    mid = 0.5 * (low + high)
+    half = 0.5 * (high - low)
+    rad = _widen(mid, half + relative * (mid.abs() + half) + LIBM_TINY)
+    bad = ~(torch.isfinite(mid) & torch.isfinite(rad))
+    return torch.where(bad, 0.0, mid), torch.where(bad, math.inf, rad)
+
+
 class Jet:
     """Enclosure of a quantity and of its gradient over a box (module docstring).
 
@@ -104,6 +165,11 @@ class Jet:
     __slots__ = ("mid", "rad", "dmid", "drad")
 
     def __init__(self, mid: Tensor, rad: Tensor, dmid: Tensor | None, drad: Tensor | None):
+        if dmid is not None and drad is not None and dmid.shape[:-1] != mid.shape:
+            # a gradient broadcast along some value dimensions (a constant's) is held at the
+            # value's full shape (a view), so that indexing and sums see one gradient per value
+            shape = (*mid.shape, dmid.shape[-1])
+            dmid, drad = dmid.expand(shape), drad.expand(shape)
         self.mid, self.rad, self.dmid, self.drad = mid, rad, dmid, drad
 
     # ---- shape-like attributes, so shape checks of step functions pass ----------------------
@@ -121,6 +187,11 @@ class Jet:
 
     def dim(self) -> int:
         return self.mid.ndim
+
+    @property
+    def device(self) -> torch.device:
+        """Device of the enclosure's tensors."""
+        return self.mid.device
 
     @property
     def low(self) -> Tensor:
@@ -206,16 +277,27 @@ class Jet:
         return as_jet(other, self) * self.reciprocal()
 
     def __pow__(self, exponent: Any) -> Jet:
-        if isinstance(exponent, bool) or not isinstance(exponent, int) or exponent < 1:
+        number = isinstance(exponent, (int, float)) and not isinstance(exponent, bool)
+        if not number or not exponent >= 1 or not math.isfinite(exponent):
             raise UnsupportedOperation(
-                f"Jet ** {exponent!r}: only positive integer exponents are supported"
+                f"Jet ** {exponent!r}: only real exponents >= 1 are supported"
             )
+        if not float(exponent).is_integer():
+            return _real_power(self, float(exponent))
         if exponent == 2:
             return self.square()
         result = self
-        for _ in range(exponent - 1):
+        for _ in range(int(exponent) - 1):
             result = result * self
         return result
+
+    def pow(self, exponent: Any) -> Jet:
+        """``self ** exponent`` for a real exponent >= 1 (``Tensor.pow``)."""
+        return self**exponent
+
+    def sum(self, dim: Any = None, keepdim: bool = False) -> Jet:
+        """Sum over ``dim`` (an int, a tuple of ints or None for all), as ``Tensor.sum``."""
+        return _sum(self, dim, keepdim)
 
     def square(self) -> Jet:
         """x^2 with the exact range (no dependency between the two factors)."""
@@ -313,10 +395,15 @@ def _sum_grads(terms: list[tuple[Tensor, Tensor]]) -> tuple[Tensor | None, Tenso
 
 def _add_grads(first: Jet, second: Jet) -> tuple[Tensor | None, Tensor | None]:
     terms = [(jet.dmid, jet.drad) for jet in (first, second) if jet.dmid is not None]  # type: ignore[misc]
-    if len(terms) == 2:
-        shape = torch.broadcast_shapes(terms[0][0].shape, terms[1][0].shape)
+    return _combine(terms)  # type: ignore[arg-type]
+
+
+def _combine(terms: list[tuple[Tensor, Tensor]]) -> tuple[Tensor | None, Tensor | None]:
+    """Sum of gradient enclosures, broadcast to one shape."""
+    if len(terms) > 1:
+        shape = torch.broadcast_shapes(*(mid.shape for mid, _ in terms))
         terms = [(m.expand(shape), r.expand(shape)) for m, r in terms]
-    return _sum_grads(terms)  # type: ignore[arg-type]
+    return _sum_grads(terms)
 
 
 def _from_ends(low: Tensor, high: Tensor) -> tuple[Tensor, Tensor]:
@@ -363,14 +450,76 @@ def _cos_value(x: Jet) -> Jet:
 
 
 def _tanh(x: Jet) -> Jet:
-    low, high = torch.tanh(x.low), torch.tanh(x.high)
-    mid, rad = _from_ends(low, high)
-    # 1 - tanh^2 over the interval: largest at the point nearest 0, smallest at an end.
-    straddles = (x.low <= 0.0) & (x.high >= 0.0)
-    nearest = torch.where(straddles, torch.zeros_like(low), torch.minimum(low.abs(), high.abs()))
+    low, high = _outer_ends(x)
+    mid, rad = _enclose_ends(torch.tanh(low), torch.tanh(high), LIBM_ERROR)
+    # tanh' = 1 / cosh^2 (not 1 - tanh^2, which cancels where tanh is near 1): largest at the
+    # point of the interval nearest 0, smallest at the farthest end
+    straddles = (low <= 0.0) & (high >= 0.0)
+    nearest = torch.where(straddles, 0.0, torch.minimum(low.abs(), high.abs()))
     farthest = torch.maximum(low.abs(), high.abs())
-    slope_mid, slope_rad = _from_ends(1.0 - farthest**2, 1.0 - nearest**2)
-    return _chain(mid, rad, Jet(slope_mid, slope_rad, None, None), x)
+    slope_low = torch.cosh(farthest).reciprocal().square()
+    slope_high = torch.cosh(nearest).reciprocal().square()
+    slope = _enclose_ends(slope_low, slope_high, SECH_SQUARE_ERROR)
+    return _chain(mid, rad, Jet(*slope, None, None), x)
+
+
+SECH_SQUARE_ERROR = 2.0 * LIBM_ERROR + 4.0 * UNIT_ROUNDOFF
+r"""Relative error of :math:`(1 / \cosh t)^2` computed with one ``cosh`` call."""
+
+
+def _exp(x: Jet) -> Jet:
+    low, high = _outer_ends(x)
+    mid, rad = _enclose_ends(torch.exp(low), torch.exp(high), LIBM_ERROR)
+    # exp' = exp: the slope's enclosure is the value's
+    return _chain(mid, rad, Jet(mid, rad, None, None), x)
+
+
+def _relu(x: Jet, inplace: bool = False) -> Jet:
+    if inplace:
+        raise UnsupportedOperation("relu(inplace=True): a jet cannot be changed in place")
+    return _clamp(x, min=0.0)
+
+
+def _real_power(x: Jet, exponent: float) -> Jet:
+    r""":math:`x^p` for a real :math:`p > 1` on its domain :math:`x \ge 0` (torch gives NaN
+    below 0): increasing, as is its slope :math:`p x^{p-1}`."""
+    low, high = _outer_ends(x)
+    low = torch.clamp(low, min=0.0)
+    mid, rad = _enclose_ends(torch.pow(low, exponent), torch.pow(high, exponent), LIBM_ERROR)
+    slope = _enclose_ends(
+        exponent * torch.pow(low, exponent - 1.0),
+        exponent * torch.pow(high, exponent - 1.0),
+        LIBM_ERROR + 2.0 * UNIT_ROUNDOFF,
+    )
+    return _chain(mid, rad, Jet(*slope, None, None), x)
+
+
+def _pow(base: Any, exponent: Any) -> Jet:
+    if not isinstance(base, Jet) or isinstance(exponent, (Jet, Tensor)):
+        raise UnsupportedOperation("pow: only Jet ** number has an interval rule")
+    return base**exponent
+
+
+def _sum(x: Jet, dim: Any = None, keepdim: bool = False, *, dtype: Any = None) -> Jet:
+    if dtype is not None and dtype != x.dtype:
+        raise UnsupportedOperation(f"sum(dtype={dtype}): only the jet's own dtype {x.dtype}")
+    if x.ndim == 0:
+        return x
+    dims = range(x.ndim) if dim is None else (dim,) if isinstance(dim, int) else dim
+    dims = tuple(sorted({int(d) % x.ndim for d in dims}))
+    gamma = _gamma(math.prod(x.shape[d] for d in dims))
+    mid = x.mid.sum(dims, keepdim=keepdim)
+    spread = _accumulated(
+        x.rad.sum(dims, keepdim=keepdim), x.mid.abs().sum(dims, keepdim=keepdim), gamma
+    )
+    if x.dmid is None:
+        return Jet(mid, _widen(mid, spread), None, None)
+    # the value dimensions keep their (non-negative) indices in the gradient
+    dmid = x.dmid.sum(dims, keepdim=keepdim)
+    dspread = _accumulated(
+        x.drad.sum(dims, keepdim=keepdim), x.dmid.abs().sum(dims, keepdim=keepdim), gamma
+    )
+    return Jet(mid, _widen(mid, spread), dmid, _widen(dmid, dspread))
 
 
 def _clamp(x: Any, min: Any = None, max: Any = None) -> Jet:  # noqa: A002
@@ -378,19 +527,21 @@ def _clamp(x: Any, min: Any = None, max: Any = None) -> Jet:  # noqa: A002
     if isinstance(min, Jet) or isinstance(max, Jet):
         raise UnsupportedOperation("clamp with interval bounds has no interval rule")
     low, high = jet.low, jet.high
+    # which side of a kink the box lies on is decided on the ends rounded outward
+    outer_low, outer_high = _outer_ends(jet)
     below = torch.zeros_like(low, dtype=torch.bool)
     above = torch.zeros_like(low, dtype=torch.bool)
     inside = torch.ones_like(low, dtype=torch.bool)
     if min is not None:
         bound = torch.as_tensor(min, dtype=jet.dtype)
         low, high = torch.maximum(low, bound), torch.maximum(high, bound)
-        below = jet.high <= bound
-        inside = inside & (jet.low > bound)
+        below = outer_high <= bound
+        inside = inside & (outer_low > bound)
     if max is not None:
         bound = torch.as_tensor(max, dtype=jet.dtype)
         low, high = torch.minimum(low, bound), torch.minimum(high, bound)
-        above = jet.low >= bound
-        inside = inside & (jet.high < bound)
+        above = outer_low >= bound
+        inside = inside & (outer_high < bound)
     mid, rad = _from_ends(low, high)
     if jet.dmid is None:
         return Jet(mid, rad, None, None)
@@ -404,16 +555,47 @@ def _clamp(x: Any, min: Any = None, max: Any = None) -> Jet:  # noqa: A002
 
 def _minimum(x: Any, y: Any) -> Jet:
     if isinstance(x, Jet) and isinstance(y, Jet):
-        raise UnsupportedOperation("minimum of two intervals has no interval rule")
+        return _extreme(x, y, larger=False)
     jet, bound = (x, y) if isinstance(x, Jet) else (y, x)
     return _clamp(jet, max=bound)
 
 
 def _maximum(x: Any, y: Any) -> Jet:
     if isinstance(x, Jet) and isinstance(y, Jet):
-        raise UnsupportedOperation("maximum of two intervals has no interval rule")
+        return _extreme(x, y, larger=True)
     jet, bound = (x, y) if isinstance(x, Jet) else (y, x)
     return _clamp(jet, min=bound)
+
+
+def _extreme(x: Jet, y: Jet, larger: bool) -> Jet:
+    """max(x, y) (``larger``) or min(x, y) of two jets: the ends' max (min); the derivative
+    of the operand that wins on the whole box, else the hull of both (Clarke's gradient)."""
+    pick = torch.maximum if larger else torch.minimum
+    mid, rad = _from_ends(pick(x.low, y.low), pick(x.high, y.high))
+    if x.dmid is None and y.dmid is None:
+        return Jet(mid, rad, None, None)
+    (x_low, x_high), (y_low, y_high) = _outer_ends(x), _outer_ends(y)
+    x_wins = (x_low > y_high) if larger else (x_high < y_low)
+    y_wins = (y_low > x_high) if larger else (y_high < x_low)
+    size = (x.dmid if x.dmid is not None else y.dmid).shape[-1]  # type: ignore[union-attr]
+    shape = (*mid.shape, size)
+    grads = [_full_grad(jet, shape) for jet in (x, y)]
+    (xm, xr), (ym, yr) = grads
+    hull_mid, hull_rad = _from_ends(
+        torch.minimum(xm - xr, ym - yr), torch.maximum(xm + xr, ym + yr)
+    )
+    x_wins, y_wins = x_wins.unsqueeze(-1), y_wins.unsqueeze(-1)
+    dmid = torch.where(x_wins, xm, torch.where(y_wins, ym, hull_mid))
+    drad = torch.where(x_wins, xr, torch.where(y_wins, yr, hull_rad))
+    return Jet(mid, rad, dmid, drad)
+
+
+def _full_grad(jet: Jet, shape: tuple[int, ...]) -> tuple[Tensor, Tensor]:
+    """The jet's gradient enclosure expanded to ``shape`` (zero for a constant)."""
+    if jet.dmid is None or jet.drad is None:
+        zero = torch.zeros(shape, dtype=jet.dtype, device=jet.device)
+        return zero, zero
+    return jet.dmid.expand(shape), jet.drad.expand(shape)
 
 
 def _abs(x: Jet) -> Jet:
@@ -456,16 +638,19 @@ def _stack(tensors: Sequence[Any], dim: int = 0) -> Jet:
 
 def _matmul_right(x: Jet, matrix: Tensor) -> Jet:
     """``x @ matrix`` for x (..., D) and a constant matrix (D, F), with the rounding bound."""
-    size = matrix.shape[0]
-    gamma = size * UNIT_ROUNDOFF / (1.0 - size * UNIT_ROUNDOFF)
+    if matrix.ndim == 1:  # x @ v: the product with the column v, that column dropped
+        return _matmul_right(x, matrix[:, None]).select(-1, 0)
+    gamma = _gamma(matrix.shape[0])
     magnitude = matrix.abs()
     mid = x.mid @ matrix
-    rad = _widen(mid, x.rad @ magnitude + gamma * (x.mid.abs() @ magnitude))
+    # (r + gamma |m|) |M|, over 1 - gamma: radius and midpoint rounding (module docstring)
+    spread = ((x.rad + gamma * x.mid.abs()) @ magnitude) / (1.0 - gamma)
+    rad = _widen(mid, spread)
     if x.dmid is None:
         return Jet(mid, rad, None, None)
     dmid = torch.einsum("...ds,df->...fs", x.dmid, matrix)
-    spread = torch.einsum("...ds,df->...fs", x.drad + gamma * x.dmid.abs(), magnitude)
-    return Jet(mid, rad, dmid, _widen(dmid, spread))
+    dspread = torch.einsum("...ds,df->...fs", x.drad + gamma * x.dmid.abs(), magnitude)
+    return Jet(mid, rad, dmid, _widen(dmid, dspread / (1.0 - gamma)))
 
 
 def _matmul(x: Any, y: Any) -> Jet:
@@ -477,6 +662,55 @@ def _matmul(x: Any, y: Any) -> Jet:
 def _linear(x: Jet, weight: Tensor, bias: Tensor | None = None) -> Jet:
     result = _matmul_right(x, torch.as_tensor(weight, dtype=x.dtype).T)
     return result if bias is None else result + bias
+
+
+def _atan2(y: Any, x: Any) -> Jet:
+    """Angle of (x, y), torch's ``atan2(y, x)`` in [-pi, pi] (module docstring)."""
+    y, x = _operands(y, x)
+    (y_low, y_high), (x_low, x_high) = _outer_ends(y), _outer_ends(x)
+    cut = (x_low <= 0.0) & (y_low <= 0.0) & (y_high >= 0.0)
+    corners = torch.stack([torch.atan2(a, b) for a in (y_low, y_high) for b in (x_low, x_high)])
+    mid, rad = _enclose_ends(corners.min(0).values, corners.max(0).values, LIBM_ERROR)
+    # where the box meets the cut the angle jumps by 2 pi: the whole range (pi rounded up)
+    mid = torch.where(cut, 0.0, mid)
+    rad = torch.where(cut, _widen(torch.zeros_like(rad), torch.full_like(rad, math.pi)), rad)
+    # d atan2 = (x dy - y dx) / (x^2 + y^2), on value enclosures
+    x_value, y_value = Jet(x.mid, x.rad, None, None), Jet(y.mid, y.rad, None, None)
+    inverse = (x_value.square() + y_value.square()).reciprocal()
+    terms = []
+    if y.dmid is not None:
+        terms.append(_scale_grad(x_value * inverse, y.dmid, y.drad))  # type: ignore[arg-type]
+    if x.dmid is not None:
+        terms.append(_scale_grad(-(y_value * inverse), x.dmid, x.drad))  # type: ignore[arg-type]
+    dmid, drad = _combine(terms)
+    if dmid is None or drad is None:
+        return Jet(mid, rad, None, None)
+    return Jet(mid, rad, *_unbounded_slope(dmid, drad, cut))
+
+
+def _unbounded_slope(dmid: Tensor, drad: Tensor, jumps: Tensor) -> tuple[Tensor, Tensor]:
+    """The gradient enclosure, unbounded (an infinite radius) where the value ``jumps``."""
+    jumps = jumps.unsqueeze(-1)
+    return torch.where(jumps, 0.0, dmid), torch.where(jumps, math.inf, drad)
+
+
+def _remainder(x: Any, modulus: Any) -> Jet:
+    """``remainder(x, m)`` for a positive constant m: x - k m, in [0, m) (module docstring)."""
+    if not isinstance(x, Jet) or isinstance(modulus, Jet):
+        raise UnsupportedOperation("remainder: only remainder(Jet, constant) has an interval rule")
+    period = torch.as_tensor(modulus, dtype=x.dtype)
+    if period.ndim != 0 or not bool(period > 0.0):
+        raise UnsupportedOperation(f"remainder: only a positive scalar modulus, found {modulus!r}")
+    shift = torch.floor(x.mid / period) * period  # k m, rounded: error at most u |k m|
+    shifted = x - Jet(shift, ROUNDING * shift.abs(), None, None)
+    low, high = _outer_ends(shifted)
+    jumps = (low < 0.0) | (high >= period)
+    half = 0.5 * period
+    mid = torch.where(jumps, half, shifted.mid)
+    rad = torch.where(jumps, _widen(half, half), shifted.rad)
+    if shifted.dmid is None or shifted.drad is None:
+        return Jet(mid, rad, None, None)
+    return Jet(mid, rad, *_unbounded_slope(shifted.dmid, shifted.drad, jumps))
 
 
 def _operands(first: Any, second: Any) -> tuple[Jet, Jet]:
@@ -498,6 +732,14 @@ _RULES: dict[Any, Callable[..., Any]] = {
     torch.sin: _sin,
     torch.cos: _cos,
     torch.tanh: _tanh,
+    torch.exp: _exp,
+    torch.relu: _relu,
+    torch.nn.functional.relu: _relu,
+    torch.pow: _pow,
+    torch.sum: _sum,
+    torch.atan2: _atan2,
+    torch.arctan2: _atan2,
+    torch.remainder: _remainder,
     torch.clamp: _clamp,
     torch.clip: _clamp,
     torch.minimum: _minimum,
@@ -538,3 +780,69 @@ def box_jet(centre: Tensor, radius: Tensor, basis: Tensor | None = None) -> Jet:
 def point_jet(value: Tensor) -> Jet:
     """A value enclosure of a point (zero radius, no derivative)."""
     return Jet(value, torch.zeros_like(value), None, None)
+
+
+SMOOTHERSTEP = (10.0, -15.0, 6.0)
+r"""Coefficients of :math:`t^3, t^4, t^5` in Perlin's smootherstep :math:`S(t) = 10 t^3 - 15 t^4
++ 6 t^5`: :math:`S(0) = 0`, :math:`S(1) = 1`, :math:`S' = S'' = 0` at both ends."""
+SMOOTHERSTEP_ABS_SUM = sum(abs(c) for c in SMOOTHERSTEP)
+SMOOTHERSTEP_SLOPE_ERROR = 8.0 * UNIT_ROUNDOFF
+r"""Relative error of :math:`S'(t) = 30 (t (1 - t))^2` computed in floating point (one
+subtraction, two products, a square and a scaling: at most 6 roundings)."""
+
+
+def smootherstep(t: Any) -> Any:
+    r"""Perlin's quintic smootherstep :math:`S(t) = 10 t^3 - 15 t^4 + 6 t^5` (Horner form).
+
+    On a tensor, ``t * t * t * (10 + t * (-15 + t * 6))``, elementwise. On a :class:`Jet`, the
+    interval rule: :math:`S' = 30 t^2 (1 - t)^2 \ge 0`, so :math:`S` is increasing and its range
+    is :math:`[S(t_{low}), S(t_{high})]` (ends rounded outward, plus the Horner bound
+    :math:`\gamma_{10} \sum_i |c_i| |t|^i`, Higham 2002, sec. 5.1); :math:`S'` is the hull of its
+    values at the ends and at its critical points 0, 1/2, 1 inside the interval. Naive interval
+    arithmetic on the Horner form would lose the flatness of :math:`S` at 0 and 1 (an
+    enclosure wider than the box where the true range is of third order).
+
+    Parameters
+    ----------
+    t : Tensor or Jet
+        Any shape ``...``; the ROA relevance feeds :math:`t \in [0, 1]`.
+
+    Returns
+    -------
+    Tensor or Jet
+        :math:`S(t)`, same shape.
+    """
+    if isinstance(t, Jet):
+        return _smootherstep(t)
+    c3, c4, c5 = SMOOTHERSTEP
+    return t * t * t * (c3 + t * (c4 + t * c5))
+
+
+def _smootherstep(t: Jet) -> Jet:
+    low, high = _outer_ends(t)
+    # t^3 (c3 + t (c4 + t c5)) rounds at most 7 times: within gamma_7 sum_i |c_i| |t|^i
+    # (Higham 2002, sec. 5.1), taken with room as gamma_10
+    gamma = _gamma(10)
+
+    def bound(value: Tensor) -> Tensor:
+        magnitude = value.abs()
+        return gamma * SMOOTHERSTEP_ABS_SUM * torch.maximum(magnitude**3, magnitude**5)
+
+    value_low, value_high = smootherstep(low), smootherstep(high)
+    mid, rad = _enclose_ends(value_low - bound(low), value_high + bound(high), 0.0)
+    if t.dmid is None:
+        return Jet(mid, rad, None, None)
+    candidates = [_smootherstep_slope(low), _smootherstep_slope(high)]
+    for critical in (0.0, 0.5, 1.0):
+        inside = (low <= critical) & (critical <= high)
+        peak = _smootherstep_slope(torch.full_like(low, critical))
+        # a critical point outside the interval stands in as one of its ends' values
+        candidates.append(torch.where(inside, peak, candidates[0]))
+    stacked = torch.stack(candidates)
+    slope = _enclose_ends(stacked.min(0).values, stacked.max(0).values, SMOOTHERSTEP_SLOPE_ERROR)
+    return _chain(mid, rad, Jet(*slope, None, None), t)
+
+
+def _smootherstep_slope(t: Tensor) -> Tensor:
+    """:math:`S'(t) = 30 (t (1 - t))^2`."""
+    return 30.0 * (t * (1.0 - t)).square()

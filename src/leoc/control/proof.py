@@ -428,7 +428,8 @@ def prove_level(
         Symmetric positive definite (checked by the caller).
     controller : callable
         Observation -> action; it must run on :class:`~leoc.control.intervals.Jet` inputs
-        (linear controllers, clip, sin and tanh saturations do).
+        (linear controllers, clip, sin and tanh saturations do, and so do leoc's learned
+        policies: MLP actors, RBF networks, hybrids with any relevance).
     repeat : int
         Control period (simulator steps per decision, action held).
     target : float

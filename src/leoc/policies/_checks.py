@@ -100,9 +100,11 @@ def check_last_dim(x: Tensor, dim: int, dtype: torch.dtype | None = None, name: 
     """Raise unless ``x`` is a tensor (of ``dtype``, if given) whose last dimension is ``dim``.
 
     Modules do not cast their input silently: a float32 observation fed to a float64 policy
-    is reported here rather than as a matmul dtype error deep inside.
+    is reported here rather than as a matmul dtype error deep inside. A tensor-like object
+    that dispatches torch functions (``__torch_function__``, e.g. an interval enclosure of
+    :mod:`leoc.control.intervals`) passes as a tensor.
     """
-    if not isinstance(x, Tensor):
+    if not torch.overrides.is_tensor_like(x):
         raise TypeError(f"{name} must be a torch.Tensor, found {type(x).__name__}")
     if dtype is not None and x.dtype != dtype:
         raise TypeError(

@@ -133,6 +133,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from leoc.control.intervals import smootherstep
 from leoc.names import RELEVANCE_NAMES
 from leoc.systems.observation import as_observation_map
 
@@ -173,9 +174,6 @@ unconstrained; :class:`PrecisionRelevance`)."""
 DEFAULT_ROA_WIDTH = 1.0
 """Default band width w: the relevance falls from 1 at :math:`V = \\rho_{in}` to 0 at
 :math:`V = 2 \\rho_{in}` (a radius :math:`\\sqrt 2` times the flat top's)."""
-# Smootherstep S(t) = 10 t^3 - 15 t^4 + 6 t^5 (Perlin 2002): S(0) = 0, S(1) = 1, S' = S'' = 0 at
-# both ends.
-_SMOOTHERSTEP = (10.0, -15.0, 6.0)
 SYMMETRY_RTOL = 1e-9  # |P - P^T| allowed, relative to max |P_ij|
 FLOOR_MARGIN = 1e-9
 """Relative margin of :func:`relevance_floor` over the exact bound, so that float64 rounding of
@@ -544,10 +542,9 @@ class ROARelevance(nn.Module):
         """Relevance (..., 1) of observations ``x`` (..., D)."""
         level = self.lyapunov(x) / self.rho_in
         t = torch.clamp((level - 1.0) / self.width, min=0.0, max=1.0)
-        c3, c4, c5 = _SMOOTHERSTEP
-        # Horner form of 10 t^3 - 15 t^4 + 6 t^5; at t = 0 every term is an exact 0, so r = 1
-        # exactly on the flat top.
-        return 1.0 - t * t * t * (c3 + t * (c4 + t * c5))
+        # Horner form of S(t) = 10 t^3 - 15 t^4 + 6 t^5 (Perlin 2002; on interval enclosures its
+        # own tight rule); at t = 0 every term is an exact 0, so r = 1 exactly on the flat top.
+        return 1.0 - smootherstep(t)
 
     def extra_repr(self) -> str:
         learned = isinstance(self.width_param, nn.Parameter)

@@ -77,7 +77,8 @@ def saturate(u: Tensor, limit: Tensor | float | None, mode: str = "clip") -> Ten
     only; they preserve neither value nor slope anywhere else.
     """
     mode = check_saturation_mode(mode)
-    if not isinstance(u, Tensor):
+    # tensor-like: a Tensor or an object dispatching torch functions (an interval enclosure)
+    if not torch.overrides.is_tensor_like(u):
         raise TypeError(f"u must be a torch.Tensor, found {type(u).__name__}")
     if limit is None or mode == "none":
         return u
