@@ -25,6 +25,17 @@ from leoc.systems.mountaincar import (
 )
 from leoc.systems.observation import ObsComponent, ObservationMap, angle_entries, state_entry
 from leoc.systems.pendulum import Pendulum, PendulumParams, pendulum_reward, pendulum_step
+from leoc.systems.perturbations import (
+    ActionDelay,
+    ActuatorGain,
+    Friction,
+    ObservationNoise,
+    ParameterError,
+    Perturbation,
+    PerturbedPlant,
+    Push,
+    TorqueNoise,
+)
 from leoc.systems.registry import (
     env_id,
     make_system,
@@ -59,6 +70,15 @@ from leoc.systems.acrobot import Acrobot  # noqa: E402
 register_system("acrobot", Acrobot, replace=True)
 
 __all__ = [
+    "ActionDelay",
+    "ActuatorGain",
+    "Friction",
+    "ObservationNoise",
+    "ParameterError",
+    "Perturbation",
+    "PerturbedPlant",
+    "Push",
+    "TorqueNoise",
     "DEFAULT_EPISODE_STEPS",
     "DTYPE",
     "PAPER_SYSTEMS",

@@ -36,7 +36,12 @@ energy
 
 conserved without torque (:func:`acrobot_energy`; the tests check it). One step integrates
 them by classic fourth-order Runge-Kutta over ``dt`` with the torque held, then clips the
-speeds to gymnasium's limits (:math:`4\pi` and :math:`9\pi` rad/s).
+speeds to gymnasium's limits (:math:`4\pi` and :math:`9\pi` rad/s). Generalised forces
+:math:`Q_1` at the shoulder and :math:`Q_2` at the elbow (friction,
+:mod:`leoc.systems.perturbations`) enter as :math:`\phi_1 \to \phi_1 - Q_1` and
+:math:`\tau \to \tau + Q_2`, i.e. :math:`M \ddot q + \dots = (Q_1, \tau + Q_2)`,
+evaluated at every Runge-Kutta stage; then :math:`dE/dt = \tau \dot\theta_2 + Q_1
+\dot\theta_1 + Q_2 \dot\theta_2`.
 
 Parameters: gymnasium's ``Acrobot-v1`` (unit masses and lengths, centres of mass at mid-link,
 unit moments of inertia, g = 9.8); the continuous torque limit (5 N m), ``dt`` (0.05 s instead of
@@ -54,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -135,9 +141,15 @@ def _inertia(theta2: Tensor, p: AcrobotParams) -> tuple[float, Tensor, Tensor, f
     return coupling, d1, d2, d3
 
 
-def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> Tensor:
+def acrobot_derivative(
+    state: Tensor,
+    torque: Tensor,
+    params: AcrobotParams,
+    external: Callable[[Tensor], Tensor] | None = None,
+) -> Tensor:
     """Time derivative ``(B, 4)`` of ``[theta1, theta2, theta1_dot, theta2_dot]`` (module
-    docstring), for an elbow torque ``(B,)``."""
+    docstring), for an elbow torque ``(B,)`` and optional generalised torques
+    ``external(state)`` ``(B, 2)`` at the shoulder and the elbow (N m)."""
     p = params
     theta1, theta2, theta1_dot, theta2_dot = state.unbind(-1)
     coupling, d1, d2, d3 = _inertia(theta2, p)
@@ -150,6 +162,9 @@ def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> 
         * torch.sin(theta1)
         + phi2
     )
+    if external is not None:
+        generalised = external(state)
+        phi1, torque = phi1 - generalised[..., 0], torque + generalised[..., 1]
     theta2_ddot = (
         torque + d2 / d1 * phi1 - coupling * theta1_dot**2 * torch.sin(theta2) - phi2
     ) / (d3 - d2**2 / d1)
@@ -157,15 +172,21 @@ def acrobot_derivative(state: Tensor, torque: Tensor, params: AcrobotParams) -> 
     return torch.stack([theta1_dot, theta2_dot, theta1_ddot, theta2_ddot], dim=-1)
 
 
-def acrobot_step(state: Tensor, action: Tensor, params: AcrobotParams) -> Tensor:
+def acrobot_step(
+    state: Tensor,
+    action: Tensor,
+    params: AcrobotParams,
+    external: Callable[[Tensor], Tensor] | None = None,
+) -> Tensor:
     """One step ``(B, 4), (B, 1) -> (B, 4)``: RK4 over ``dt`` with the clipped torque held,
-    then the speeds clipped to their limits."""
+    then the speeds clipped to their limits. ``external``: generalised torques
+    (:func:`acrobot_derivative`), evaluated at every stage; None adds nothing."""
     torque = torch.clamp(action[..., 0], -params.max_torque, params.max_torque)
     dt = params.dt
-    k1 = acrobot_derivative(state, torque, params)
-    k2 = acrobot_derivative(state + 0.5 * dt * k1, torque, params)
-    k3 = acrobot_derivative(state + 0.5 * dt * k2, torque, params)
-    k4 = acrobot_derivative(state + dt * k3, torque, params)
+    k1 = acrobot_derivative(state, torque, params, external)
+    k2 = acrobot_derivative(state + 0.5 * dt * k1, torque, params, external)
+    k3 = acrobot_derivative(state + 0.5 * dt * k2, torque, params, external)
+    k4 = acrobot_derivative(state + dt * k3, torque, params, external)
     slopes = (k1, k2, k3, k4)
     increment = sum(w * k for w, k in zip(RK4_WEIGHTS, slopes, strict=True)) / sum(RK4_WEIGHTS)
     following = state + dt * increment
@@ -230,6 +251,7 @@ class Acrobot(System):
     start_spread = (START_ANGLE_SPREAD, START_ANGLE_SPREAD, START_SPEED_SPREAD, START_SPEED_SPREAD)
     default_q = (10.0, 10.0, 1.0, 1.0)
     default_r = (1.0,)
+    velocity_indices = (2, 3)
 
     params: AcrobotParams
 
@@ -247,6 +269,11 @@ class Acrobot(System):
 
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return acrobot_step(state, action, self.params)
+
+    def forced_step_fn(
+        self, state: Tensor, action: Tensor, force: Callable[[Tensor], Tensor]
+    ) -> Tensor:
+        return acrobot_step(state, action, self.params, force)
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return acrobot_reward(state, action, self.params)

@@ -49,6 +49,12 @@ and may override, with these defaults:
 ``cost_factor()``           PILCO's cost on the main coordinate's observation entries
 ``continuous_model()``      none (only the optional continuous-time LQR design needs it)
 ``episode_steps``           200
+``velocity_indices``        none: the state entries that are generalised velocities, one per
+                            degree of freedom (friction and pushes act on them,
+                            :mod:`leoc.systems.perturbations`)
+``forced_step_fn(state,     raises: ``step_fn`` with generalised forces ``force(state)``
+action, force)``            ``(B, V)`` (one per entry of ``velocity_indices``) added to the
+                            dynamics beside the clipped actuator (friction needs it)
 ==========================  =================================================================
 
 :meth:`System.validate` (run by :func:`~leoc.systems.registry.register_system`) checks shapes,
@@ -63,7 +69,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import cached_property
 from typing import Any, ClassVar, Literal
 
@@ -309,6 +315,10 @@ class System:
         Half-widths of the uniform swing-up start distribution around ``swing_up_centre``.
     default_q, default_r : tuple
         Diagonals of the default LQR weights (state and action).
+    velocity_indices : tuple of int
+        State entries that are generalised velocities, one per degree of freedom (``V`` of
+        them), in the order of the forces of :meth:`forced_step_fn`; empty (the default) for a
+        system that takes no friction or pushes (:mod:`leoc.systems.perturbations`).
     """
 
     name: ClassVar[str]
@@ -327,6 +337,7 @@ class System:
     default_r: ClassVar[tuple[float, ...]]
     out_of_bounds_reward: ClassVar[float] = 0.0
     params_type: ClassVar[type[PhysicalParams]]
+    velocity_indices: ClassVar[tuple[int, ...]] = ()
 
     def __init__(self, params: PhysicalParams | None = None, **overrides: float) -> None:
         if params is None:
@@ -394,6 +405,33 @@ class System:
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         """Pure batched step ``(B, S), (B, A) -> (B, S)``; the action is clipped inside."""
         raise NotImplementedError
+
+    def forced_step_fn(
+        self, state: Tensor, action: Tensor, force: Callable[[Tensor], Tensor]
+    ) -> Tensor:
+        """:meth:`step_fn` with generalised forces added to the dynamics.
+
+        Parameters
+        ----------
+        state : (B, S) tensor
+        action : (B, A) tensor
+            Clipped to the actuator limit inside, as by :meth:`step_fn`.
+        force : callable
+            ``force(x)`` ``(B, V)``: the generalised force (N or N m) on each degree of freedom
+            of :attr:`velocity_indices` at a state ``x`` ``(B, S)``, evaluated wherever the
+            integrator evaluates the accelerations (once per Euler step at its start state,
+            at each stage of a Runge-Kutta step). It is added beside the clipped actuator
+            force, so the actuator limit does not bound it (friction is not the motor's).
+
+        Raises
+        ------
+        NotImplementedError
+            For a system that does not implement it (friction then cannot be applied).
+        """
+        raise NotImplementedError(
+            f"system {getattr(self, 'name', type(self).__name__)!r} does not implement "
+            "forced_step_fn (generalised forces such as friction)"
+        )
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         """Reward ``(B,)`` of taking ``action`` in ``state`` (before the step)."""

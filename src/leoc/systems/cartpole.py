@@ -12,12 +12,23 @@ corrected by Florian 2007), with theta = 0 upright and a continuous force F on t
 
 with l the pole's half-length, integrated by explicit Euler (positions first with the old
 velocities, then the velocities).
+
+Generalised forces (friction, :mod:`leoc.systems.perturbations`): a force :math:`Q_x` on the
+cart adds to the clipped F, and a torque :math:`Q_\\theta` at the pivot adds
+:math:`Q_\\theta / (m_p l)` to the numerator of :math:`\\ddot\\theta`: the Lagrange
+equations of this model (kinetic energy :math:`\\tfrac12 (m_c + m_p) \\dot x^2 + m_p l
+\\cos\\theta \\, \\dot x \\dot\\theta + \\tfrac23 m_p l^2 \\dot\\theta^2`) with the
+generalised forces on the right, evaluated at the step's start state. Barto, Sutton & Anderson
+(1983) write friction this way, :math:`Q_x = -\\mu_c \\operatorname{sgn}\\dot x` and
+:math:`Q_\\theta = -\\mu_p \\dot\\theta`; Florian (2007) makes the cart's Coulomb force
+depend on the normal force, which a given :math:`Q_x` does not model.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -84,13 +95,30 @@ class CartPoleParams(PhysicalParams):
         return self.pole_mass * self.half_length
 
 
-def cartpole_step(state: Tensor, action: Tensor, params: CartPoleParams) -> Tensor:
-    """One Euler step ``(B, 4), (B, 1) -> (B, 4)`` of ``[x, x_dot, theta, theta_dot]``."""
+def cartpole_step(
+    state: Tensor,
+    action: Tensor,
+    params: CartPoleParams,
+    external: Callable[[Tensor], Tensor] | None = None,
+) -> Tensor:
+    """One Euler step ``(B, 4), (B, 1) -> (B, 4)`` of ``[x, x_dot, theta, theta_dot]``.
+
+    ``external``: ``state -> (B, 2)``, the generalised forces ``[Q_x (N), Q_theta (N m)]`` on
+    the cart and at the pivot (module docstring,
+    :meth:`~leoc.systems.base.System.forced_step_fn`); None adds nothing.
+    """
     x, x_dot, theta, theta_dot = state.unbind(-1)
     force = torch.clamp(action[..., 0], -params.max_force, params.max_force)
+    pole_torque = None
+    if external is not None:
+        generalised = external(state)
+        force, pole_torque = force + generalised[..., 0], generalised[..., 1]
     cos_theta, sin_theta = torch.cos(theta), torch.sin(theta)
     tmp = (force + params.pole_mass_length * theta_dot**2 * sin_theta) / params.total_mass
-    theta_ddot = (params.gravity * sin_theta - cos_theta * tmp) / (
+    numerator = params.gravity * sin_theta - cos_theta * tmp
+    if pole_torque is not None:
+        numerator = numerator + pole_torque / params.pole_mass_length
+    theta_ddot = numerator / (
         params.half_length * (FOUR_THIRDS - params.pole_mass * cos_theta**2 / params.total_mass)
     )
     x_ddot = tmp - params.pole_mass_length * theta_ddot * cos_theta / params.total_mass
@@ -141,6 +169,7 @@ class CartPole(System):
     start_spread = START_SPREAD
     default_q = (2.0, 0.3, 2.0, 0.3)
     default_r = (1.0,)
+    velocity_indices = (1, 3)
     params: CartPoleParams
 
     @property
@@ -168,6 +197,11 @@ class CartPole(System):
 
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return cartpole_step(state, action, self.params)
+
+    def forced_step_fn(
+        self, state: Tensor, action: Tensor, force: Callable[[Tensor], Tensor]
+    ) -> Tensor:
+        return cartpole_step(state, action, self.params, force)
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return cartpole_reward(state, action, self.params)

@@ -11,6 +11,13 @@ with
   offset (for response and robustness tests);
 * ``{"state": [...]}``: an explicit initial state.
 
+Perturbations (:mod:`leoc.systems.perturbations`): ``perturbations=[...]`` makes the env step
+a :class:`~leoc.systems.perturbations.PerturbedPlant`, the same object every rollout steps, so
+the env and :func:`~leoc.systems.rollout.simulate` see the same plant (and, from a fresh env or
+a reset without a seed, the same random draws as a ``simulate`` call with batch 1). A
+``reset(seed=s)`` restarts the perturbations' streams from their seeds and ``s``. The info's
+``state`` is the plant's true state; the observation is what the controller sees.
+
 Rendering, as gymnasium's classic control: ``render_mode`` ``None``, ``"rgb_array"``
 (``render()`` returns the ``(H, W, 3)`` uint8 frame of the current state) or ``"human"`` (a
 matplotlib window, redrawn by ``reset`` and ``step`` at ``metadata["render_fps"]`` = 1 / dt).
@@ -20,6 +27,7 @@ user's system is there too).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -30,6 +38,7 @@ from leoc.systems.base import DTYPE, START_KINDS, PhysicalParams, System
 from leoc.systems.cartpole import CartPole
 from leoc.systems.mountaincar import MountainCar
 from leoc.systems.pendulum import Pendulum
+from leoc.systems.perturbations import Perturbation, PerturbedPlant
 from leoc.systems.registry import env_id, make_system
 from leoc.systems.rendering import RENDER_MODES, Renderer
 
@@ -52,6 +61,11 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
     render_mode : {None, "rgb_array", "human"}
         gymnasium's render mode (see the module docstring). A system that cannot be drawn
         accepts every mode and raises a one-line ``ValueError`` on the first frame.
+    perturbations : sequence of Perturbation, optional
+        The plant's perturbations (module docstring); none by default.
+    action_repeat : int
+        Simulator steps per decision of the agent that drives the env (each ``step`` is one
+        simulator step); it only converts an action delay's periods into steps.
     """
 
     # render_fps is set per instance from the system's dt (gymnasium reads the class's
@@ -65,6 +79,8 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         start: str = "swing_up",
         system: System | str | None = None,
         render_mode: str | None = None,
+        perturbations: Sequence[Perturbation] = (),
+        action_repeat: int = 1,
     ) -> None:
         if start not in START_KINDS:
             raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
@@ -81,11 +97,12 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         elif params is not None:
             raise ValueError("params: only with a system name, found a System object as well")
         self.system = system
+        self.plant = PerturbedPlant(system, perturbations, action_repeat)
         self.default_start = start
         limit = np.float32(self.system.action_limit)
         shape = (self.system.action_dim,)
         self.action_space = gym.spaces.Box(-limit, limit, shape=shape, dtype=np.float32)
-        high = self.system.observation.bounds()
+        high = self.plant.observation_bounds()
         self.observation_space = gym.spaces.Box(-high, high, dtype=np.float64)
         self.state: np.ndarray | None = None
         self._steps = 0  # steps taken in this episode
@@ -95,7 +112,9 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _obs(self) -> np.ndarray:
         assert self.state is not None
-        obs = self.system.observe(torch.as_tensor(self.state, dtype=DTYPE))[0].numpy()
+        state = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
+        with torch.no_grad():
+            obs = self.plant.observe(state)[0].numpy()
         return np.clip(obs, self.observation_space.low, self.observation_space.high)
 
     def reset(
@@ -108,6 +127,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         super().reset(seed=seed)
         self._steps = 0
+        self.plant.reset(1, seed)
         options = dict(options or {})
         unknown = set(options) - set(RESET_OPTION_KEYS)
         if unknown:
@@ -141,13 +161,12 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         self._steps += 1
         state_t = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
         action_t = torch.as_tensor(action_arr, dtype=DTYPE).unsqueeze(0)
+        plant = self.plant.system
         with torch.no_grad():
-            next_state = self.system.step_fn(state_t, action_t)
-            leaving = self.system.out_of_bounds(next_state)
-            left_after = max(0, self.system.episode_steps - self._steps)
-            reward = float(
-                self.system.step_reward(state_t, action_t, next_state, leaving, left_after)[0]
-            )
+            next_state = self.plant.step(state_t, action_t).state
+            leaving = plant.out_of_bounds(next_state)
+            left_after = max(0, plant.episode_steps - self._steps)
+            reward = float(plant.step_reward(state_t, action_t, next_state, leaving, left_after)[0])
             terminated = bool(leaving[0])
         self.state = next_state[0].numpy()
         if self.render_mode == "human":

@@ -8,6 +8,8 @@ The car of mass m moves along x under a force F and the slope of the hill
     \\ddot x = \\frac{F}{m} - g\\, h'(x) = \\frac{F}{m} + 1.35\\, g \\sin x
 
 integrated by semi-implicit Euler (``x_dot' = x_dot + dt x_ddot``, ``x' = x + dt x_dot'``).
+A generalised force Q along the track (friction, :mod:`leoc.systems.perturbations`) adds to the
+clipped F: ``(F + Q) / m``, Q evaluated at the step's start state.
 The hilltop is an unstable equilibrium with ``u_eq = 0``.
 """
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -74,10 +77,21 @@ def hill_height(x: Tensor, params: MountainCarParams) -> Tensor:
     return params.hill_amplitude * torch.cos(x) + params.hill_offset
 
 
-def mountaincar_step(state: Tensor, action: Tensor, params: MountainCarParams) -> Tensor:
-    """One semi-implicit Euler step ``(B, 2), (B, 1) -> (B, 2)`` of ``[x, x_dot]``."""
+def mountaincar_step(
+    state: Tensor,
+    action: Tensor,
+    params: MountainCarParams,
+    external: Callable[[Tensor], Tensor] | None = None,
+) -> Tensor:
+    """One semi-implicit Euler step ``(B, 2), (B, 1) -> (B, 2)`` of ``[x, x_dot]``.
+
+    ``external``: ``state -> (B, 1)``, a generalised force along the track in N added to the
+    clipped force (:meth:`~leoc.systems.base.System.forced_step_fn`); None adds nothing.
+    """
     x, x_dot = state[..., 0], state[..., 1]
     force = torch.clamp(action[..., 0], -params.max_force, params.max_force)
+    if external is not None:
+        force = force + external(state)[..., 0]
     slope = -params.hill_amplitude * torch.sin(x)  # h'(x)
     x_ddot = force / params.mass - params.gravity * slope
     new_x_dot = x_dot + params.dt * x_ddot
@@ -112,6 +126,7 @@ class MountainCar(System):
     start_spread = START_SPREAD
     default_q = (2.0, 0.3)
     default_r = (1.0,)
+    velocity_indices = (1,)
     params: MountainCarParams
 
     @property
@@ -131,6 +146,11 @@ class MountainCar(System):
 
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return mountaincar_step(state, action, self.params)
+
+    def forced_step_fn(
+        self, state: Tensor, action: Tensor, force: Callable[[Tensor], Tensor]
+    ) -> Tensor:
+        return mountaincar_step(state, action, self.params, force)
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return mountaincar_reward(state, action, self.params)

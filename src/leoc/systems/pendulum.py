@@ -9,12 +9,15 @@ theta positive anticlockwise, torque u positive in the direction of increasing t
 
 integrated by semi-implicit Euler with the speed clipped to ``max_speed``:
 ``theta_dot' = clip(theta_dot + dt * theta_ddot)``, ``theta' = theta + dt * theta_dot'``.
+A generalised torque Q at the pivot (friction, :mod:`leoc.systems.perturbations`) adds to the
+clipped u: ``3 / (m l^2) (u + Q)``, Q evaluated at the step's start state.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -75,7 +78,11 @@ class PendulumParams(PhysicalParams):
 
 
 def pendulum_step(
-    state: Tensor, action: Tensor, params: PendulumParams, legacy: bool = False
+    state: Tensor,
+    action: Tensor,
+    params: PendulumParams,
+    legacy: bool = False,
+    force: Callable[[Tensor], Tensor] | None = None,
 ) -> Tensor:
     """One step ``(B, 2), (B, 1) -> (B, 2)`` of state ``[theta, theta_dot]``.
 
@@ -83,9 +90,13 @@ def pendulum_step(
     ``dao/envs/pendulum_env.py``), which writes the gravity term ``-sin(theta + pi)`` (in floating
     point not exactly ``sin(theta)``: ``pi`` is rounded, a bias of about 1.2e-16 that sets the
     last digits of a decayed response) and clips the speed after the position update.
+    ``force``: ``state -> (B, 1)``, a generalised torque at the pivot in N m added to the
+    clipped torque (:meth:`~leoc.systems.base.System.forced_step_fn`); None adds nothing.
     """
     theta, theta_dot = state[..., 0], state[..., 1]
     torque = torch.clamp(action[..., 0], -params.max_torque, params.max_torque)
+    if force is not None:
+        torque = torque + force(state)[..., 0]
     gravity_term = -torch.sin(theta + math.pi) if legacy else torch.sin(theta)
     theta_ddot = (
         3.0 * params.gravity / (2.0 * params.length) * gravity_term
@@ -131,6 +142,7 @@ class Pendulum(System):
     start_spread = (START_ANGLE_SPREAD, START_SPEED_SPREAD)
     default_q = (2.0, 2.0)
     default_r = (1.0,)
+    velocity_indices = (1,)
 
     params: PendulumParams
 
@@ -146,6 +158,11 @@ class Pendulum(System):
 
     def step_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return pendulum_step(state, action, self.params, self.rules.legacy_integrator)
+
+    def forced_step_fn(
+        self, state: Tensor, action: Tensor, force: Callable[[Tensor], Tensor]
+    ) -> Tensor:
+        return pendulum_step(state, action, self.params, self.rules.legacy_integrator, force)
 
     def reward_fn(self, state: Tensor, action: Tensor) -> Tensor:
         return pendulum_reward(state, action, self.params)

@@ -11,6 +11,13 @@ a controller keeps the period it was trained at wherever it is evaluated. Distur
 (``action_offsets``) act on every simulator step, on top of the held action, before the
 actuator clip.
 
+Perturbations. ``perturbations`` (:mod:`leoc.systems.perturbations`) make the plant differ
+from ``system``: the controller sees noisy observations, the actuator a delayed, scaled or
+noisy command, the dynamics friction, pushes or other constants. One
+:class:`~leoc.systems.perturbations.PerturbedPlant` per call runs them (the gymnasium
+environment runs the same); the recorded observations are those the controller saw, the
+recorded actions its commands, the states the plant's.
+
 Termination. A start whose state leaves the allowed region (``System.out_of_bounds``) gets the
 system's ``termination_reward`` for that step (its ``out_of_bounds_reward`` for that step and
 each of the steps the episode would still have run) and is frozen from then on (no further
@@ -22,7 +29,7 @@ Shapes: ``B`` starts, ``T`` simulator steps, ``S`` state, ``O`` observation, ``A
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -30,6 +37,7 @@ import torch
 from torch import Tensor
 
 from leoc.systems.base import DTYPE, System, check_repeat
+from leoc.systems.perturbations import Perturbation, PerturbedPlant
 
 #: A controller: batched observations ``(B, D)`` to actions ``(B, A)``.
 Controller = Callable[[Tensor], Tensor]
@@ -41,8 +49,9 @@ class Trajectory(NamedTuple):
     Attributes
     ----------
     states : (T + 1, S) array
-    observations : (T + 1, O) array
-    actions : (T, A) array of the actions applied (held controller output plus offset, clipped)
+    observations : (T + 1, O) array of what the controller saw (with any observation noise)
+    actions : (T, A) array of the commands (held controller output plus offset, clipped; the
+        actuator's perturbations, if any, act on them after)
     rewards : (T,) array
     relevance : (T,) array of r(x) at the last decision, for hybrid controllers; else None
     terminated : bool
@@ -193,30 +202,33 @@ class _Episodes:
     relevance: list[Tensor] = dataclasses.field(default_factory=list)
 
     @classmethod
-    def start(cls, system: System, state: Tensor, steps: int) -> _Episodes:
+    def start(cls, plant: PerturbedPlant, state: Tensor, steps: int) -> _Episodes:
         """Episodes of ``steps`` steps from ``state`` ``(B, S)``, every one alive."""
         batch = state.shape[0]
         alive = torch.ones(batch, dtype=torch.bool)
         lengths = torch.full((batch,), steps, dtype=torch.long)
-        return cls(state, alive, lengths, [state], [system.observe(state)])
+        plant.reset(batch)
+        return cls(state, alive, lengths, [state], [plant.observe(state)])
 
     def advance(
-        self, system: System, action: Tensor, relevance: Tensor, index: int, steps: int
+        self, plant: PerturbedPlant, action: Tensor, relevance: Tensor, index: int, steps: int
     ) -> None:
         """Simulator step ``index`` (of ``steps``) with ``action`` ``(B, A)``: a start that
         leaves the allowed region ends there (its termination reward), an ended one is frozen
-        (zero action and reward, its state repeated)."""
-        stepped = system.step_fn(self.state, action)
+        (zero action and reward, its state and observation repeated)."""
+        system = plant.system
+        stepped = plant.step(self.state, action).state
         leaving = self.alive & system.out_of_bounds(stepped)
         reward = system.step_reward(self.state, action, stepped, leaving, steps - index - 1)
         self.rewards.append(torch.where(self.alive, reward, torch.zeros_like(reward)))
         self.actions.append(torch.where(self.alive[:, None], action, torch.zeros_like(action)))
         self.relevance.append(relevance)
         self.state = torch.where(self.alive[:, None], stepped, self.state)
+        observed = plant.observe(self.state)
+        self.observations.append(torch.where(self.alive[:, None], observed, self.observations[-1]))
         self.lengths = torch.where(leaving, torch.as_tensor(index + 1), self.lengths)
         self.alive = self.alive & ~leaving
         self.states.append(self.state)
-        self.observations.append(system.observe(self.state))
 
     def pad(self, steps: int) -> None:
         """Repeat the frozen tail up to ``steps`` steps when every start ended early."""
@@ -250,6 +262,7 @@ def simulate(
     steps: int | None = None,
     action_offsets: Any = None,
     action_repeat: int | None = None,
+    perturbations: Sequence[Perturbation] = (),
 ) -> BatchTrajectory:
     """Run ``controller`` on ``system`` from every start at once.
 
@@ -265,6 +278,8 @@ def simulate(
         Disturbance added to the held action at every simulator step, before the clip.
     action_repeat : int, optional
         Simulator steps per decision; default the controller's own (:func:`control_period`).
+    perturbations : sequence of Perturbation, optional
+        The plant's perturbations (module docstring); none by default: ``system`` itself.
 
     Returns
     -------
@@ -274,7 +289,8 @@ def simulate(
     state, offsets = _check_inputs(system, starts, steps, action_offsets)
     repeat = control_period(controller) if action_repeat is None else check_repeat(action_repeat)
     relevance_of = relevance_function(controller)
-    episodes = _Episodes.start(system, state, steps)
+    plant = PerturbedPlant(system, perturbations, repeat)
+    episodes = _Episodes.start(plant, state, steps)
     batch = state.shape[0]
     decision = _Decision(
         torch.zeros(batch, system.action_dim, dtype=DTYPE), torch.zeros(batch, dtype=DTYPE)
@@ -285,7 +301,7 @@ def simulate(
                 obs = episodes.observations[-1]
                 decision = _decide(system, controller, relevance_of, obs, decision)
             action = system.clip_action(decision.action + offsets[index])
-            episodes.advance(system, action, decision.relevance, index, steps)
+            episodes.advance(plant, action, decision.relevance, index, steps)
             if not bool(episodes.alive.any()):
                 break
     episodes.pad(steps)
@@ -299,6 +315,7 @@ def rollout(
     steps: int | None = None,
     action_offsets: Any = None,
     action_repeat: int | None = None,
+    perturbations: Sequence[Perturbation] = (),
 ) -> Trajectory:
     """One episode of :func:`simulate` from ``initial_state`` ``(S,)``, cut where it ended."""
     start = np.asarray(initial_state, dtype=float)
@@ -306,7 +323,9 @@ def rollout(
         raise ValueError(
             f"initial_state: expected shape ({system.state_dim},), found {start.shape}"
         )
-    batch = simulate(system, controller, start[None], steps, action_offsets, action_repeat)
+    batch = simulate(
+        system, controller, start[None], steps, action_offsets, action_repeat, perturbations
+    )
     return batch.episode(0)
 
 
