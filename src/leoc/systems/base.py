@@ -52,9 +52,10 @@ and may override, with these defaults:
 ``velocity_indices``        none: the state entries that are generalised velocities, one per
                             degree of freedom (friction and pushes act on them,
                             :mod:`leoc.systems.perturbations`)
-``forced_step_fn(state,     raises: ``step_fn`` with generalised forces ``force(state)``
-action, force)``            ``(B, V)`` (one per entry of ``velocity_indices``) added to the
-                            dynamics beside the clipped actuator (friction needs it)
+``forced_step_fn(...)``     raises: ``step_fn(state, action)`` with generalised forces
+                            ``force(state)`` ``(B, V)`` (one per entry of
+                            ``velocity_indices``) added to the dynamics beside the clipped
+                            actuator (friction needs it)
 ==========================  =================================================================
 
 :meth:`System.validate` (run by :func:`~leoc.systems.registry.register_system`) checks shapes,

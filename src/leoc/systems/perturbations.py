@@ -37,7 +37,7 @@ at every simulator step for every episode of the batch, whether or not a control
 then, so the stream does not depend on the controller.
 
 Shapes: ``B`` batch, ``S`` state, ``O`` observation, ``A`` action, ``V`` the system's
-degrees of freedom (:attr:`~leoc.systems.base.System.velocity_indices`).
+degrees of freedom (``System.velocity_indices``, :class:`~leoc.systems.base.System`).
 """
 
 from __future__ import annotations
@@ -290,7 +290,7 @@ class Friction(Perturbation):
         mu, in N or N m, >= 0.
     joints : tuple of str, optional
         Names of the velocity state entries it acts on (``("theta_dot",)``); None: every
-        degree of freedom (:attr:`~leoc.systems.base.System.velocity_indices`).
+        degree of freedom (``System.velocity_indices``, :class:`~leoc.systems.base.System`).
     """
 
     level_field: ClassVar[str] = "viscous"
