@@ -21,11 +21,13 @@ import torch
 from leoc.control import certify_level, certify_lqr, design_lqr, lqr_closed_loop
 from leoc.control.intervals import Jet, UnsupportedOperation, box_jet
 from leoc.control.proof import (
+    BATCH,
     MAX_BOXES,
     NO_BALL,
     RESOLUTION,
     _annulus,
     _box_bound,
+    _Budget,
     _enclose,
     _Enclosure,
     _frame,
@@ -534,8 +536,7 @@ def test_the_box_search_checks_every_box_outside_the_inner_ball():
             math.sqrt(inner_level),
             math.sqrt(certificate.rho),
             RESOLUTION[2],
-            MAX_BOXES,
-            math.inf,
+            _Budget(MAX_BOXES, math.inf, BATCH),
         )
     assert search.limited_by == "decrease"
     assert 0.99 * inner_level < search.level <= first

@@ -1,5 +1,6 @@
 """Linearisation, LQR design, stability margins and the certified region of attraction about
-the operating point (empirical basins: :mod:`leoc.evaluation.basins`)."""
+the operating point, of the LQR and of any trained controller (empirical basins:
+:mod:`leoc.evaluation.basins`)."""
 
 from leoc.control.lqr import (
     DESIGN_METHODS,
@@ -22,14 +23,23 @@ from leoc.control.roa import (
     lyapunov_value,
     state_deviation,
 )
+from leoc.control.trained import (
+    ControllerCertificate,
+    Equilibrium,
+    certify_controller,
+    find_equilibrium,
+)
 
 __all__ = [
+    "ControllerCertificate",
     "DESIGN_METHODS",
+    "Equilibrium",
     "LevelProof",
     "LyapunovCertificate",
     "LQRDesign",
     "Linearisation",
     "StabilityMargins",
+    "certify_controller",
     "certify_level",
     "certify_lqr",
     "check_stabilisable",
@@ -37,6 +47,7 @@ __all__ = [
     "lyapunov_value",
     "state_deviation",
     "design_lqr",
+    "find_equilibrium",
     "linearise",
     "loop_margins",
     "observation_gain",

@@ -101,6 +101,8 @@ the paper systems finish far below it and are then reproducible box for box)."""
 BATCH = 16_384
 """Boxes evaluated per batched call, smallest levels first."""
 INNER_BISECTIONS = 40
+TIGHTEN_FACTOR = 0.5
+"""The excluded radius epsilon is shrunk on smaller balls while each step at least halves it."""
 BOUND_SLACK = 1e-10
 """Relative slack on the dense S x S operations of the box bound (module docstring)."""
 LEVEL_MARGIN = 1e-12
@@ -184,7 +186,7 @@ class _Enclosure(NamedTuple):
     outside: Tensor  # (B,) bool
 
 
-def _frame(system: System, P: np.ndarray) -> _Frame:
+def _frame(system: System, P: np.ndarray, centre: np.ndarray | None = None) -> _Frame:
     factor = np.linalg.cholesky(P)
     inverse = np.linalg.inv(factor.T)
     size = P.shape[0]
@@ -194,7 +196,7 @@ def _frame(system: System, P: np.ndarray) -> _Frame:
     return _Frame(
         torch.as_tensor(factor, dtype=DTYPE),
         torch.as_tensor(inverse, dtype=DTYPE),
-        torch.as_tensor(system.operating_state, dtype=DTYPE),
+        torch.as_tensor(system.operating_state if centre is None else centre, dtype=DTYPE),
         error,
     )
 
@@ -264,17 +266,50 @@ def _inner_contraction(
     return True, offset / room
 
 
+def _tightened(
+    system: System, controller: Controller, repeat: int, frame: _Frame, half_width: float, epsilon
+) -> float:
+    """A smaller epsilon, where the loop is no exact fixed point: the argument on the ball of
+    radius ``epsilon`` (its own contraction is smaller) proves the decrease on (epsilon', epsilon],
+    which joins (epsilon, s]; repeated while epsilon at least halves."""
+    radius = half_width
+    for _ in range(INNER_BISECTIONS):
+        if not 0.0 < epsilon < radius:
+            break
+        works, value = _inner_contraction(system, controller, repeat, frame, epsilon)
+        if not works or not value < TIGHTEN_FACTOR * epsilon:
+            break
+        radius, epsilon = epsilon, value
+    return epsilon
+
+
 def _inner_level(
     system: System, controller: Controller, repeat: int, frame: _Frame, target_radius: float
 ) -> tuple[float, float]:
-    """Largest half-width s (by bisection) of the inner-ball argument, and its epsilon."""
+    """Largest half-width s (by bisection) of the inner-ball argument, and its epsilon (made
+    as small as the argument on smaller balls allows: :func:`_tightened`)."""
+    low, epsilon = _largest_inner(system, controller, repeat, frame, target_radius)
+    return low, _tightened(system, controller, repeat, frame, low, epsilon)
+
+
+def _largest_inner(
+    system: System, controller: Controller, repeat: int, frame: _Frame, target_radius: float
+) -> tuple[float, float]:
+    """Largest half-width s (by bisection) of the inner-ball argument whose epsilon is at most
+    ``TIGHTEN_FACTOR * s`` (near the largest contracting s, epsilon = offset / room blows up as
+    the room vanishes), and that epsilon (0 at an exact fixed point)."""
+
+    def useful(half_width: float) -> tuple[bool, float]:
+        works, value = _inner_contraction(system, controller, repeat, frame, half_width)
+        return works and value <= TIGHTEN_FACTOR * half_width, value
+
     low, high, epsilon = 0.0, target_radius, math.inf
-    works, value = _inner_contraction(system, controller, repeat, frame, high)
+    works, value = useful(high)
     if works:
         return high, value
     for _ in range(INNER_BISECTIONS):
         middle = 0.5 * (low + high)
-        works, value = _inner_contraction(system, controller, repeat, frame, middle)
+        works, value = useful(middle)
         if works:
             low, epsilon = middle, value
         else:
@@ -350,6 +385,14 @@ def _split(centre: Tensor, radius: Tensor) -> tuple[Tensor, Tensor]:
     return torch.cat([centre - shift, centre + shift]), torch.cat([half, half])
 
 
+class _Budget(NamedTuple):
+    """Limits of the box search: evaluations, wall-clock deadline, boxes per batched call."""
+
+    max_boxes: int
+    deadline: float
+    batch: int
+
+
 class _Search(NamedTuple):
     level: float  # smallest unproved |w|^2 (inf: none)
     boxes: int
@@ -365,8 +408,7 @@ def _annulus(
     inner: float,
     cover: float,
     resolution: float,
-    max_boxes: int,
-    deadline: float,
+    budget: _Budget,
 ) -> _Search:
     """Best-first adaptive verification of the boxes between the inner ball and the cover."""
     centre, radius = _initial_cover(frame.factor.shape[0], cover)
@@ -378,12 +420,12 @@ def _annulus(
         centre, radius, depth, nearest = centre[keep], radius[keep], depth[keep], nearest[keep]
         if not centre.shape[0]:
             break
-        if evaluated >= max_boxes or time.perf_counter() > deadline:
+        if evaluated >= budget.max_boxes or time.perf_counter() > budget.deadline:
             best, reason = min(best, float(nearest.min())), "budget"
             unproved += int(centre.shape[0])
             break
         order = torch.argsort(nearest)
-        take, rest = order[:BATCH], order[BATCH:]
+        take, rest = order[: budget.batch], order[budget.batch :]
         c, h, d, near = centre[take], radius[take], depth[take], nearest[take]
         box = _enclose(system, controller, repeat, frame, c, h)
         point = _enclose(system, controller, repeat, frame, c, None)
@@ -417,6 +459,8 @@ def prove_level(
     resolution: float | None = None,
     max_boxes: int = MAX_BOXES,
     max_seconds: float = MAX_SECONDS,
+    equilibrium: np.ndarray | None = None,
+    batch: int = BATCH,
 ) -> LevelProof:
     r"""Prove the decrease of :math:`V = |L^\top z|^2` on the largest level set it can, up to
     ``target`` (module docstring).
@@ -441,6 +485,11 @@ def prove_level(
     max_seconds : float
         Wall-clock budget of the box search; past it the pending boxes count as unproved
         (``limited_by="budget"``: the level reported is still proved, only smaller).
+    equilibrium : (S,) array, optional
+        Centre of V (default a): a controller's own (:func:`leoc.control.certify_controller`).
+    batch : int
+        Boxes per batched call; the deadline is checked between them (the level does not
+        depend on it).
 
     Returns
     -------
@@ -451,8 +500,13 @@ def prove_level(
     fine = RESOLUTION.get(size, DEFAULT_RESOLUTION) if resolution is None else float(resolution)
     if not 0.0 < fine < 1.0:
         raise ValueError(f"resolution: expected a number in (0, 1), found {resolution!r}")
-    deadline = started + max_seconds
-    outcome = _prove(system, P, controller, repeat, target, fine, max_boxes, deadline)
+    budget = _Budget(max_boxes, started + max_seconds, int(batch))
+    frame = _frame(system, P, equilibrium)
+    outcome = _prove(system, frame, controller, repeat, target, fine, budget)
+    return _level_proof(outcome, target, fine, time.perf_counter() - started)
+
+
+def _level_proof(outcome: _Outcome, target: float, fine: float, seconds: float) -> LevelProof:
     search = outcome.search
     return LevelProof(
         outcome.rho,
@@ -463,7 +517,7 @@ def prove_level(
         search.unproved,
         search.limited_by,
         fine,
-        time.perf_counter() - started,
+        seconds,
         outcome.reason,
     )
 
@@ -482,19 +536,17 @@ _NO_SEARCH = _Search(math.inf, 0, 0, "target")
 
 def _prove(
     system: System,
-    P: np.ndarray,
+    frame: _Frame,
     controller: Controller,
     repeat: int,
     target: float,
     fine: float,
-    max_boxes: int,
-    deadline: float,
+    budget: _Budget,
 ) -> _Outcome:
     """:func:`prove_level` past its checks: the inner ball by the rigorous linearisation, then
     the annulus of boxes out to ``target``."""
     if not target > 0.0:
         return _Outcome(0.0, 0.0, 0.0, _NO_SEARCH, "no target level (the sampled estimate is 0)")
-    frame = _frame(system, P)
     shrink = (1.0 - frame.error) ** 2
     cover = math.sqrt(target) / (1.0 - frame.error)
     with torch.no_grad():
@@ -504,9 +556,7 @@ def _prove(
             if half_width <= 0.0:
                 failed = _NO_SEARCH._replace(limited_by="decrease")
                 return _Outcome(0.0, 0.0, 0.0, failed, NO_BALL)
-            search = _annulus(
-                system, controller, repeat, frame, half_width, cover, fine, max_boxes, deadline
-            )
+            search = _annulus(system, controller, repeat, frame, half_width, cover, fine, budget)
         except UnsupportedOperation as error:
             unsupported = _NO_SEARCH._replace(limited_by="unsupported")
             return _Outcome(0.0, 0.0, 0.0, unsupported, str(error))

@@ -289,29 +289,36 @@ def _closed_loop(system: System, controller: Controller, repeat: int, states: Te
 
 
 def _decrease(
-    system: System, P: Tensor, controller: Controller, repeat: int, states: Tensor
+    system: System,
+    P: Tensor,
+    controller: Controller,
+    repeat: int,
+    states: Tensor,
+    centre: np.ndarray,
 ) -> tuple[Tensor, Tensor]:
-    """``(V(x), violates)`` (B,) each: violation = no strict decrease, a non-finite value, or
-    leaving the allowed region."""
+    """``(V(x), violates)`` (B,) each, V centred on ``centre``: violation = no strict decrease,
+    a non-finite value, or leaving the allowed region."""
+    angles = system.angle_indices
     with torch.no_grad():
         following, left = _closed_loop(system, controller, repeat, states)
-        value = lyapunov_value(P, state_deviation(system, states))
-        value_next = lyapunov_value(P, state_deviation(system, following))
+        value = lyapunov_value(P, _deviation(states, centre, angles))
+        value_next = lyapunov_value(P, _deviation(following, centre, angles))
     # The condition is on 0 < V <= rho: the operating point itself (V = 0) is a fixed point.
     violates = (value > 0.0) & (left | ~torch.isfinite(value_next) | ~(value_next < value))
     return value, violates
 
 
 def _linear_check(
-    system: System, P: np.ndarray, controller: Controller, repeat: int
+    system: System, P: np.ndarray, controller: Controller, repeat: int, centre: np.ndarray
 ) -> tuple[bool, float]:
     """Largest eigenvalue of ``A_cl^T P A_cl - P``, A_cl the autodiff Jacobian of the held
-    closed loop at a; negative definite -> True."""
+    closed loop at ``centre`` (a, or a controller's own equilibrium); negative definite ->
+    True."""
 
     def closed(x: Tensor) -> Tensor:
         return _closed_loop(system, controller, repeat, x.unsqueeze(0))[0][0]
 
-    point = torch.as_tensor(system.operating_state, dtype=DTYPE)
+    point = torch.as_tensor(centre, dtype=DTYPE)
     jacobian = torch.autograd.functional.jacobian(closed, point).numpy()
     change = jacobian.T @ P @ jacobian - P
     largest = float(np.max(np.linalg.eigvalsh(0.5 * (change + change.T))))
@@ -364,9 +371,10 @@ def certify_level(
     linear_check: bool = True,
     prove: bool = True,
     max_boxes: int = MAX_BOXES,
+    equilibrium: Any = None,
+    **proof_options: Any,
 ) -> LyapunovCertificate:
-    r"""The :class:`LyapunovCertificate` of the largest level :math:`\rho` with
-    :math:`V(F(x)) < V(x)` on :math:`0 < V \le \rho`: sampled, then proved (module docstring).
+    r"""The certificate of the largest rho with V(F(x)) < V(x) on 0 < V <= rho (module docs).
 
     Parameters
     ----------
@@ -377,39 +385,50 @@ def certify_level(
         Observation (B, O) float64 -> action (B, A): the closed loop certified (e.g.
         :math:`G(o) = W o + b`; the step clips it to the actuator limit).
     action_repeat : int, optional
-        Control period of the closed loop; default the controller's ``action_repeat`` or 1.
-    samples : int
-        Uniform samples per round; the final clean round's count sets the confidence.
+        Control period (default the controller's ``action_repeat`` or 1).
+    samples, seed : int
+        Uniform samples per round (the last, clean, round's count sets the confidence), seed.
     confidence : float in (0, 1)
         :math:`1 - \delta` of the violating-volume bound :math:`\ln(1/\delta)/n`.
-    seed : int
-        Seed of every sample drawn.
-    search_box : (S,) half-widths, optional
-        The search starts at the largest level whose ellipsoid fits in this box (default
-        ``SEARCH_BOX_FACTOR * system.operating_region``) and in the angle chart.
-    rho_max : float, optional
-        Further cap on the initial level.
+    search_box, rho_max : (S,) half-widths, float, optional
+        Start: the largest ellipsoid in ``search_box`` (default ``SEARCH_BOX_FACTOR *
+        system.operating_region``) and in the angle chart, at most ``rho_max``.
     linear_check : bool
         Check the linearised decrease first (rho = 0 if it fails); off only to test sampling.
-    prove : bool
+    prove, max_boxes : bool, int
         Prove the level (:func:`leoc.control.proof.prove_level`, aiming at the sampled
-        estimate); ``rho`` is then the proved level. Off: ``rho`` is the sampled estimate.
-    max_boxes : int
-        Box budget of the proof.
+        estimate, with this box budget); off: ``rho`` is the sampled estimate.
+    equilibrium : (S,) array, optional
+        Centre of V (default a; the certificate's ``operating_state``): a controller's own
+        fixed point (:func:`leoc.control.certify_controller`).
+    **proof_options
+        Further keywords of :func:`~leoc.control.proof.prove_level` (``max_seconds``, ``batch``).
     """
     repeat = _check_options(controller, action_repeat, samples, seed, confidence, max_boxes)
-    matrix = _check_matrix(P, system.state_dim)
+    matrix, centre = _check_matrix(P, system.state_dim), _check_centre(system, equilibrium)
     initial = _initial_level(system, matrix, search_box, rho_max)
-    linear = _linear_check(system, matrix, controller, repeat)
+    linear = _linear_check(system, matrix, controller, repeat, centre)
     sampled = _Sampled(0.0, 0)
     if linear[0] or not linear_check:
-        sampled = _sampled_level(system, matrix, controller, repeat, initial, samples, seed)
-    proof = None
-    if prove:  # aiming at the sampled estimate
-        proof = prove_level(system, matrix, controller, repeat, sampled.rho, max_boxes=max_boxes)
+        sampled = _sampled_level(system, matrix, controller, repeat, initial, samples, seed, centre)
+    kw = {**proof_options, "max_boxes": max_boxes, "equilibrium": centre}
+    proof = prove_level(system, matrix, controller, repeat, sampled.rho, **kw) if prove else None
     return _certificate(
-        system, matrix, repeat, samples, confidence, initial, linear, sampled, proof
+        system, matrix, repeat, samples, confidence, initial, linear, sampled, proof, centre
     )
+
+
+def _check_centre(system: System, equilibrium: Any) -> np.ndarray:
+    """The centre of V: the operating point a, or ``equilibrium`` as S finite numbers."""
+    if equilibrium is None:
+        return np.asarray(system.operating_state, dtype=float).copy()
+    centre = np.asarray(equilibrium, dtype=float).reshape(-1)
+    if centre.shape != (system.state_dim,) or not np.all(np.isfinite(centre)):
+        raise ValueError(
+            f"equilibrium: expected {system.state_dim} finite numbers "
+            f"({', '.join(system.state_names)}), found {equilibrium!r}"
+        )
+    return centre
 
 
 def _check_options(
@@ -450,17 +469,18 @@ def _sampled_level(
     initial: float,
     samples: int,
     seed: int,
+    centre: np.ndarray,
 ) -> _Sampled:
     """The sampled estimate (module docstring): from ``initial`` down, a fresh batch of
     ``samples`` per round, until a round without a violation."""
     rng = np.random.default_rng(seed)
     P_t = torch.as_tensor(matrix, dtype=DTYPE)
-    operating = torch.as_tensor(system.operating_state, dtype=DTYPE)
+    operating = torch.as_tensor(centre, dtype=DTYPE)
     rho = initial
     for rounds in range(1, MAX_ROUNDS + 1):
         deviation = _uniform_ellipsoid(matrix, rho, samples, rng)
         states = torch.as_tensor(deviation, dtype=DTYPE) + operating
-        value, violates = _decrease(system, P_t, controller, repeat, states)
+        value, violates = _decrease(system, P_t, controller, repeat, states, centre)
         if not bool(violates.any()):
             return _Sampled(rho, rounds)
         smallest = float(value[violates].min())
@@ -480,6 +500,7 @@ def _certificate(
     linear: tuple[bool, float],
     sampled: _Sampled,
     proof: LevelProof | None,
+    centre: np.ndarray,
 ) -> LyapunovCertificate:
     """The certificate of a search: ``rho`` the proved level (the sampled one without proof)."""
     delta = 1.0 - confidence
@@ -487,7 +508,7 @@ def _certificate(
     return LyapunovCertificate(
         sampled.rho if proof is None else proof.rho,
         matrix,
-        system.operating_state.copy(),
+        centre,
         tuple(system.angle_indices),
         repeat,
         samples,
