@@ -150,6 +150,22 @@ RELEVANCE_NAMES = ("paper", "roa", "lyapunov")
 """Relevance functions of a hybrid (``leoc.policies.relevance.RELEVANCE_KINDS``): the paper's
 r(x) = (1 + d)^-2, the ROA relevance, exactly 1 on the LQR's certified region, or the paper's
 form with the LQR's Lyapunov function as its distance."""
+ROBUSTNESS_CATEGORIES = (
+    "observation_noise",
+    "action_delay",
+    "actuator_gain",
+    "torque_noise",
+    "viscous_friction",
+    "coulomb_friction",
+    "parameter_error",
+    "push",
+)
+"""The perturbation categories of the robustness protocol
+(``leoc.evaluation.robustness_protocol.CATEGORY_NAMES``), in report order."""
+ROBUSTNESS_LEVELS = 21
+"""Levels per category of the robustness protocol (RealAIGym's 21)."""
+ROBUSTNESS_EPISODES = 5
+"""Episodes per level and start kind of the robustness protocol."""
 LQR_METHODS = ("discrete", "continuous", "authors")
 """LQR designs of ``leoc.control.design_lqr``."""
 BACKEND_NAMES = ("local", "ray")

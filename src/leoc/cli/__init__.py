@@ -15,14 +15,25 @@ import sys
 from collections.abc import Callable, Sequence
 
 from leoc import __version__
-from leoc.cli import ablation, export, lqr, plot, publish, reproduce, roa, simulate, train
+from leoc.cli import (
+    ablation,
+    export,
+    lqr,
+    plot,
+    publish,
+    reproduce,
+    roa,
+    robustness,
+    simulate,
+    train,
+)
 from leoc.cli._args import OneLineParser
 
 # Exit statuses of an interrupted command: 128 + the signal number, as a shell reports it.
 EXIT_SIGINT = 128 + signal.SIGINT
 EXIT_SIGTERM = 128 + signal.SIGTERM
 EXIT_SIGPIPE = 128 + signal.SIGPIPE
-COMMANDS = (lqr, simulate, roa, train, export, reproduce, ablation, plot, publish)
+COMMANDS = (lqr, simulate, roa, robustness, train, export, reproduce, ablation, plot, publish)
 RESUMABLE_COMMANDS = ("reproduce", "ablation", "train")
 
 

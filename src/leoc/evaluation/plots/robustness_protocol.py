@@ -1,0 +1,111 @@
+"""The robustness protocol's scores (:mod:`leoc.evaluation.robustness_protocol`): per category
+and controller the share of episodes held, as grouped bars, with the robustness score (the
+categories' mean) as the last group; one panel per start selection (every start, the
+operating region, the swing-up start).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leoc.evaluation.plots.common import (
+    axes_handles,
+    controller_colour,
+    legend_below,
+    new_figure,
+    save_figure,
+)
+
+PANELS = {
+    None: "every start (the protocol's score)",
+    "operating_region": "from the operating region",
+    "swing_up": "from the swing-up start",
+}
+"""The panels, top to bottom: the start kind each scores (None: all) and its title."""
+GROUP_WIDTH = 0.8
+"""Width of one category's group of bars, in category spacings."""
+HATCHES = ("", "//", "..", "xx", "\\\\", "++", "oo", "--")
+"""Bar fill patterns, one per controller in turn (told apart where colours coincide)."""
+PANEL_HEIGHT = 2.7
+PANEL_WIDTH_PER_GROUP = 1.15
+SCORE_LIMITS = (0.0, 1.08)
+ROBUSTNESS = "robustness"
+
+
+def protocol_caption(results: Mapping[str, Any]) -> str:
+    """What each bar is."""
+    first = next(iter(results.values()))
+    return (
+        f"Robustness protocol on {first.system} (seed {first.seed}): each bar is the share of "
+        f"the episodes held (leoc's hold test) over the category's levels, up to "
+        f"{first.level_count} from none to the level at which the LQR fails, with "
+        f"{first.episodes} episodes per level and start kind; '{ROBUSTNESS}' is the mean of "
+        "the categories."
+    )
+
+
+def _draw_panel(axis: Any, results: Mapping[str, Any], keys: Mapping[str, str], kind) -> None:
+    """The grouped bars of one start selection ``kind`` on ``axis``."""
+    names = [category.name for category in next(iter(results.values())).categories]
+    groups = [*names, ROBUSTNESS]
+    width = GROUP_WIDTH / max(1, len(results))
+    for index, (label, result) in enumerate(results.items()):
+        scores = result.scores(kind)
+        values = [scores.get(name, np.nan) for name in names] + [result.score(kind)]
+        offsets = np.arange(len(groups)) - GROUP_WIDTH / 2 + (index + 0.5) * width
+        axis.bar(
+            offsets,
+            values,
+            width,
+            color=controller_colour(keys.get(label, label)),
+            hatch=HATCHES[index % len(HATCHES)],
+            edgecolor="white",
+            linewidth=0.5,
+            label=label,
+        )
+        axis.annotate(
+            f"{values[-1]:.2f}",
+            (offsets[-1], values[-1]),
+            textcoords="offset points",
+            xytext=(0, 2),
+            ha="center",
+            fontsize="x-small",
+        )
+    axis.axvline(len(names) - 0.5, color="#999999", linewidth=0.8)
+    axis.set_xticks(range(len(groups)), [name.replace("_", "\n") for name in groups])
+    axis.set_ylim(*SCORE_LIMITS)
+    axis.set_ylabel("share held")
+    axis.set_title(PANELS[kind])
+    axis.grid(axis="y", alpha=0.3)
+
+
+def draw_protocol_scores(results: Mapping[str, Any], keys: Mapping[str, str] | None = None):
+    """The figure of :func:`plot_protocol_scores` (not saved)."""
+    keys = dict(keys or {})
+    first = next(iter(results.values()))
+    kinds = [kind for kind in PANELS if kind is None or kind in first.starts]
+    groups = len(first.categories) + 1
+    figure, axes = new_figure(len(kinds), 1, (PANEL_WIDTH_PER_GROUP * groups, PANEL_HEIGHT))
+    for row, kind in enumerate(kinds):
+        _draw_panel(axes[row][0], results, keys, kind)
+    legend_below(figure, axes_handles(axes), protocol_caption(results))
+    return figure
+
+
+def plot_protocol_scores(
+    results: Mapping[str, Any], path: str | Path, keys: Mapping[str, str] | None = None
+) -> Path:
+    """Write the scores of ``results`` to ``path`` as a PNG: bars per category and controller,
+    the controllers side by side in the order given, coloured by ``keys``.
+
+    ``results`` maps a label to its
+    :class:`~leoc.evaluation.robustness_protocol.ProtocolResult` (one system); ``keys`` maps a
+    label to a controller name such as ``linear`` or ``ddpg_hybrid`` (default the label).
+    """
+    if not results:
+        raise ValueError("results: expected at least one controller's result, found none")
+    return save_figure(draw_protocol_scores(results, keys), path)
