@@ -50,9 +50,26 @@ SYSTEMS = (*PAPER_SYSTEM_NAMES, "acrobot")
 #: Basin starts and sampled-estimate samples of the matrix's ``leoc roa`` (the proof itself is
 #: the same at any setting).
 ROA_ARGS = ["--samples", "500", "--starts", "8", "--json"]
+#: ``leoc roa --prove`` in the matrix: each run's own closed loop, on a short proof budget (the
+#: path through every learner's network on intervals, not the size of the proved set).
+PROVE_ARGS = ["--prove", "--proof-seconds", "2"]
+#: A hybrid's equilibrium is a up to the rounding of its LQR's ``W o(a) + b`` (state units).
+OFFSET_ROUNDING = 1e-12
 #: A hybrid whose relevance is 1 along the impulse response equals its LQR there: the two
 #: records agree to rounding (in the units of the deviation: degrees or metres).
 SAME_RESPONSE_TOL = 1e-9
+
+
+def _check_own_proof(entry: dict, kind: str) -> None:
+    """A run's own proof ran through its network (no operation without an interval rule); a
+    hybrid's equilibrium is a itself (pi(a) = G(a), up to the rounding of W o(a) + b), so
+    nothing is excluded around it."""
+    assert entry["limited_by"] != "unsupported", entry
+    assert entry["rho"] >= 0.0 and 0.0 <= entry["box_share"] <= 1.0
+    if kind != "baseline":
+        offset = max(abs(value) for value in entry["offset"])
+        assert entry["equilibrium_found"] and offset < OFFSET_ROUNDING, entry
+        assert entry["excluded_level"] < 1e-12 and entry["rho"] > 0.0, entry
 
 
 def _pairwise_cover() -> list[tuple[str, str, str, str]]:
@@ -195,14 +212,16 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
     if kind == "hybrid_lyapunov":
         _check_no_flat_top(run, system)
 
-    # roa: the system read from the run, certified on the run's plant
-    code, out, err = _run(["roa", "--controller", run, *ROA_ARGS], capsys)
+    # roa: the system read from the run, certified on the run's plant; its own closed loop
+    # proved on intervals (every learner's network has the rules; a short budget)
+    code, out, err = _run(["roa", "--controller", run, *ROA_ARGS, *PROVE_ARGS], capsys)
     assert code == 0, err
     report = json.loads(out)
     assert report["system"] == system
     assert report["plant"]["legacy_integrator"] == (variant == "authors" and system == "pendulum")
     (held,) = [entry for label, entry in report["basins"].items() if label == run.name]
     assert 0.0 <= held["certified_set_held"] <= 1.0
+    _check_own_proof(report["proofs"][run.name], kind)
 
     # the same train command again: nothing is trained, the controller is the same
     before = _actions(run, system)

@@ -166,6 +166,11 @@ ROBUSTNESS_LEVELS = 21
 """Levels per category of the robustness protocol (RealAIGym's 21)."""
 ROBUSTNESS_EPISODES = 5
 """Episodes per level and start kind of the robustness protocol."""
+LYAPUNOV_CHOICES = ("best", "lqr", "own")
+"""The V a controller's proof uses (``leoc roa --prove --lyapunov``,
+:func:`leoc.control.certify_controller`): the larger proved set of the two, the LQR's P, or
+the discrete Lyapunov matrix of the controller's own linearisation at its equilibrium."""
+
 LQR_METHODS = ("discrete", "continuous", "authors")
 """LQR designs of ``leoc.control.design_lqr``."""
 BACKEND_NAMES = ("local", "ray")

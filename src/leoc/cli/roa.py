@@ -17,6 +17,7 @@ from leoc.cli._args import (
 )
 from leoc.cli.lqr import print_matrix
 from leoc.cli.simulate import load_controller
+from leoc.names import LYAPUNOV_CHOICES
 
 
 def add_parser(commands: Any) -> None:
@@ -73,9 +74,35 @@ def add_parser(commands: Any) -> None:
         default=41,
         help="grid points per axis of the plot slice (default 41)",
     )
+    _add_proof_arguments(roa)
     roa.add_argument("--plot", type=Path, help="write a PNG of the basin slices here")
     roa.add_argument("--json", action="store_true", help="print the results as JSON")
     roa.set_defaults(run=run)
+
+
+def _add_proof_arguments(roa: argparse.ArgumentParser) -> None:
+    """``--prove`` and its options: the trained controllers' own proved regions."""
+    roa.add_argument(
+        "--prove",
+        action="store_true",
+        help="also prove each --controller's own region of attraction: its equilibrium near a, "
+        "and the largest level set of a quadratic V (the LQR's P or its own linearisation's "
+        "Lyapunov matrix, whichever proves more) on which V decreases along its closed loop "
+        "(interval arithmetic through the trained network)",
+    )
+    roa.add_argument(
+        "--lyapunov",
+        choices=LYAPUNOV_CHOICES,
+        default="best",
+        help="with --prove: the V to prove with (default best: both, the larger proved set)",
+    )
+    roa.add_argument(
+        "--proof-seconds",
+        type=positive_float,
+        default=480.0,
+        help="with --prove: wall-clock budget of each controller's box search (default 480; "
+        "past it the level proved so far is reported, limited by budget)",
+    )
 
 
 ROA_SLICES = {"pendulum": (0, 1), "cartpole": (2, 3), "mountaincar": (0, 1)}
@@ -258,9 +285,21 @@ def _roa_controllers(system, design, lqr: CertifiedLQR, runs: dict) -> dict:
     controllers = {
         f"LQR (period {design.action_repeat})": saturated_lqr(system, design, lqr.saturation)
     }
+    labels = run_labels(list(runs))
     for spec, controller in runs.items():
-        controllers[Path(spec).name] = controller
+        controllers[labels[spec]] = controller
     return controllers
+
+
+def run_labels(specs: list[str]) -> dict[str, str]:
+    """A label per run folder: its name, or as many trailing path parts as make the labels
+    distinct (``td3_baseline/seed0`` beside ``td3_hybrid/seed0``)."""
+    parts = {spec: Path(spec).resolve().parts for spec in specs}
+    for depth in range(1, max((len(p) for p in parts.values()), default=1) + 1):
+        labels = {spec: "/".join(path[-depth:]) for spec, path in parts.items()}
+        if len(set(labels.values())) == len(labels):
+            return labels
+    return {spec: str(Path(spec).resolve()) for spec in specs}
 
 
 class _Certified(NamedTuple):
@@ -378,6 +417,32 @@ def _plot_slices(args: argparse.Namespace, system, certificate, basins: dict, bo
     )
 
 
+def _prove_controllers(args: argparse.Namespace, system, certified: _Certified, runs, box):
+    """Per run label: its proved region beside the LQR's
+    (:func:`~leoc.evaluation.proved_regions.proved_region`); progress on stderr."""
+    import sys
+
+    from leoc.evaluation.proved_regions import proved_region
+
+    proofs = {}
+    labels = run_labels(list(runs))
+    for spec, controller in runs.items():
+        label = labels[spec]
+        print(f"leoc roa: proving {label}'s own region ...", file=sys.stderr, flush=True)
+        proofs[label] = proved_region(
+            system,
+            controller,
+            certified.design,
+            certified.certificate,
+            box,
+            lyapunov=args.lyapunov,
+            samples=args.samples,
+            seed=args.seed,
+            max_seconds=args.proof_seconds,
+        )
+    return proofs
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
@@ -385,6 +450,11 @@ def run(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(1)
     started = time.perf_counter()
+    if args.prove and not args.controller:
+        raise ValueError(
+            "--prove: expected --controller RUN_DIR ... (the LQR's own region is always proved), "
+            "found none"
+        )
     system = roa_plant(args)
     runs = {spec: load_controller(spec, args.system) for spec in args.controller or []}
     lqr = certified_lqr_choice(args, runs)
@@ -392,6 +462,8 @@ def run(args: argparse.Namespace) -> int:
     cover = _box_cover(args, system, certified.certificate)
     basins = _measure_basins(args, system, certified, lqr, runs, cover.box)
     report = _roa_report(args, system, lqr, runs, certified, cover, basins)
+    if args.prove:
+        report["proofs"] = _prove_controllers(args, system, certified, runs, cover.box)
     if args.plot:
         report["plot"] = _plot_slices(args, system, certified.certificate, basins, cover.box)
     report["seconds"] = time.perf_counter() - started
@@ -440,6 +512,13 @@ def _print_roa(system, certificate, report: dict) -> None:
             f"  {label}: {entry['box_held']:.1%} of the box; {entry['certified_set_held']:.1%} of "
             f"the certified set{top}"
         )
+    if "proofs" in report:
+        from leoc.evaluation.proved_regions import describe_proved_region
+
+        print("proved regions of the controllers' own closed loops (V centred on each one's x*):")
+        for label, entry in report["proofs"].items():
+            for line in describe_proved_region(system, label, entry):
+                print(line)
     if "plot" in report:
         print(f"figure written to {report['plot']}")
     print(f"({report['seconds']:.1f} s)")

@@ -105,6 +105,9 @@ TIGHTEN_FACTOR = 0.5
 """The excluded radius epsilon is shrunk on smaller balls while each step at least halves it."""
 BOUND_SLACK = 1e-10
 """Relative slack on the dense S x S operations of the box bound (module docstring)."""
+HUGE_ENTRY = 1e150
+"""A box whose ``J^T J`` has an entry beyond this gets no bound (it fails): its square would
+overflow in the bound's products."""
 LEVEL_MARGIN = 1e-12
 """The reported level is this fraction below the smallest unproved level (strict inequality)."""
 NO_BALL = (
@@ -337,7 +340,7 @@ def _box_bound(enclosure: _Enclosure, point: _Enclosure, centre: Tensor, radius:
     error_second = torch.einsum("bs,bst,bt->b", h, cross, h)
     eye = torch.eye(jac.shape[-1], dtype=DTYPE)
     quadratic = jac.transpose(-1, -2) @ jac - eye
-    eigenvalues, vectors = torch.linalg.eigh(quadratic)
+    eigenvalues, vectors, usable = _spectrum(quadratic)
     largest = eigenvalues[:, -1]
     h_square = (h * h).sum(-1)
     linear_bound = delta0 + (g.abs() * h).sum(-1) + torch.clamp(largest, min=0.0) * h_square
@@ -357,7 +360,27 @@ def _box_bound(enclosure: _Enclosure, point: _Enclosure, centre: Tensor, radius:
         + peak.abs() * negative
         + (jac_abs**2).sum((-1, -2)) * h_square
     )
-    return bound + error_first + error_second + 2.0 * error * outer + BOUND_SLACK * magnitude
+    total = bound + error_first + error_second + 2.0 * error * outer + BOUND_SLACK * magnitude
+    return torch.where(usable, total, math.inf)
+
+
+def _spectrum(quadratic: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """``eigh`` of symmetric matrices (B, S, S), and which are usable (B,): a box whose
+    Jacobian enclosure is not finite or beyond :data:`HUGE_ENTRY` (a learned part on intervals
+    can be soundly unbounded, e.g. a relevance whose 1 + d contains 0) gets no bound (+inf:
+    it fails, which is sound); so does one whose decomposition does not converge."""
+    usable = torch.isfinite(quadratic).all((-1, -2)) & (quadratic.abs().amax((-1, -2)) < HUGE_ENTRY)
+    safe = torch.where(usable[:, None, None], quadratic, torch.zeros_like(quadratic))
+    try:
+        eigenvalues, vectors = torch.linalg.eigh(safe)
+    except torch.linalg.LinAlgError:  # one ill-conditioned box fails the whole batch
+        eigenvalues, vectors = torch.zeros_like(safe[..., 0]), torch.zeros_like(safe)
+        for row in range(safe.shape[0]):
+            try:
+                eigenvalues[row], vectors[row] = torch.linalg.eigh(safe[row])
+            except torch.linalg.LinAlgError:
+                usable[row] = False
+    return eigenvalues, vectors, usable
 
 
 def _levels(centre: Tensor, radius: Tensor) -> tuple[Tensor, Tensor]:

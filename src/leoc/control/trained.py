@@ -54,6 +54,7 @@ from leoc.control.roa import (
     _deviation,
     certify_level,
 )
+from leoc.names import LYAPUNOV_CHOICES
 from leoc.systems.base import DTYPE, System, check_repeat
 
 __all__ = [
@@ -70,8 +71,6 @@ NEWTON_ITERATIONS = 60
 """Newton steps at most (each with up to ``LINE_SEARCH_HALVINGS`` halvings)."""
 LINE_SEARCH_HALVINGS = 30
 """Halvings of a Newton step at most, until the residual shrinks (else the search stops)."""
-LYAPUNOV_CHOICES = ("best", "lqr", "own")
-"""``lyapunov`` of :func:`certify_controller`: the larger proved set of the two, or one of them."""
 CONTROLLER_BATCH = 512
 """Boxes per batched call of a controller's proof: a 400x300 actor on interval jets takes
 seconds per batch on 2 cores, so the wall-clock budget is checked often (the LQR's own proof

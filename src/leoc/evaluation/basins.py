@@ -215,8 +215,13 @@ def box_fraction(
     box: Sequence[float],
     samples: int = BOX_FRACTION_SAMPLES,
     seed: int = 0,
+    centre: Any = None,
 ) -> tuple[float, float]:
-    """Fraction of the box ``a +/- box`` inside the certified set, by Monte Carlo.
+    """Fraction of the box ``centre +/- box`` inside the certified set, by Monte Carlo.
+
+    ``centre`` defaults to the certificate's own centre (its ``operating_state``); a
+    controller's certificate centred on its offset equilibrium passes the operating point a,
+    so every controller is measured on one box.
 
     Returns
     -------
@@ -224,7 +229,8 @@ def box_fraction(
     """
     half = np.asarray(box, dtype=float)
     rng = np.random.default_rng(seed)
-    states = certificate.operating_state + rng.uniform(-half, half, size=(samples, half.size))
+    middle = certificate.operating_state if centre is None else np.asarray(centre, dtype=float)
+    states = middle + rng.uniform(-half, half, size=(samples, half.size))
     inside = certificate.contains(states)
     fraction = float(inside.mean())
     return fraction, math.sqrt(fraction * (1.0 - fraction) / samples)
