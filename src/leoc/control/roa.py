@@ -308,17 +308,25 @@ def _decrease(
     return value, violates
 
 
+def held_map(system: System, controller: Controller, repeat: int) -> Callable[[Tensor], Tensor]:
+    """``x -> F(x)``, the held closed loop on one state (S,), float64 and differentiable (for
+    its autodiff Jacobian: the linear check here, Newton's method in
+    :func:`leoc.control.find_equilibrium`)."""
+
+    def closed(x: Tensor) -> Tensor:
+        return _closed_loop(system, controller, repeat, x.unsqueeze(0))[0][0]
+
+    return closed
+
+
 def _linear_check(
     system: System, P: np.ndarray, controller: Controller, repeat: int, centre: np.ndarray
 ) -> tuple[bool, float]:
     """Largest eigenvalue of ``A_cl^T P A_cl - P``, A_cl the autodiff Jacobian of the held
     closed loop at ``centre`` (a, or a controller's own equilibrium); negative definite ->
     True."""
-
-    def closed(x: Tensor) -> Tensor:
-        return _closed_loop(system, controller, repeat, x.unsqueeze(0))[0][0]
-
     point = torch.as_tensor(centre, dtype=DTYPE)
+    closed = held_map(system, controller, repeat)
     jacobian = torch.autograd.functional.jacobian(closed, point).numpy()
     change = jacobian.T @ P @ jacobian - P
     largest = float(np.max(np.linalg.eigvalsh(0.5 * (change + change.T))))

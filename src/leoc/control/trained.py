@@ -50,9 +50,9 @@ from leoc.control.proof import MAX_BOXES, MAX_SECONDS
 from leoc.control.roa import (
     DEFAULT_SAMPLES,
     LyapunovCertificate,
-    _closed_loop,
     _deviation,
     certify_level,
+    held_map,
 )
 from leoc.names import LYAPUNOV_CHOICES
 from leoc.systems.base import DTYPE, System, check_repeat
@@ -112,15 +112,6 @@ class Equilibrium(NamedTuple):
         return _deviation(point, system.operating_state, system.angle_indices)[0].numpy()
 
 
-def _loop_map(system: System, controller: Any, repeat: int):
-    """``x -> F(x)`` on one state (S,), float64, differentiable."""
-
-    def closed(x: torch.Tensor) -> torch.Tensor:
-        return _closed_loop(system, controller, repeat, x.unsqueeze(0))[0][0]
-
-    return closed
-
-
 def _residual(system: System, closed, x: np.ndarray) -> np.ndarray:
     """``F(x) - x`` (S,), angles wrapped."""
     point = torch.as_tensor(x, dtype=DTYPE)
@@ -166,7 +157,7 @@ def find_equilibrium(
     repeat = check_repeat(
         getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
     )
-    closed = _loop_map(system, controller, repeat)
+    closed = held_map(system, controller, repeat)
     operating = np.asarray(system.operating_state, dtype=float)
     x, iterations = operating.copy(), 0
     residual = _residual(system, closed, x)
