@@ -103,6 +103,13 @@ def _add_proof_arguments(roa: argparse.ArgumentParser) -> None:
         help="with --prove: wall-clock budget of each controller's box search (default 480; "
         "past it the level proved so far is reported, limited by budget)",
     )
+    roa.add_argument(
+        "--device",
+        default="cpu",
+        help="with --prove: where the boxes are evaluated, cpu (default) or cuda[:N] (a GPU "
+        "through torch's CUDA build; the equilibrium search and the sampled estimates stay on "
+        "the CPU)",
+    )
 
 
 ROA_SLICES = {"pendulum": (0, 1), "cartpole": (2, 3), "mountaincar": (0, 1)}
@@ -439,8 +446,23 @@ def _prove_controllers(args: argparse.Namespace, system, certified: _Certified, 
             samples=args.samples,
             seed=args.seed,
             max_seconds=args.proof_seconds,
+            device=args.device,
         )
     return proofs
+
+
+def _check_device(args: argparse.Namespace) -> None:
+    """``--device``: a usable device, and only with ``--prove`` (one-line errors)."""
+    if args.device == "cpu":
+        return
+    if not args.prove:
+        raise ValueError(f"--device: expected only with --prove, found --device {args.device}")
+    from leoc.control.proof import check_device
+
+    try:
+        check_device(args.device)
+    except ValueError as error:
+        raise ValueError(f"--{error}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -455,6 +477,7 @@ def run(args: argparse.Namespace) -> int:
             "--prove: expected --controller RUN_DIR ... (the LQR's own region is always proved), "
             "found none"
         )
+    _check_device(args)
     system = roa_plant(args)
     runs = {spec: load_controller(spec, args.system) for spec in args.controller or []}
     lqr = certified_lqr_choice(args, runs)

@@ -50,6 +50,10 @@ documented accuracy). The rules for ``exp``, ``tanh``, ``atan2`` and ``pow`` all
 call a further ``LIBM_ERROR`` (four ulps, above the measured maximum errors of glibc's double
 functions, Zimmermann 2021) and evaluate it at the ends of the enclosure rounded outward
 (``nextafter``), which matters for ``exp``, whose relative condition number is :math:`|x|`.
+Off the CPU (CUDA: the NVIDIA CUDA C++ Programming Guide's table of double-precision
+functions documents 2 ulps for ``sin``, ``cos``, ``atan2`` and ``pow``, 1 for ``exp`` and
+``tanh``) ``sin`` and ``cos`` get the same further ``LIBM_ERROR``; the other rules' four ulps
+already cover those bounds.
 Matrix products and sums of :math:`n` terms add the standard bound :math:`\gamma_n |x|\,|M|`
 (:math:`\gamma_n |x|` for sums) with :math:`\gamma_n = n u / (1 - n u)` (Higham 2002, sec.
 3.1 and 3.5; any order of summation, blocked or pairwise), and divide the accumulated radius by
@@ -433,9 +437,12 @@ def _cos(x: Jet) -> Jet:
 
 
 def _sin_cos_rad(same: Tensor, other: Tensor, rad: Tensor) -> Tensor:
-    """Radius of sin (or cos) over m +/- r by the addition theorem (module docstring)."""
+    """Radius of sin (or cos) over m +/- r by the addition theorem (module docstring); off the
+    CPU each of the two libm values gets a further ``LIBM_ERROR``."""
     half_square = torch.clamp(0.5 * rad**2, max=2.0)
     spread = same.abs() * half_square + other.abs() * torch.clamp(rad, max=1.0)
+    if same.device.type != "cpu":
+        spread = spread + LIBM_ERROR * (same.abs() + other.abs() * torch.clamp(rad, max=1.0))
     return _widen(same, spread)
 
 

@@ -58,6 +58,13 @@ Floating point: the interval evaluator rounds outward (:mod:`leoc.control.interv
 few dense operations on S x S matrices of the bound (products, ``eigvalsh``) get a relative
 slack ``BOUND_SLACK`` of their magnitudes, many orders above their rounding errors.
 
+**Device.** The search runs on the CPU by default, or on an accelerator (``device="cuda"``):
+the proof's tensors are made there and a controller that is a ``torch.nn.Module`` is copied
+there (the caller's stays where it is); the system's step must be plain torch on its inputs,
+as every leoc system is. The proved level does not depend on the device beyond the libm
+allowance of :mod:`leoc.control.intervals`, which widens ``sin`` and ``cos`` off the CPU (CUDA
+documents 2 ulps for them, glibc 1); the order of the box search does not change.
+
 References
 ----------
 H. K. Khalil, *Nonlinear Systems*, 3rd ed., Prentice Hall, 2002.
@@ -67,10 +74,11 @@ sec. 6.1 (mean-value form).
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -79,7 +87,7 @@ from torch import Tensor
 from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet
 from leoc.systems.base import DTYPE, System
 
-__all__ = ["LevelProof", "prove_level"]
+__all__ = ["LevelProof", "check_device", "prove_level"]
 
 Controller = Callable[[Tensor], Tensor]
 
@@ -116,6 +124,43 @@ NO_BALL = (
 )
 STATUS_PROVED = "proved"
 STATUS_NOT_PROVED = "not proved"
+DEVICE_TYPES = ("cpu", "cuda")
+"""Devices a proof runs on: the CPU, or an NVIDIA GPU through torch's CUDA build."""
+
+
+def check_device(device: Any) -> torch.device:
+    """``device`` (``"cpu"``, ``"cuda"``, ``"cuda:1"``, a :class:`torch.device`) as a torch device
+    a proof can run on here.
+
+    Raises
+    ------
+    ValueError
+        Not a device name, a kind other than :data:`DEVICE_TYPES`, or CUDA without a usable GPU.
+    """
+    try:
+        resolved = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(
+            f"device: expected one of {DEVICE_TYPES} (optionally 'cuda:N'), found {device!r}"
+        ) from None
+    if resolved.type not in DEVICE_TYPES:
+        raise ValueError(f"device: expected one of {DEVICE_TYPES}, found {device!r}")
+    if resolved.type == "cuda":
+        available = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if (resolved.index or 0) >= available:
+            raise ValueError(
+                f"device: expected an available GPU, found {device!r} ({available} CUDA "
+                f"device(s) usable by this torch build)"
+            )
+    return resolved
+
+
+def _on_device(controller: Controller, device: torch.device) -> Controller:
+    """``controller`` with its tensors on ``device``: a copy of a module moved there, else
+    itself (a plain callable must follow its inputs' device)."""
+    if device.type == "cpu" or not isinstance(controller, torch.nn.Module):
+        return controller
+    return copy.deepcopy(controller).to(device)
 
 
 class LevelProof(NamedTuple):
@@ -484,6 +529,7 @@ def prove_level(
     max_seconds: float = MAX_SECONDS,
     equilibrium: np.ndarray | None = None,
     batch: int = BATCH,
+    device: Any = "cpu",
 ) -> LevelProof:
     r"""Prove the decrease of :math:`V = |L^\top z|^2` on the largest level set it can, up to
     ``target`` (module docstring).
@@ -513,6 +559,8 @@ def prove_level(
     batch : int
         Boxes per batched call; the deadline is checked between them (the level does not
         depend on it).
+    device : str or torch.device
+        Where the boxes are evaluated (module docstring, **Device**; :func:`check_device`).
 
     Returns
     -------
@@ -524,8 +572,10 @@ def prove_level(
     if not 0.0 < fine < 1.0:
         raise ValueError(f"resolution: expected a number in (0, 1), found {resolution!r}")
     budget = _Budget(max_boxes, started + max_seconds, int(batch))
-    frame = _frame(system, P, equilibrium)
-    outcome = _prove(system, frame, controller, repeat, target, fine, budget)
+    place = check_device(device)
+    with torch.device(place):
+        frame = _frame(system, P, equilibrium)
+        outcome = _prove(system, frame, _on_device(controller, place), repeat, target, fine, budget)
     return _level_proof(outcome, target, fine, time.perf_counter() - started)
 
 

@@ -46,7 +46,7 @@ import numpy as np
 import scipy.linalg
 import torch
 
-from leoc.control.proof import MAX_BOXES, MAX_SECONDS
+from leoc.control.proof import MAX_BOXES, MAX_SECONDS, check_device
 from leoc.control.roa import (
     DEFAULT_SAMPLES,
     LyapunovCertificate,
@@ -75,6 +75,8 @@ CONTROLLER_BATCH = 512
 """Boxes per batched call of a controller's proof: a 400x300 actor on interval jets takes
 seconds per batch on 2 cores, so the wall-clock budget is checked often (the LQR's own proof
 keeps :data:`leoc.control.proof.BATCH`)."""
+ACCELERATOR_BATCH = 16_384
+"""Boxes per batched call on a GPU, which needs large batches to be busy."""
 STABLE_RADIUS = 1.0
 """The own-linearisation V needs the spectral radius of J below this."""
 
@@ -301,6 +303,11 @@ def _best(candidates: dict[str, LyapunovCertificate]) -> str:
     return names[int(np.argmax(volumes))] if max(volumes) > -math.inf else names[0]
 
 
+def _batch(device: Any) -> int:
+    """Boxes per batched call on ``device`` (checked)."""
+    return CONTROLLER_BATCH if check_device(device).type == "cpu" else ACCELERATOR_BATCH
+
+
 def certify_controller(
     system: System,
     controller: Any,
@@ -312,6 +319,7 @@ def certify_controller(
     seed: int = 0,
     max_boxes: int = MAX_BOXES,
     max_seconds: float = MAX_SECONDS,
+    device: Any = "cpu",
 ) -> ControllerCertificate:
     """Prove a region of attraction of ``controller``'s own closed loop (module docstring).
 
@@ -329,15 +337,16 @@ def certify_controller(
     lyapunov : {"best", "lqr", "own"}
     samples, seed :
         :func:`~leoc.control.certify_level`'s sampled estimate (the proof's target).
-    max_boxes : int
-        Box budget of each candidate's proof.
-    max_seconds : float
-        Wall-clock budget of the box searches, shared equally by the candidates.
+    max_boxes, max_seconds, device :
+        Box budget of each candidate's proof; wall-clock budget of the box searches, shared
+        equally by the candidates; where the boxes are evaluated
+        (:func:`~leoc.control.proof.prove_level`; the rest runs on the CPU).
     """
     started = time.perf_counter()
     repeat = check_repeat(
         getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
     )
+    proof = {"max_boxes": max_boxes, "batch": _batch(device), "device": device}
     equilibrium = find_equilibrium(system, controller, repeat)
     matrices = _candidate_matrices(system, equilibrium, design, lyapunov)
     candidates = {
@@ -348,10 +357,9 @@ def certify_controller(
             action_repeat=repeat,
             samples=samples,
             seed=seed,
-            max_boxes=max_boxes,
             max_seconds=max_seconds / len(matrices),
             equilibrium=equilibrium.state,
-            batch=CONTROLLER_BATCH,
+            **proof,
         )
         for name, matrix in matrices.items()
     }

@@ -75,6 +75,7 @@ def proved_region(
     samples: int = DEFAULT_SAMPLES,
     seed: int = 0,
     max_seconds: float = MAX_SECONDS,
+    device: Any = "cpu",
 ) -> dict[str, Any]:
     """The proved region of ``controller`` beside its LQR's (module docstring), JSON-friendly.
 
@@ -90,15 +91,15 @@ def proved_region(
         The LQR's certificate (the reference of the ratios).
     box : (S,) half-widths
         The box around a the shares are measured on.
-    lyapunov, samples, seed, max_seconds :
+    lyapunov, samples, seed, max_seconds, device :
         :func:`leoc.control.certify_controller`'s options; ``seed`` also seeds the box shares.
 
     Returns
     -------
     dict
         :meth:`~leoc.control.ControllerCertificate.summary` with the comparison
-        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``) and
-        ``seconds``.
+        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``),
+        ``seconds`` and the ``device`` of the box search.
     """
     proved = certify_controller(
         system,
@@ -108,12 +109,14 @@ def proved_region(
         samples=samples,
         seed=seed,
         max_seconds=max_seconds,
+        device=device,
     )
     half = np.asarray(box, dtype=float)
     return {
         **proved.summary(system),
         **_comparison(system, proved, lqr, half, seed),
         "seconds": proved.seconds,
+        "device": str(device),
     }
 
 
