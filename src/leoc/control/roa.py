@@ -587,7 +587,8 @@ class LinearClosedLoop:
         self.action_repeat = check_repeat(design.action_repeat)
 
     def __call__(self, obs: Tensor) -> Tensor:
-        return obs @ self.W.T + self.b
+        # On the device of its input (a proof may run on a GPU: leoc.control.proof).
+        return obs @ self.W.to(obs.device).T + self.b.to(obs.device)
 
 
 def lqr_closed_loop(design: Any) -> LinearClosedLoop:

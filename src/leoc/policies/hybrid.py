@@ -423,7 +423,9 @@ def saturated_lqr(
     def saturated_linear(obs: Tensor) -> Tensor:
         # G written out (not a LinearController) so that the certificate's interval proof can
         # evaluate it on interval enclosures (leoc.control.intervals).
-        return apply_saturation(obs @ gain.T + bias, limit_t, saturation)
+        # on the device of its input (a proof may run on a GPU: leoc.control.proof)
+        linear = obs @ gain.to(obs.device).T + bias.to(obs.device)
+        return apply_saturation(linear, limit_t, saturation)
 
     return with_control_period(_Callable(saturated_linear), design.action_repeat)
 
