@@ -85,6 +85,7 @@ from torch import Tensor
 from leoc.control.proof import MAX_BOXES, LevelProof, prove_level
 from leoc.io import write_bytes_atomic
 from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
+from leoc.systems.rollout import control_period
 
 __all__ = [
     "LevelProof",
@@ -241,9 +242,11 @@ def _deviation(states: Tensor, operating_state: np.ndarray, angles: Sequence[int
     return deviation
 
 
-def state_deviation(system: System, states: Tensor) -> Tensor:
-    """``z = x - a`` (B, S) of states (B, S), every angle entry wrapped to [-pi, pi)."""
-    return _deviation(states, system.operating_state, system.angle_indices)
+def state_deviation(system: System, states: Tensor, centre: Any = None) -> Tensor:
+    """``z = x - a`` (B, S) of states (B, S), every angle entry wrapped to [-pi, pi); from
+    ``centre`` (S,) instead of a where given (a controller's own equilibrium)."""
+    origin = system.operating_state if centre is None else centre
+    return _deviation(states, origin, system.angle_indices)
 
 
 def lyapunov_value(P: Tensor, deviation: Tensor) -> Tensor:
@@ -449,9 +452,7 @@ def _check_options(
 ) -> int:
     """The control period of :func:`certify_level` (its ``action_repeat``, default the
     controller's or 1) once its options are checked; a ValueError names a wrong one."""
-    repeat = check_repeat(
-        getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
-    )
+    repeat = control_period(controller, action_repeat)
     for name, value in (("samples", samples), ("seed", seed)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
             raise ValueError(f"{name}: expected a non-negative integer, found {value!r}")

@@ -50,12 +50,13 @@ from leoc.control.proof import MAX_BOXES, MAX_SECONDS, check_device
 from leoc.control.roa import (
     DEFAULT_SAMPLES,
     LyapunovCertificate,
-    _deviation,
     certify_level,
     held_map,
+    state_deviation,
 )
 from leoc.names import LYAPUNOV_CHOICES
-from leoc.systems.base import DTYPE, System, check_repeat
+from leoc.systems.base import DTYPE, System
+from leoc.systems.rollout import control_period
 
 __all__ = [
     "ControllerCertificate",
@@ -113,7 +114,7 @@ class Equilibrium(NamedTuple):
     def offset(self, system: System) -> np.ndarray:
         """``x* - a`` (S,), angles wrapped: the steady-state error of the controller."""
         point = torch.as_tensor(self.state, dtype=DTYPE).unsqueeze(0)
-        return _deviation(point, system.operating_state, system.angle_indices)[0].numpy()
+        return state_deviation(system, point)[0].numpy()
 
 
 def _residual(system: System, closed, x: np.ndarray) -> np.ndarray:
@@ -121,7 +122,7 @@ def _residual(system: System, closed, x: np.ndarray) -> np.ndarray:
     point = torch.as_tensor(x, dtype=DTYPE)
     with torch.no_grad():
         following = closed(point).unsqueeze(0)
-    return _deviation(following, x, system.angle_indices)[0].numpy()
+    return state_deviation(system, following, x)[0].numpy()
 
 
 def _scaled_size(system: System, residual: np.ndarray) -> float:
@@ -158,9 +159,7 @@ def find_equilibrium(
     action_repeat : int, optional
         Control period (default the controller's ``action_repeat``, else 1).
     """
-    repeat = check_repeat(
-        getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
-    )
+    repeat = control_period(controller, action_repeat)
     closed = held_map(system, controller, repeat)
     operating = np.asarray(system.operating_state, dtype=float)
     x, iterations = operating.copy(), 0
@@ -180,9 +179,7 @@ def _equilibrium(
     """The :class:`Equilibrium` of a Newton search ending at ``x`` (a if not accepted)."""
     size = _scaled_size(system, residual)
     region = np.asarray(system.operating_region, dtype=float)
-    offset = _deviation(
-        torch.as_tensor(x, dtype=DTYPE).unsqueeze(0), operating, system.angle_indices
-    )[0].numpy()
+    offset = state_deviation(system, torch.as_tensor(x, dtype=DTYPE).unsqueeze(0))[0].numpy()
     found = size <= EQUILIBRIUM_TOL and bool(np.all(np.abs(offset) <= region))
     if not found:
         x = operating.copy()
@@ -345,9 +342,7 @@ def certify_controller(
         (:func:`~leoc.control.proof.prove_level`; the rest runs on the CPU).
     """
     started = time.perf_counter()
-    repeat = check_repeat(
-        getattr(controller, "action_repeat", 1) if action_repeat is None else action_repeat
-    )
+    repeat = control_period(controller, action_repeat)
     proof = {"max_boxes": max_boxes, "batch": _batch(device), "device": device}
     equilibrium = find_equilibrium(system, controller, repeat)
     matrices = _candidate_matrices(system, equilibrium, design, lyapunov)

@@ -120,9 +120,12 @@ class BatchTrajectory(NamedTuple):
         )
 
 
-def control_period(controller: Any) -> int:
-    """Simulator steps per decision of ``controller``: its ``action_repeat``, default 1."""
-    return check_repeat(getattr(controller, "action_repeat", 1))
+def control_period(controller: Any, action_repeat: Any = None) -> int:
+    """Simulator steps per decision of ``controller``: ``action_repeat`` where given, else its
+    own ``action_repeat``, default 1 (checked: a positive integer)."""
+    if action_repeat is None:
+        action_repeat = getattr(controller, "action_repeat", 1)
+    return check_repeat(action_repeat)
 
 
 def relevance_function(controller: Any) -> Callable[[Tensor], Tensor] | None:
