@@ -49,9 +49,6 @@ CONTROLLER_LABELS = {
 PROOF_SECONDS = 480.0
 """The paper profile's proof budget [s]: ``leoc roa --proof-seconds``' default
 (:data:`leoc.control.proof.MAX_SECONDS`, not imported here: this module imports no torch)."""
-PROOF_BOXES = 3_000_000
-"""The paper profile's box budget per candidate V: the proof engine's default
-(:data:`leoc.control.proof.MAX_BOXES`)."""
 
 
 def _check_count(value: Any, name: str, least: int) -> None:
@@ -80,16 +77,11 @@ class EvaluationBudget:
         (:func:`leoc.evaluation.robustness_protocol.run_protocol`'s ``levels``).
     protocol_episodes : int
         Episodes per level and start kind of the robustness protocol, >= 1.
-    proof_boxes : int
-        Box budget of each candidate V's search (``max_boxes``): unlike the wall-clock budget
-        it gives the same level on every machine and every rerun, so the small profiles bound
-        their proofs by boxes and keep the seconds as a safety valve.
     """
 
     proof_seconds: float = PROOF_SECONDS
     protocol_levels: int = ROBUSTNESS_LEVELS
     protocol_episodes: int = ROBUSTNESS_EPISODES
-    proof_boxes: int = PROOF_BOXES
 
     def __post_init__(self) -> None:
         seconds = self.proof_seconds
@@ -97,7 +89,6 @@ class EvaluationBudget:
             raise ValueError(
                 f"EvaluationBudget.proof_seconds: expected a positive number, found {seconds!r}"
             )
-        _check_count(self.proof_boxes, "proof_boxes", 1)
         _check_count(self.protocol_levels, "protocol_levels", 2)
         _check_count(self.protocol_episodes, "protocol_episodes", 1)
 
@@ -415,9 +406,7 @@ PROFILES: dict[str, Profile] = {
             "smoke profile: a tiny end-to-end check of the pipeline (a few hundred steps of "
             "training); its controllers are not trained and its numbers mean nothing"
         ),
-        evaluation=EvaluationBudget(
-            proof_seconds=60.0, proof_boxes=2_000, protocol_levels=3, protocol_episodes=1
-        ),
+        evaluation=EvaluationBudget(proof_seconds=2.0, protocol_levels=3, protocol_episodes=1),
     ),
     "paper": Profile(
         name="paper",
