@@ -6,14 +6,7 @@ import dataclasses
 from typing import Any, NamedTuple
 
 from leoc.learners import ControllerSpec, get_learner
-from leoc.names import (
-    CONTROLLERS,
-    DEFAULT_CONTROLLERS,
-    ROBUSTNESS_EPISODES,
-    ROBUSTNESS_LEVELS,
-    controller_framework,
-    parse_controller,
-)
+from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework, parse_controller
 from leoc.systems import SYSTEM_NAMES, system_names
 
 # Every controller, in report order, and the default set (the paper's controllers and the two
@@ -46,53 +39,6 @@ CONTROLLER_LABELS = {
 }
 
 
-PROOF_SECONDS = 480.0
-"""The paper profile's proof budget [s]: ``leoc roa --proof-seconds``' default
-(:data:`leoc.control.proof.MAX_SECONDS`, not imported here: this module imports no torch)."""
-
-
-def _check_count(value: Any, name: str, least: int) -> None:
-    """Raise naming ``name`` unless ``value`` is an integer >= ``least``."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise ValueError(
-            f"EvaluationBudget.{name}: expected an integer >= {least}, found {value!r}"
-        )
-
-
-@dataclasses.dataclass(frozen=True)
-class EvaluationBudget:
-    """The sizes of a profile's evaluations that cost most: the trained controllers' own proved
-    regions and the robustness protocol (``evaluation.json``'s ``proved_region`` and
-    ``robustness_protocol``, :mod:`leoc.experiments.evaluators`). The defaults are the paper
-    profile's: ``leoc roa --prove``'s and ``leoc robustness``' own defaults.
-
-    Attributes
-    ----------
-    proof_seconds : float
-        Wall-clock budget [s] of one controller's box searches
-        (:func:`leoc.control.certify_controller`'s ``max_seconds``, shared by its candidate V);
-        past it the level proved so far is kept, limited by ``budget``.
-    protocol_levels : int
-        Levels per category of the robustness protocol, >= 2
-        (:func:`leoc.evaluation.robustness_protocol.run_protocol`'s ``levels``).
-    protocol_episodes : int
-        Episodes per level and start kind of the robustness protocol, >= 1.
-    """
-
-    proof_seconds: float = PROOF_SECONDS
-    protocol_levels: int = ROBUSTNESS_LEVELS
-    protocol_episodes: int = ROBUSTNESS_EPISODES
-
-    def __post_init__(self) -> None:
-        seconds = self.proof_seconds
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not seconds > 0:
-            raise ValueError(
-                f"EvaluationBudget.proof_seconds: expected a positive number, found {seconds!r}"
-            )
-        _check_count(self.protocol_levels, "protocol_levels", 2)
-        _check_count(self.protocol_episodes, "protocol_episodes", 1)
-
-
 @dataclasses.dataclass(frozen=True)
 class Profile:
     """Budgets of one ``leoc reproduce`` profile.
@@ -118,17 +64,6 @@ class Profile:
     variant_run_seconds : dict variant -> dict ``"system/controller"`` -> float
         The same measured under another variant (``authors``), where it costs otherwise; see
         :meth:`for_variant`.
-    evaluation : EvaluationBudget
-        The budgets of the proved regions and the robustness protocol.
-    evaluation_seconds : dict ``"system/learner"`` -> float
-        Expected wall time [s] that :attr:`evaluation`'s proof and protocol add to one run of
-        that system and learner (``linear`` for the LQRs), beyond :attr:`run_seconds`, which
-        were measured before those evaluations existed; see :meth:`expected_seconds`.
-    training_perturbations : dict
-        The perturbations every trained run of the profile is trained under
-        (:meth:`leoc.systems.TrainingPerturbations.as_dict`: fixed levels, randomised maxima);
-        empty (every built-in profile): the nominal plant. ``leoc train --perturb`` and
-        ``--randomise`` replace it.
     """
 
     name: str
@@ -142,9 +77,6 @@ class Profile:
     description: str = ""
     run_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
     variant_run_seconds: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
-    evaluation: EvaluationBudget = EvaluationBudget()
-    evaluation_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
-    training_perturbations: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def for_variant(self, variant: str) -> Profile:
         """This profile costed as it runs under ``variant`` (a name of
@@ -156,16 +88,9 @@ class Profile:
         return dataclasses.replace(self, run_seconds={**self.run_seconds, **measured})
 
     def expected_seconds(self, spec: RunSpec) -> float:
-        """Expected wall time of ``spec`` on one worker: :meth:`training_seconds` plus
-        :meth:`evaluation_cost` (see :attr:`cost_model` for a profile with no measurements at
-        all)."""
-        return self.training_seconds(spec) + self.evaluation_cost(spec)
-
-    def training_seconds(self, spec: RunSpec) -> float:
-        """Expected wall time of ``spec``'s training and of the evaluations the measured
-        studies ran (all but the proof and the protocol): its kind's :attr:`run_seconds`, else
-        the mean of the measured runs of its controller on other systems, else the framework's
-        fallback."""
+        """Expected wall time of ``spec`` on one worker: its measured kind, else the mean of
+        the measured runs of its controller on other systems, else the framework's fallback
+        (see :attr:`cost_model` for a profile with no measurements at all)."""
         known = self.run_seconds.get(f"{spec.system}/{spec.controller}")
         if known is not None:
             return known
@@ -173,15 +98,6 @@ class Profile:
         if same:
             return sum(same) / len(same)
         return FALLBACK_RUN_SECONDS[spec.framework]
-
-    def evaluation_cost(self, spec: RunSpec) -> float:
-        """What the proof and the protocol add to ``spec`` [s]: :attr:`evaluation_seconds` of
-        its system and learner, else the mean of that learner's on other systems, else 0."""
-        known = self.evaluation_seconds.get(f"{spec.system}/{spec.framework}")
-        if known is not None:
-            return known
-        same = [v for k, v in self.evaluation_seconds.items() if k.endswith(f"/{spec.framework}")]
-        return sum(same) / len(same) if same else 0.0
 
     @property
     def cost_model(self):
@@ -206,8 +122,7 @@ class Profile:
         assembly ``leoc reproduce`` and ``leoc train`` share. The learner's ``settings_of``
         says whose settings it takes (TD3 DDPG's); its ``budget_unit`` which budget (PILCO's
         iterations, or the others' environment steps). The hybrid itself is
-        ``controller.hybrid``, which these fields may refine (the authors' Lambda). A profile's
-        :attr:`training_perturbations` is added when it has any."""
+        ``controller.hybrid``, which these fields may refine (the authors' Lambda)."""
         learner = get_learner(controller.learner)
         iterations = learner.budget_unit == "iterations"
         if budget is None:
@@ -219,8 +134,6 @@ class Profile:
         # the relevance design is the controller's own (its name says which): a variant's or a
         # profile's settings refine the hybrid's parameters, never switch its design
         settings.pop("relevance", None)
-        if self.training_perturbations:
-            settings["training_perturbations"] = dict(self.training_perturbations)
         return settings
 
 
@@ -326,45 +239,6 @@ QUICK_RUN_SECONDS = {
     "mountaincar/pilco_hybrid": 44.0,
     "mountaincar/pilco_hybrid_roa": 44.0,
 }
-# What the proof and the protocol add to a run [s] (Profile.evaluation_seconds): the tables
-# above were measured before they existed. The LQR's protocol at the paper's budget on one core
-# of the same machine (docs/user_guide/robustness_protocol.md's table); a learned controller's
-# protocol costs a factor more per episode (measured side by side on one loaded core, CPU time:
-# a DDPG actor 2.0x the LQR, a PILCO RBF policy at its period 1.4x; SAC's actor is DDPG's MLP);
-# the quick budget's 5 levels x 2 episodes run 0.3x the paper's settings (CPU time, measured).
-# A trained controller's proof: 25 s on the 2-D systems (benchmarks/bench_controller_proof.py:
-# trained pendulum controllers 18-25 s with both V; a mountain-car hybrid 10 s on a loaded
-# core), the cart-pole's its whole budget (its LQR alone takes 168 s, docs/user_guide/roa.md).
-PROTOCOL_LQR_SECONDS = {"pendulum": 15.0, "cartpole": 16.0, "mountaincar": 31.0}
-"""The LQR's robustness protocol at the paper's budget [s] per system (one core)."""
-PROTOCOL_LEARNER_FACTOR = {"linear": 1.0, "ddpg": 2.0, "sac": 2.0, "pilco": 1.4}
-"""A learner's controller's protocol time over the LQR's (measured side by side)."""
-QUICK_PROTOCOL_SHARE = 0.3
-"""The quick budget's protocol time over the paper's (measured)."""
-TRAINED_PROOF_SECONDS = {"pendulum": 25.0, "cartpole": PROOF_SECONDS, "mountaincar": 25.0}
-"""A trained controller's proof [s] per system, without a budget cut (the cart-pole's: the
-paper's whole budget)."""
-
-
-def evaluation_costs(protocol_share: float, proof_seconds: float) -> dict[str, float]:
-    """Expected seconds the proof and the protocol add to a run, by ``"system/learner"``:
-    the protocol at ``protocol_share`` of the paper's settings, and a trained controller's
-    proof cut at ``proof_seconds`` (the tables and their sources are in the comment above)."""
-    costs = {}
-    for system, protocol in PROTOCOL_LQR_SECONDS.items():
-        for learner, factor in PROTOCOL_LEARNER_FACTOR.items():
-            proof = (
-                0.0 if learner == "linear" else min(TRAINED_PROOF_SECONDS[system], proof_seconds)
-            )
-            costs[f"{system}/{learner}"] = round(protocol * factor * protocol_share + proof, 1)
-    return costs
-
-
-QUICK_EVALUATION_SECONDS = evaluation_costs(QUICK_PROTOCOL_SHARE, 30.0)
-"""The quick profile's :attr:`Profile.evaluation_seconds` (30 s proofs, 5 levels x 2 episodes)."""
-PAPER_EVALUATION_SECONDS = evaluation_costs(1.0, PROOF_SECONDS)
-"""The paper profile's :attr:`Profile.evaluation_seconds` (480 s proofs, 21 levels x 5
-episodes)."""
 
 #: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
 PROFILES: dict[str, Profile] = {
@@ -379,8 +253,6 @@ PROFILES: dict[str, Profile] = {
             "paper's budgets); numbers are indicative, not a reproduction of the paper's"
         ),
         run_seconds=QUICK_RUN_SECONDS,
-        evaluation=EvaluationBudget(proof_seconds=30.0, protocol_levels=5, protocol_episodes=2),
-        evaluation_seconds=QUICK_EVALUATION_SECONDS,
     ),
     "smoke": Profile(
         name="smoke",
@@ -406,7 +278,6 @@ PROFILES: dict[str, Profile] = {
             "smoke profile: a tiny end-to-end check of the pipeline (a few hundred steps of "
             "training); its controllers are not trained and its numbers mean nothing"
         ),
-        evaluation=EvaluationBudget(proof_seconds=2.0, protocol_levels=3, protocol_episodes=1),
     ),
     "paper": Profile(
         name="paper",
@@ -420,8 +291,6 @@ PROFILES: dict[str, Profile] = {
         ),
         run_seconds=PAPER_RUN_SECONDS,
         variant_run_seconds={"authors": AUTHORS_RUN_SECONDS},
-        evaluation=EvaluationBudget(),
-        evaluation_seconds=PAPER_EVALUATION_SECONDS,
     ),
 }
 PROFILE_NAMES = tuple(PROFILES)

@@ -184,7 +184,7 @@ def execute_run(
         controller, curve = train_controller(spec, profile, run_dir / "train", variant, system)
         trained = time.perf_counter() - started
         print(f"trained in {trained:.1f} s; evaluating", flush=True)
-        evaluation = evaluate_controller(spec, controller, variant, system, profile.evaluation)
+        evaluation = evaluate_controller(spec, controller, variant, system)
     evaluation.update(
         spec=spec._asdict(),
         variant=variant.name,
@@ -307,7 +307,6 @@ def _study_meta(
             "ddpg_steps": profile.ddpg_steps,
             "pilco_overrides": profile.pilco_overrides,
             "ddpg_overrides": profile.ddpg_overrides,
-            "evaluation": dataclasses.asdict(profile.evaluation),
         },
         "systems": list(systems),
         "controllers": list(controllers),

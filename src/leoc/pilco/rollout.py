@@ -9,13 +9,11 @@ episode is therefore ``ceil(200 / repeat)`` decisions; only complete held decisi
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from leoc.systems.base import System
-from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import Controller, Trajectory, hold_step, rollout
 
 
@@ -46,21 +44,11 @@ class Rollout(NamedTuple):
 
 
 def run_rollout(
-    system: System,
-    controller: Controller,
-    start: np.ndarray,
-    steps: int,
-    repeat: int,
-    perturbations: Sequence[Perturbation] = (),
+    system: System, controller: Controller, start: np.ndarray, steps: int, repeat: int
 ) -> Rollout:
     """Run ``steps`` simulator steps from ``start`` with ``controller`` deciding every
-    ``repeat`` steps, and cut the episode into GP data (see the module docstring). With
-    ``perturbations`` the episode runs on that perturbed plant: the inputs are the observations
-    the controller saw (noisy ones with observation noise), the targets the plant's state
-    changes."""
-    trajectory = rollout(
-        system, controller, start, steps, action_repeat=repeat, perturbations=perturbations
-    )
+    ``repeat`` steps, and cut the episode into GP data (see the module docstring)."""
+    trajectory = rollout(system, controller, start, steps, action_repeat=repeat)
     decisions = trajectory.steps // repeat
     index = np.arange(decisions) * repeat
     observations = trajectory.observations[index]
