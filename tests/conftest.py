@@ -50,3 +50,11 @@ def single_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Modules holding a ``heavy`` test run first, each module's tests kept together and in
+    order (their module-scoped fixtures are set up once): a worker of ``pytest -n`` that meets a
+    minutes-long test at the end of the run finishes minutes after the others."""
+    heavy_modules = {item.module for item in items if item.get_closest_marker("heavy")}
+    items.sort(key=lambda item: item.module not in heavy_modules)

@@ -667,7 +667,7 @@ def test_physical_policy_names_the_call_for_a_model():
         physical_policy(model)
 
 
-@pytest.mark.slow
+@pytest.mark.extended
 def test_hybrid_ddpg_learns_to_hold_pendulum_on_most_seeds(tmp_path):
     """The paper's budget (10k steps) on three seeds: at least two reach and hold the operating
     point with a return above -600 (swing-up in a few seconds, then balanced); one seed's

@@ -477,7 +477,7 @@ def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
     assert np.max(np.abs(poles)) < 1.0
 
 
-@pytest.mark.slow
+@pytest.mark.extended
 @pytest.mark.xfail(
     strict=False,
     reason="PILCO's seed outcomes depend on the machine's floating point (issue 41): 3 of 3 on "

@@ -132,6 +132,7 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
     return _numbers(out)
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 @pytest.mark.parametrize(
     "signum",

@@ -328,6 +328,7 @@ def _simulate_json(system: str | None, run_folder: Path) -> dict:
     return json.loads(out.stdout)
 
 
+@pytest.mark.heavy
 def test_smoke_profile_end_to_end_on_the_pendulum(tmp_path) -> None:
     _smoke_end_to_end(tmp_path, ["pendulum"])
 

@@ -164,6 +164,7 @@ def smoke_study(tmp_path_factory):
     return out, path.read_text(), json.loads((out / "results.json").read_text())
 
 
+@pytest.mark.heavy
 def test_a_smoke_study_reports_the_lyapunov_hybrid_with_its_label(smoke_study):
     out, report, results = smoke_study
     label = "DDPG hybrid (Lyapunov relevance)"

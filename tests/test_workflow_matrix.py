@@ -12,8 +12,12 @@ the acrobot, which has no authors' linearisation; a linear reference, which has 
 file).
 
 The fast suite runs a pairwise cover of the three paper systems (every pair of learner, kind,
-system and variant appears in some case); the slow suite runs the rest of the product and the
-acrobot. The assertions are about values, not exit codes only: a run is simulated on the plant it
+system and variant appears in some case); the slow suite (CI) runs the acrobot and ``leoc
+reproduce`` on one system and variant; the extended suite (``pytest -m extended``, by hand:
+beyond CI's 45-minute budget) runs the rest of the product and ``reproduce`` on the other five
+system and variant pairs.
+
+The assertions are about values, not exit codes only: a run is simulated on the plant it
 was trained on (the variant whose rules it recorded), an ROA hybrid gives exactly its LQR's
 impulse response (r = 1 along it, by construction: a mismatched plant, period or LQR breaks
 it), a baseline does not, nor does a Lyapunov hybrid (r = 1 at the operating point only), a
@@ -98,7 +102,8 @@ PRODUCT = [
     for case in itertools.product(LEARNERS, KINDS, PAPER_SYSTEM_NAMES, VARIANT_NAMES)
     if case[0] in KIND_LEARNERS[case[1]]
 ]
-SLOW_CASES = [case for case in PRODUCT if case not in FAST_CASES] + ACROBOT_CASES
+#: The rest of the product, in the extended suite (about 20 minutes on 2 cores).
+EXTENDED_CASES = [case for case in PRODUCT if case not in FAST_CASES]
 
 
 def _case_id(case: tuple[str, str, str, str]) -> str:
@@ -238,13 +243,20 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
         torch.testing.assert_close(_actions(run, system), before, rtol=0.0, atol=0.0)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("case", FAST_CASES, ids=_case_id)
 def test_workflow(case, tmp_path, capsys) -> None:
     _check_workflow(case, tmp_path, capsys)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", SLOW_CASES, ids=_case_id)
+@pytest.mark.parametrize("case", ACROBOT_CASES, ids=_case_id)
+def test_workflow_on_the_acrobot(case, tmp_path, capsys) -> None:
+    _check_workflow(case, tmp_path, capsys)
+
+
+@pytest.mark.extended
+@pytest.mark.parametrize("case", EXTENDED_CASES, ids=_case_id)
 def test_workflow_rest_of_the_product(case, tmp_path, capsys) -> None:
     _check_workflow(case, tmp_path, capsys)
 
@@ -255,10 +267,11 @@ def test_the_pairwise_cover_covers_every_pair() -> None:
     for a, b in itertools.combinations(range(4), 2):
         seen = {(case[a], case[b]) for case in FAST_CASES}
         assert seen == {(case[a], case[b]) for case in PRODUCT}, (a, b)
-    assert set(FAST_CASES).isdisjoint(SLOW_CASES)
+    assert set(FAST_CASES).isdisjoint(EXTENDED_CASES)
     # 4 learners x 3 kinds and the three SB3 learners' Lyapunov hybrids, x 3 systems x 2 variants
-    assert len(set(FAST_CASES) | {c for c in SLOW_CASES if c[2] != "acrobot"}) == 90
-    # the Lyapunov hybrids split as the ROA hybrids do: one fast case per learner, the rest slow
+    assert len(set(FAST_CASES) | set(EXTENDED_CASES)) == 90
+    # the Lyapunov hybrids split as the ROA hybrids do: one fast case per learner, the rest
+    # extended
     for kind in ("hybrid_roa", "hybrid_lyapunov"):
         assert sorted(c[0] for c in FAST_CASES if c[1] == kind) == sorted(KIND_LEARNERS[kind])
     assert all(c[:2] != ("pilco", "hybrid_lyapunov") for c in PRODUCT)
@@ -339,11 +352,12 @@ def _check_reproduce(system: str, variant: str, tmp_path: Path, capsys) -> None:
     assert (out / "report.md").read_text().splitlines()[0] == report.splitlines()[0]
 
 
+@pytest.mark.slow
 def test_reproduce_workflow(tmp_path, capsys) -> None:
     _check_reproduce("mountaincar", "authors", tmp_path, capsys)
 
 
-@pytest.mark.slow
+@pytest.mark.extended
 @pytest.mark.parametrize(
     ("system", "variant"),
     [
