@@ -298,6 +298,7 @@ def test_reproduce_variants_side_by_side_in_appendix_d(tmp_path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.heavy
 def test_smoke_profile_runs_the_whole_pipeline_on_the_authors_variant(tmp_path) -> None:
     """Every controller of the paper on the cart-pole (the system where the authors' choices
     differ most) trains and evaluates under the authors' variant, with their settings recorded."""

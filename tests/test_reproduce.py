@@ -334,8 +334,8 @@ def test_smoke_profile_end_to_end_on_the_pendulum(tmp_path) -> None:
 
 
 @pytest.mark.slow
-def test_smoke_profile_end_to_end_on_all_systems(tmp_path) -> None:
-    _smoke_end_to_end(tmp_path, ["pendulum", "cartpole", "mountaincar"])
+def test_smoke_profile_end_to_end_on_the_other_systems(tmp_path) -> None:
+    _smoke_end_to_end(tmp_path, ["cartpole", "mountaincar"])
 
 
 def test_runs_are_queued_longest_first() -> None:
