@@ -255,6 +255,30 @@ def test_a_systems_draw_hook_and_frame_size_are_used() -> None:
     assert _centroid(_mask(left, rd.BODY_COLOUR))[1] < _centroid(_mask(right, rd.BODY_COLOUR))[1]
 
 
+def test_a_systems_draw_gets_cleared_axes_before_every_frame() -> None:
+    """The hook's axes are cleared before every frame, as documented: a frame depends on its
+    state only, not on the frames before it, even for a drawing that leaves its limits to
+    matplotlib's autoscaling and sets a title (which leoc's own drawings never do)."""
+    example = _load_example()
+
+    class AutoscaledCart(example.DampedCart):
+        frame_size = (300, 200)
+
+        def draw(self, ax, state):
+            ax.set_title(f"x = {state[0]:.1f}")
+            ax.plot([state[0] - 0.2, state[0] + 0.2], [0.0, 0.4], color=rd.BODY_COLOUR)
+
+    def frame(*states: float) -> np.ndarray:
+        env = LeocEnv(system=AutoscaledCart(), render_mode="rgb_array")
+        for x in states:
+            env.reset(options={"state": [x, 0.0]})
+            image = env.render()
+        env.close()
+        return image
+
+    np.testing.assert_array_equal(frame(-1.0, 1.0), frame(1.0))
+
+
 # --------------------------------------------------------------------------- animations
 class _ConstantHybrid:
     """Zero action and a constant relevance: what the gauge must show is known."""

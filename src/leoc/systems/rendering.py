@@ -98,11 +98,18 @@ Drawer = Callable[[Any, "Axes", np.ndarray], None]
 
 def _remove_drawing(ax: Axes) -> None:
     """Remove what the last frame drew on ``ax`` and restart its colour cycle: what
-    ``ax.clear()`` does for a drawing, without rebuilding the axes' ticks and spines (most of
-    a frame's time); each drawer sets its limits again."""
+    ``ax.clear()`` does for leoc's own drawings (lines, patches, texts; each sets its limits
+    again), without rebuilding the axes' ticks and spines (most of a frame's time). A system's
+    own ``draw`` may leave anything on its axes, so those are cleared in full."""
     for artist in (*ax.lines, *ax.patches, *ax.texts, *ax.collections, *ax.images):
         artist.remove()
     ax.set_prop_cycle(None)
+
+
+def _clear(ax: Axes) -> None:
+    """``ax.clear()`` with the axis lines hidden: the axes a system's own ``draw`` gets."""
+    ax.clear()
+    ax.set_axis_off()
 
 
 class Gauge(NamedTuple):
@@ -307,6 +314,10 @@ class Renderer:
         self.system = system
         self.mode = mode
         self.draw = drawer_for(system)
+        # leoc's drawings are removed artist by artist; a system's own draw gets cleared axes
+        self._reset_drawing = (
+            _clear if self.draw == getattr(system, "draw", None) else _remove_drawing
+        )
         width, height = frame_size(system)
         figsize = (width / DPI, height / DPI)
         if mode == "human":
@@ -333,8 +344,8 @@ class Renderer:
 
         Returns the ``(H, W, 3)`` uint8 frame in ``rgb_array`` mode, None in ``human`` mode.
         """
-        for ax in (self.overlay, self.axes):
-            _remove_drawing(ax)
+        _remove_drawing(self.overlay)
+        self._reset_drawing(self.axes)
         self.draw(self.axes, np.asarray(state, dtype=float))
         if caption:
             self.overlay.text(
