@@ -258,6 +258,13 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
             assert runs[hybrid]["relevance"] is not None
         assert runs["ddpg_baseline"]["relevance"] is None
         assert runs["ddpg_hybrid"]["curve"]["seconds"]
+        # the smoke profile's reduced grid (Profile.evaluation) reaches every run's evaluation
+        for run in runs.values():
+            scales = {(point["parameter"], point["scale"]) for point in run["robustness"]}
+            assert scales == {(p, s) for p in ("mass", "gravity") for s in (0.5, 1.0, 5.0)}
+        for hybrid in ("ddpg_hybrid", "pilco_hybrid"):
+            claims = runs[hybrid]["hybrid_claims"]
+            assert len(claims["impulse_sweep"]["hybrid"]) == 2, hybrid
         # a held PILCO controller: the same closed loop through reproduce, the library and
         # `leoc simulate` given the run folder reproduce prints
         run_folder = out / "runs" / system / "pilco_hybrid" / "seed0"
@@ -276,6 +283,7 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
     _damaged_run_folders_are_one_line_errors(out, systems[0])
     report = (out / "report.md").read_text()
     assert "## Summary" in report and "**What worked:**" in report
+    assert "g is scaled by 0.5x, 1x, 5x: per scale" in report
     # the selection each run recorded: DDPG's best_held, PILCO's final (the smoke profile's)
     assert runs["ddpg_hybrid"]["curve"]["model_selection"] == "best_held"
     assert runs["pilco_hybrid"]["curve"]["model_selection"] == "final"

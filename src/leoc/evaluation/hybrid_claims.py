@@ -22,6 +22,7 @@ from leoc.evaluation.basins import (
     shell_robustness,
 )
 from leoc.evaluation.impulse_sweep import (
+    SWEEP_POINTS,
     ImpulsePoint,
     impulse_sweep,
     lqr_failure_size,
@@ -72,6 +73,7 @@ def hybrid_claims(
     seed: int = 0,
     starts: int = BASIN_STARTS,
     shell_starts: int = SHELL_STARTS,
+    sweep_points: int = SWEEP_POINTS,
 ) -> dict[str, Any] | None:
     """The three comparisons of ``controller`` (a hybrid) with ``lqr`` as a JSON-friendly dict;
     None if ``controller`` is no hybrid or the LQR has no proved set.
@@ -85,10 +87,9 @@ def hybrid_claims(
         The LQR's (proved) certificate at that period.
     box : (S,) array
         Half-widths of the basin box.
-    seed, starts : int
-        The seed, and the starts in the proved set and in the box (each).
-    shell_starts : int
-        Starts per shell of V.
+    seed, starts, shell_starts, sweep_points : int
+        The seed; the starts in the proved set and in the box (each); the starts per shell of
+        V; the sizes of the impulse sweep (:func:`~leoc.evaluation.impulse_sweep.sweep_sizes`).
 
     Returns
     -------
@@ -103,11 +104,10 @@ def hybrid_claims(
     rho = float(certificate.rho)
     flat_top = flat_top_level(controller)
     failure = lqr_failure_size(system, lqr)
-    sweep = impulse_sweep(system, {HYBRID_LABEL: controller, LQR_LABEL: lqr}, sweep_sizes(failure))
+    labelled = {HYBRID_LABEL: controller, LQR_LABEL: lqr}
+    sweep = impulse_sweep(system, labelled, sweep_sizes(failure, sweep_points))
     levels = shell_levels(rho, flat_top)
-    shells = shell_robustness(
-        system, controller, lqr, certificate.P, levels, count=shell_starts, seed=seed
-    )
+    shells = shell_robustness(system, controller, lqr, certificate.P, levels, shell_starts, seed)
     basin = _basin(system, controller, lqr, certificate, box, starts, seed)
     corners = operating_region_corners(system)
     return {

@@ -27,6 +27,7 @@ from leoc.systems.base import System
 from leoc.systems.rollout import simulate
 
 SCALE_FACTORS = tuple(np.round(np.arange(0.5, 5.01, 0.5), 2).tolist())
+"""The robustness sweep's factors on the mass and on g: 0.5, 1.0, ..., 5.0 (paper figure 8)."""
 SCALED_PARAMETERS = ("mass", "gravity")
 ROBUSTNESS_EPISODES = 10
 

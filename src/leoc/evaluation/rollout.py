@@ -38,6 +38,7 @@ __all__ = [
     "control_period",
     "hold_step",
     "holds",
+    "measure_response",
     "relevance_function",
     "response_offsets",
     "response_test",
@@ -98,9 +99,23 @@ def response_test(
     arcsin(sin theta)). Metrics: leoc's, settling band 2 % of the peak error by default or the
     absolute ``band`` (e.g. ``system.settling_band``); or the authors' (``band`` must be None).
     """
-    measure = get_metric_set(metric_set)
+    measure = get_metric_set(metric_set)  # an unknown set fails before the simulation
     offsets = response_offsets(test, steps, system.action_dim)
     trajectory = rollout(system, controller, system.operating_state, steps, offsets)
+    return measure_response(system, trajectory, test, band, measure)
+
+
+def measure_response(
+    system: System,
+    trajectory: Trajectory,
+    test: ResponseTest,
+    band: float | None = None,
+    metric_set: str | MetricSet = "leoc",
+) -> ResponseResult:
+    """The deviation and metrics of a response ``trajectory`` simulated by
+    :func:`response_test`, as ``metric_set`` computes them: one simulation measured with
+    several metric sets."""
+    measure = get_metric_set(metric_set)
     deviation = measure.deviation(system, trajectory.states)
     metrics = measure.metrics(deviation, band, system.dt, trajectory.terminated)
     return ResponseResult(test, trajectory, deviation, metrics)

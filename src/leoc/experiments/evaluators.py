@@ -22,9 +22,14 @@ from typing import Any, NamedTuple
 import torch
 
 from leoc.evaluation.robustness import relevance_trace, robustness_sweep
-from leoc.evaluation.rollout import RESPONSE_TESTS, control_period, response_test
+from leoc.evaluation.rollout import (
+    RESPONSE_TESTS,
+    control_period,
+    measure_response,
+    response_test,
+)
 from leoc.experiments.layout import SWING_UP_EPISODES
-from leoc.experiments.profiles import RunSpec
+from leoc.experiments.profiles import EvaluationBudget, RunSpec
 from leoc.experiments.variants import LEOC, Variant
 from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
@@ -47,6 +52,10 @@ __all__ = [
     "hybrid_claims_of",
     "region_of_attraction",
 ]
+
+
+DEFAULT_BUDGET = EvaluationBudget()
+"""Every evaluation at its own default size (the ``quick`` and ``paper`` profiles')."""
 
 
 class CertifiedLQR(NamedTuple):
@@ -73,17 +82,24 @@ def certified_lqr(system: System, period: int, lqr_method: str = "discrete") -> 
 
 
 def hybrid_claims_of(
-    system: System, controller: torch.nn.Module, seed: int, lqr: tuple[Any, Any]
+    system: System,
+    controller: torch.nn.Module,
+    seed: int,
+    lqr: tuple[Any, Any],
+    sweep_points: int | None = None,
 ) -> Any:
     """:func:`leoc.evaluation.hybrid_claims.hybrid_claims` against the LQR ``lqr`` (design and
-    certificate, :func:`certified_lqr`) at the controller's period (None for non-hybrids)."""
+    certificate, :func:`certified_lqr`) at the controller's period (None for non-hybrids);
+    ``sweep_points`` impulse-sweep sizes (None: the sweep's default)."""
     from leoc.evaluation.basins import default_basin_box
     from leoc.evaluation.hybrid_claims import hybrid_claims
     from leoc.policies import lqr_controller
 
     design, certificate = lqr
+    sweep = {} if sweep_points is None else {"sweep_points": sweep_points}
+    box = default_basin_box(system)
     return hybrid_claims(
-        system, controller, lqr_controller(design), certificate, default_basin_box(system), seed
+        system, controller, lqr_controller(design), certificate, box, seed, **sweep
     )
 
 
@@ -135,6 +151,8 @@ class EvaluationContext:
     seed : int
         The run's seed.
     variant : Variant
+    budget : EvaluationBudget
+        How large the costliest evaluations are (the profile's; default: their own defaults).
     """
 
     system_name: str
@@ -142,6 +160,7 @@ class EvaluationContext:
     controller: torch.nn.Module
     seed: int
     variant: Variant
+    budget: EvaluationBudget = DEFAULT_BUDGET
 
     @functools.cached_property
     def period(self) -> int:
@@ -180,8 +199,10 @@ def evaluate_roa(context: EvaluationContext) -> dict[str, Any]:
 
 
 def evaluate_hybrid_claims(context: EvaluationContext) -> Any:
-    """:func:`hybrid_claims_of` against the shared LQR (None for non-hybrids)."""
-    return hybrid_claims_of(context.system, context.controller, context.seed, context.lqr)
+    """:func:`hybrid_claims_of` against the shared LQR at the budget's sweep sizes (None for
+    non-hybrids)."""
+    points = context.budget.impulse_sweep_points
+    return hybrid_claims_of(context.system, context.controller, context.seed, context.lqr, points)
 
 
 def evaluate_responses(context: EvaluationContext) -> dict[str, Any]:
@@ -193,7 +214,8 @@ def evaluate_responses(context: EvaluationContext) -> dict[str, Any]:
     for test in RESPONSE_TESTS:
         steps = context.variant.steps_for(context.system_name)
         result = response_test(system, controller, test, steps)
-        authors = response_test(system, controller, test, steps, metric_set="authors")
+        # the same closed loop measured the authors' way: one simulation serves both sets
+        authors = measure_response(system, result.trajectory, test, metric_set="authors")
         responses[test] = {
             "metrics": result.metrics._asdict(),
             "deviation": result.deviation.tolist(),
@@ -205,11 +227,15 @@ def evaluate_responses(context: EvaluationContext) -> dict[str, Any]:
 
 
 def evaluate_robustness(context: EvaluationContext) -> list[dict[str, Any]]:
-    """The robustness sweep's points, each with its mean return."""
-    return [
-        {**point._asdict(), "return_mean": point.return_mean}
-        for point in robustness_sweep(context.system, context.controller, seed=context.seed)
-    ]
+    """The robustness sweep's points at the budget's scales, each with its mean return."""
+    scales = context.budget.robustness_scales
+    sweep = robustness_sweep(
+        context.system,
+        context.controller,
+        seed=context.seed,
+        **({} if scales is None else {"scales": scales}),
+    )
+    return [{**point._asdict(), "return_mean": point.return_mean} for point in sweep]
 
 
 def evaluate_swing_up(context: EvaluationContext) -> dict[str, Any]:
@@ -262,10 +288,12 @@ def evaluate_controller(
     controller: torch.nn.Module,
     variant: Variant = LEOC,
     system: System | None = None,
+    budget: EvaluationBudget = DEFAULT_BUDGET,
 ) -> dict[str, Any]:
     """Every evaluation of :data:`EVALUATORS` of one controller, at its period, on the system
     stepping under ``variant``'s rules (``system``, built once by the caller; default
-    ``variant.system(spec.system)``): ``{evaluator.name: evaluator(context)}`` in order."""
+    ``variant.system(spec.system)``), sized by ``budget`` (the profile's):
+    ``{evaluator.name: evaluator(context)}`` in order."""
     system = variant.system(spec.system) if system is None else system
-    context = EvaluationContext(spec.system, system, controller, spec.seed, variant)
+    context = EvaluationContext(spec.system, system, controller, spec.seed, variant, budget)
     return {evaluator.name: evaluator(context) for evaluator in EVALUATORS}

@@ -40,6 +40,60 @@ CONTROLLER_LABELS = {
 
 
 @dataclasses.dataclass(frozen=True)
+class EvaluationBudget:
+    """How large a profile's costliest evaluations are (:mod:`leoc.experiments.evaluators`):
+    each field None (the default) keeps the evaluation's own default, which the ``quick`` and
+    ``paper`` profiles use; the ``smoke`` profile, a pipeline check, evaluates on fewer points.
+
+    Attributes
+    ----------
+    robustness_scales : tuple of float or None
+        Factors on the mass and on g of the robustness sweep (``evaluation.json``'s
+        ``robustness``; default :data:`leoc.evaluation.robustness.SCALE_FACTORS`, 0.5 ... 5.0
+        in steps of 0.5).
+    impulse_sweep_points : int or None
+        Sizes of the hybrids' impulse sweep against their LQR (``hybrid_claims``; default
+        :data:`leoc.evaluation.impulse_sweep.SWEEP_POINTS`), >= 2: the paper's size and the
+        LQR's failure size at least.
+    """
+
+    robustness_scales: tuple[float, ...] | None = None
+    impulse_sweep_points: int | None = None
+
+    def __post_init__(self) -> None:
+        scales = self.robustness_scales
+        if scales is not None and (
+            not isinstance(scales, tuple)
+            or not scales
+            or not all(
+                isinstance(s, (int, float)) and not isinstance(s, bool) and s > 0 for s in scales
+            )
+        ):
+            raise ValueError(
+                "EvaluationBudget.robustness_scales: expected None or a non-empty tuple of "
+                f"positive numbers, found {scales!r}"
+            )
+        points = self.impulse_sweep_points
+        if points is not None and (
+            isinstance(points, bool) or not isinstance(points, int) or points < 2
+        ):
+            raise ValueError(
+                "EvaluationBudget.impulse_sweep_points: expected None or an integer >= 2, "
+                f"found {points!r}"
+            )
+
+    def describe(self) -> str:
+        """The budget in words, for the report ("" when every evaluation keeps its default)."""
+        parts = []
+        if self.robustness_scales is not None:
+            scales = ", ".join(f"{s:g}x" for s in self.robustness_scales)
+            parts.append(f"robustness at {scales} only")
+        if self.impulse_sweep_points is not None:
+            parts.append(f"{self.impulse_sweep_points} impulse-sweep sizes")
+        return "; ".join(parts)
+
+
+@dataclasses.dataclass(frozen=True)
 class Profile:
     """Budgets of one ``leoc reproduce`` profile.
 
@@ -64,6 +118,9 @@ class Profile:
     variant_run_seconds : dict variant -> dict ``"system/controller"`` -> float
         The same measured under another variant (``authors``), where it costs otherwise; see
         :meth:`for_variant`.
+    evaluation : EvaluationBudget
+        How large the costliest evaluations of each run are (default: every evaluation's own
+        default).
     """
 
     name: str
@@ -77,6 +134,7 @@ class Profile:
     description: str = ""
     run_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
     variant_run_seconds: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
+    evaluation: EvaluationBudget = EvaluationBudget()
 
     def for_variant(self, variant: str) -> Profile:
         """This profile costed as it runs under ``variant`` (a name of
@@ -240,6 +298,12 @@ QUICK_RUN_SECONDS = {
     "mountaincar/pilco_hybrid_roa": 44.0,
 }
 
+SMOKE_EVALUATION = EvaluationBudget(robustness_scales=(0.5, 1.0, 5.0), impulse_sweep_points=2)
+"""The smoke profile's evaluation budget: the robustness sweep at the smallest, the nominal and
+the largest scale, the impulse sweep at the paper's size and the LQR's failure size (every
+evaluation still runs, on 6 robustness points instead of 20: the pipeline check costs about
+half as much)."""
+
 #: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
 PROFILES: dict[str, Profile] = {
     "quick": Profile(
@@ -276,8 +340,10 @@ PROFILES: dict[str, Profile] = {
         },
         description=(
             "smoke profile: a tiny end-to-end check of the pipeline (a few hundred steps of "
-            "training); its controllers are not trained and its numbers mean nothing"
+            f"training; evaluated on a reduced grid: {SMOKE_EVALUATION.describe()}); its "
+            "controllers are not trained and its numbers mean nothing"
         ),
+        evaluation=SMOKE_EVALUATION,
     ),
     "paper": Profile(
         name="paper",

@@ -184,7 +184,7 @@ def execute_run(
         controller, curve = train_controller(spec, profile, run_dir / "train", variant, system)
         trained = time.perf_counter() - started
         print(f"trained in {trained:.1f} s; evaluating", flush=True)
-        evaluation = evaluate_controller(spec, controller, variant, system)
+        evaluation = evaluate_controller(spec, controller, variant, system, profile.evaluation)
     evaluation.update(
         spec=spec._asdict(),
         variant=variant.name,

@@ -142,6 +142,18 @@ def compute(study: Study) -> dict[str, Any]:
     return {"robustness": robustness_summary(study.evaluations)}
 
 
+def _scales_in_words(rows: list[dict[str, Any]]) -> str:
+    """The table's scales: ``0.5x ... 5.0x`` for a run of evenly spaced ones (the default
+    sweep), else each (``0.5x, 1x, 5x``: a profile's reduced grid)."""
+    scales = sorted({row["scale"] for row in rows})
+    if not scales:
+        return "0.5x ... 5.0x"
+    steps = np.diff(scales)
+    if len(scales) > 3 and np.allclose(steps, steps[0]):
+        return f"{scales[0]:.1f}x ... {scales[-1]:.1f}x"
+    return ", ".join(f"{scale:g}x" for scale in scales)
+
+
 def render(report: Report) -> list[str]:
     """``## Robustness``: the protocol, what failed, the table."""
     evaluations = report.study.evaluations
@@ -155,7 +167,8 @@ def render(report: Report) -> list[str]:
         "## Robustness",
         "",
         "Each controller, trained on the nominal system, runs on systems whose mass (all "
-        "masses) or g is scaled by 0.5x ... 5.0x: per scale and seed, "
+        f"masses) or g is scaled by {_scales_in_words(report.tables['robustness'])}: per "
+        "scale and seed, "
         f"{ROBUSTNESS_EPISODES} episodes from starts drawn uniformly in the operating region "
         f"(the same starts at every scale; {regions}; the nominal LQR recovers from every "
         "corner of these boxes), and the impulse test. Cells: fraction of episodes stabilised "
