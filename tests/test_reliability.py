@@ -132,12 +132,12 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
     return _numbers(out)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 @pytest.mark.parametrize(
     "signum",
-    # SIGTERM takes the same path after its handler; it runs with the slow tests
-    [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)],
+    # SIGTERM takes the same path after its handler; both share the uninterrupted study
+    [signal.SIGINT, signal.SIGTERM],
 )
 def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, uninterrupted, signum):
     command = _smoke_command(tmp_path)

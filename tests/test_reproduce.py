@@ -164,6 +164,7 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
     )
 
 
+@pytest.mark.slow
 def test_an_interrupted_reproduce_resumes_without_losing_finished_runs(tmp_path) -> None:
     command = [
         sys.executable,
@@ -336,14 +337,9 @@ def _simulate_json(system: str | None, run_folder: Path) -> dict:
     return json.loads(out.stdout)
 
 
-@pytest.mark.heavy
-def test_smoke_profile_end_to_end_on_the_pendulum(tmp_path) -> None:
-    _smoke_end_to_end(tmp_path, ["pendulum"])
-
-
 @pytest.mark.slow
-def test_smoke_profile_end_to_end_on_the_other_systems(tmp_path) -> None:
-    _smoke_end_to_end(tmp_path, ["cartpole", "mountaincar"])
+def test_smoke_profile_end_to_end(tmp_path) -> None:
+    _smoke_end_to_end(tmp_path, ["pendulum", "cartpole", "mountaincar"])
 
 
 def test_runs_are_queued_longest_first() -> None:

@@ -301,7 +301,7 @@ def test_cli_without_ray_says_so_in_one_line(tmp_path, monkeypatch, capsys) -> N
 
 
 # ------------------------------------------------------------------------ the smoke profile
-@pytest.mark.heavy
+@pytest.mark.slow
 def test_smoke_profile_on_ray_equals_the_local_backend(tmp_path, ray_instance) -> None:
     from leoc.experiments.reproduce import EVALUATION_FILE, reproduce
 
