@@ -99,7 +99,14 @@ nitpick_ignore_regex = [
 # --- API reference -------------------------------------------------------------------------------
 leoc_api_packages = list(leoc_api.PUBLIC_PACKAGES)  # the packages of the library
 # referenced from the packages' docstrings; documented, not held to the docstring check
-leoc_api_extra_modules = ["leoc.learners", "leoc.names", "leoc.training", "leoc.linalg", "leoc.io"]
+leoc_api_extra_modules = [
+    "leoc.learners",
+    "leoc.names",
+    "leoc.training",
+    "leoc.linalg",
+    "leoc.io",
+    "leoc.gym_adapter",
+]
 autodoc_default_options = {"member-order": "bysource"}
 autodoc_typehints = "signature"
 autodoc_inherit_docstrings = True

@@ -28,6 +28,8 @@ def _checker():
 def test_every_public_name_has_a_docstring() -> None:
     checker = _checker()
     assert checker.missing_docstrings(list(checker.PUBLIC_PACKAGES)) == []
+    # the gymnasium adapter is a module of its own (docs/conf.py's extra modules)
+    assert checker.missing_docstrings(["leoc.gym_adapter"]) == []
 
 
 def test_the_check_finds_a_missing_docstring(tmp_path, monkeypatch) -> None:
