@@ -130,3 +130,18 @@ def test_the_budget_in_words() -> None:
     assert SMOKE.describe() in get_profile("smoke").description
     for name in ("quick", "paper"):
         assert get_profile(name).evaluation == EvaluationBudget()
+
+
+@pytest.mark.parametrize(
+    ("scales", "expected"),
+    [
+        ((0.5, 1.0, 5.0), "0.5x, 1x, 5x"),  # the smoke grid: each scale
+        ((1.0, 1.5, 2.0, 2.5), "1.0x ... 2.5x"),  # evenly spaced: the range
+        ((), f"{min(SCALE_FACTORS):.1f}x ... {max(SCALE_FACTORS):.1f}x"),  # empty: the default
+    ],
+)
+def test_the_robustness_section_names_the_scales_it_ran(scales, expected) -> None:
+    from leoc.experiments.report.robustness import _scales_in_words
+
+    rows = [{"scale": scale} for scale in scales for _ in range(2)]  # two rows per scale
+    assert _scales_in_words(rows) == expected

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from leoc.evaluation.robustness import ROBUSTNESS_EPISODES
+from leoc.evaluation.robustness import ROBUSTNESS_EPISODES, SCALE_FACTORS
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.markdown import markdown_table
 from leoc.experiments.profiles import LINEAR_REFERENCE
@@ -143,11 +143,10 @@ def compute(study: Study) -> dict[str, Any]:
 
 
 def _scales_in_words(rows: list[dict[str, Any]]) -> str:
-    """The table's scales: ``0.5x ... 5.0x`` for a run of evenly spaced ones (the default
-    sweep), else each (``0.5x, 1x, 5x``: a profile's reduced grid)."""
-    scales = sorted({row["scale"] for row in rows})
-    if not scales:
-        return "0.5x ... 5.0x"
+    """The table's scales (for an empty table the default sweep's,
+    :data:`~leoc.evaluation.robustness.SCALE_FACTORS`): ``0.5x ... 5.0x`` for a run of evenly
+    spaced ones, else each (``0.5x, 1x, 5x``: a profile's reduced grid)."""
+    scales = sorted({row["scale"] for row in rows}) or list(SCALE_FACTORS)
     steps = np.diff(scales)
     if len(scales) > 3 and np.allclose(steps, steps[0]):
         return f"{scales[0]:.1f}x ... {scales[-1]:.1f}x"
