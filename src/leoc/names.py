@@ -27,6 +27,35 @@ BUILTIN_ENV_IDS = {
 }
 """Gymnasium id and entry point of each built-in system (``import leoc`` registers them)."""
 
+GYM_PREFIX = "gym:"
+"""A system name ``gym:ENV_ID`` is the gymnasium environment ``ENV_ID`` itself, trained on by
+:func:`leoc.sb3.train_gym` (``leoc train gym:InvertedPendulum-v5 --algo sac --hybrid``)."""
+
+
+def gym_env_id(name: str) -> str | None:
+    """The gymnasium id of a ``gym:ENV_ID`` system name, None for any other name.
+
+    Raises
+    ------
+    ValueError
+        ``gym:`` with no id after it.
+    """
+    if not name.startswith(GYM_PREFIX):
+        return None
+    env_id = name[len(GYM_PREFIX) :].strip()
+    if not env_id:
+        raise ValueError(
+            f"system: expected gym:ENV_ID (e.g. gym:InvertedPendulum-v5), found {name!r}"
+        )
+    return env_id
+
+
+def gym_folder_name(name: str) -> str:
+    """The run-folder component of a system name: ``gym:ENV_ID`` becomes ``gym-ENV_ID`` (no
+    colon in a path), any other name is itself."""
+    return name.replace(":", "-", 1) if name.startswith(GYM_PREFIX) else name
+
+
 CONTROLLERS = (
     "linear",
     "linear_pilco",

@@ -16,11 +16,14 @@ from leoc.cli._args import (
     system_name,
 )
 from leoc.names import (
+    GYM_PREFIX,
     LEARNER_NAMES,
     PROFILE_NAMES,
     RELEVANCE_NAMES,
     VARIANT_NAMES,
     ControllerName,
+    gym_env_id,
+    gym_folder_name,
 )
 
 ALGO_CHOICES = LEARNER_NAMES
@@ -62,7 +65,13 @@ def add_parser(commands: Any) -> None:
     train = commands.add_parser(
         "train", help="train a baseline or hybrid controller", description=DESCRIPTION
     )
-    train.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
+    train.add_argument(
+        "system",
+        type=train_system,
+        metavar="SYSTEM",
+        help=f"{SYSTEM_HELP}; or {GYM_PREFIX}ENV_ID, a gymnasium env trained on itself (e.g. "
+        f"{GYM_PREFIX}InvertedPendulum-v5; DDPG/TD3/SAC, leoc's variant, no profile)",
+    )
     train.add_argument("--algo", choices=ALGO_CHOICES, required=True, help="learning algorithm")
     train.add_argument("--hybrid", action="store_true", help="train the LEOC hybrid")
     add_relevance_arguments(train)
@@ -104,6 +113,18 @@ def add_parser(commands: Any) -> None:
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.set_defaults(run=run)
+
+
+def train_system(text: str) -> str:
+    """argparse type of ``leoc train``'s SYSTEM: a system name (:func:`system_name`) or
+    ``gym:ENV_ID`` (the id is checked when the env is made)."""
+    if text.startswith(GYM_PREFIX):
+        try:
+            gym_env_id(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+        return text
+    return system_name(text)
 
 
 def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
@@ -267,7 +288,7 @@ def default_run_dir(args: argparse.Namespace) -> Path:
     relevance = (args.relevance or "paper") if args.hybrid else None
     controller = ControllerName(args.algo, relevance).name
     root = DEFAULT_RUNS_DIR if args.variant == "leoc" else DEFAULT_RUNS_DIR / args.variant
-    return root / args.system / controller / f"seed{args.seed}"
+    return root / gym_folder_name(args.system) / controller / f"seed{args.seed}"
 
 
 def controller_of(args: argparse.Namespace) -> Any:
@@ -335,6 +356,8 @@ def run(args: argparse.Namespace) -> int:
     from leoc.learners import get_learner
     from leoc.policies.spec import with_hybrid_overrides
 
+    if gym_env_id(args.system) is not None:
+        return run_gym(args)
     check_budget_arguments(args)
     controller = controller_of(args)  # checks the relevance flags first
     run_dir = args.out or default_run_dir(args)
@@ -354,6 +377,45 @@ def run(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
         )
     except ValueError as error:  # a learner refusing a field: name the flag that set it
+        message = with_flag(str(error), hybrid_changes(args))
+        if message == str(error):
+            raise
+        raise ValueError(message) from error
+    print(f"run folder: {result.run_dir}")
+    return 0
+
+
+def run_gym(args: argparse.Namespace) -> int:
+    """Train on the gymnasium env of ``gym:ENV_ID`` itself (:func:`leoc.sb3.train_gym`);
+    prints the run folder."""
+    if args.algo not in MODEL_FREE_ALGOS:
+        raise ValueError(
+            f"--algo: expected one of {MODEL_FREE_ALGOS} for a gymnasium env (PILCO needs a "
+            f"leoc system), found {args.algo!r}"
+        )
+    check_budget_arguments(args)
+    if args.variant != "leoc" or args.profile is not None:
+        raise ValueError(
+            f"--variant, --profile: expected neither for a gymnasium env (leoc's settings, "
+            f"GYM_DEFAULTS), found --variant {args.variant} --profile {args.profile}"
+        )
+    hybrid = hybrid_of(args)
+    from leoc.sb3.gym import train_gym
+
+    env_id = gym_env_id(args.system)
+    run_dir = args.out or default_run_dir(args)
+    try:
+        result = train_gym(
+            str(env_id),
+            args.algo,
+            hybrid,
+            args.seed,
+            run_dir,
+            total_steps=args.steps,
+            progress=not args.quiet,
+            overwrite=args.overwrite,
+        )
+    except ValueError as error:
         message = with_flag(str(error), hybrid_changes(args))
         if message == str(error):
             raise

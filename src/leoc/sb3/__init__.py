@@ -23,6 +23,10 @@ SYSTEM --algo sac --hybrid``): its squashed mean is the same hybrid (:mod:`leoc.
 The authors' TF-Agents settings (nrjc/LEOC) are :data:`AUTHORS_DDPG` and
 :func:`authors_ddpg_overrides`, overrides of :class:`DDPGConfig` fields.
 
+A gymnasium environment is trained on itself, with no torch step function, by
+:func:`train_gym` (:mod:`leoc.sb3.gym`; ``leoc train gym:InvertedPendulum-v5 --algo sac
+--hybrid``): the LQR from the env's own step map, its gain written on the env's observation.
+
 This package was ``leoc.ddpg`` until issue 39; :func:`load_ddpg_model` still loads the models
 saved then.
 """
@@ -41,6 +45,16 @@ from leoc.sb3.config import (
     authors_ddpg_overrides,
 )
 from leoc.sb3.ddpg import HybridDDPGPolicy, LeocDDPG
+from leoc.sb3.gym import (
+    GYM_DEFAULTS,
+    GymController,
+    GymPlant,
+    SampledRegion,
+    gym_plant,
+    load_gym_controller,
+    sample_region,
+    train_gym,
+)
 from leoc.sb3.noise import SeededOUNoise
 from leoc.sb3.physical import AffineOutput, PhysicalPolicy, physical_policy
 from leoc.sb3.sac import HybridSACActor, HybridSACPolicy, LeocSAC, LeocSACPolicy, SquashedMean
@@ -58,6 +72,7 @@ __all__ = [
     "ALGOS",
     "AUTHORS_DDPG",
     "EVAL_INTERVAL_BY_SYSTEM",
+    "GYM_DEFAULTS",
     "PAPER_TOTAL_STEPS",
     "SAC_DEFAULTS",
     "STEP_RULES_BY_SYSTEM",
@@ -65,6 +80,8 @@ __all__ = [
     "AffineOutput",
     "DDPGConfig",
     "DDPGResult",
+    "GymController",
+    "GymPlant",
     "HeldOutEvaluationCallback",
     "HybridActor",
     "HybridDDPGPolicy",
@@ -78,16 +95,21 @@ __all__ = [
     "LeocTD3",
     "LeocTD3Policy",
     "PhysicalPolicy",
+    "SampledRegion",
     "SeededOUNoise",
     "SplitCritic",
     "SquashedMean",
     "action_box",
     "authors_ddpg_overrides",
     "build_model",
+    "gym_plant",
     "held_and_reached",
     "hybrid_policy_kwargs",
     "load_ddpg_controller",
     "load_ddpg_model",
+    "load_gym_controller",
     "physical_policy",
+    "sample_region",
     "train_ddpg",
+    "train_gym",
 ]

@@ -804,16 +804,27 @@ class _PaperSettingsMixin(ActorRateAndWarmupMixin):
         self.tau = self.polyak
 
 
-def policy_of(config: Any, env: Any, baseline: type, hybrid: type) -> tuple[type, dict[str, Any]]:
+def policy_of(
+    config: Any,
+    env: Any,
+    baseline: type,
+    hybrid: type,
+    hybrid_kwargs: dict[str, Any] | None = None,
+) -> tuple[type, dict[str, Any]]:
     """The SB3 policy class of a :class:`~leoc.sb3.DDPGConfig` and its ``policy_kwargs``:
     ``baseline`` with the config's networks, or, for a hybrid config, ``hybrid`` with the
-    hybrid's keywords from the LQR of ``env``'s system (:func:`hybrid_policy_kwargs`)."""
+    hybrid's keywords from the LQR of ``env``'s system (:func:`hybrid_policy_kwargs`), or
+    ``hybrid_kwargs`` (``hybrid_spec`` and ``hybrid_design`` dicts) where the caller designed
+    them (a gymnasium env has no leoc system: :func:`leoc.sb3.train_gym`)."""
     policy_kwargs: dict[str, Any] = {
         "net_arch": {"pi": list(config.actor_hidden), "qf": list(config.critic_hidden)},
         **config.network_kwargs(),
     }
     if not config.hybrid:
         return baseline, policy_kwargs
+    if hybrid_kwargs is not None:
+        clip = {"clip_output": config.actor_output_clip}
+        return hybrid, {**hybrid_kwargs, **clip, **policy_kwargs}
     system = env.unwrapped.system
     keywords = hybrid_policy_kwargs(
         system,

@@ -383,10 +383,13 @@ class DDPGConfig:
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        from leoc.names import gym_env_id
         from leoc.systems import system_names
 
-        if self.system not in system_names():
-            raise ValueError(f"system: expected one of {system_names()}, found {self.system!r}")
+        if self.system not in system_names() and gym_env_id(self.system) is None:
+            raise ValueError(
+                f"system: expected one of {system_names()} or gym:ENV_ID, found {self.system!r}"
+            )
         if self.algo not in ALGOS:
             raise ValueError(f"algo: expected one of {ALGOS}, found {self.algo!r}")
         object.__setattr__(self, "hybrid", as_hybrid_spec(self.hybrid))

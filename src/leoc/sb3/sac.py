@@ -490,16 +490,19 @@ class LeocSAC(ActorRateAndWarmupMixin, SAC):
         polyak_update(self.batch_norm_stats, self.batch_norm_stats_target, 1.0)
 
 
-def build_sac_model(config: Any, seed: int, env: Any) -> LeocSAC:
+def build_sac_model(
+    config: Any, seed: int, env: Any, hybrid_kwargs: dict[str, Any] | None = None
+) -> LeocSAC:
     """The :class:`LeocSAC` model of a :class:`~leoc.sb3.DDPGConfig` with ``algo="sac"``.
 
     Baseline: SB3's ``SACPolicy`` with ``actor_hidden``/``critic_hidden`` MLPs. Hybrid:
     :class:`HybridSACPolicy` with the system's LQR design (``lqr_method``) and the config's
-    relevance (paper or ROA). ``seed`` seeds SB3 (torch, numpy, random, action space): SAC's
-    Gaussian samples come from torch's generator, so the run repeats exactly.
+    relevance (paper or ROA), or ``hybrid_kwargs`` (:func:`~leoc.sb3.common.policy_of`).
+    ``seed`` seeds SB3 (torch, numpy, random, action space): SAC's Gaussian samples come from
+    torch's generator, so the run repeats exactly.
     """
     # LeocSACPolicy is SB3's SACPolicy when the network options are at their defaults
-    policy, policy_kwargs = policy_of(config, env, LeocSACPolicy, HybridSACPolicy)
+    policy, policy_kwargs = policy_of(config, env, LeocSACPolicy, HybridSACPolicy, hybrid_kwargs)
     return LeocSAC(
         policy,
         env,

@@ -105,14 +105,17 @@ def _atomic_save_model(model: Any, path: Path) -> None:
     write_bytes_atomic(path, buffer.getvalue())
 
 
-def build_model(config: DDPGConfig, seed: int, env: Any) -> Any:
+def build_model(
+    config: DDPGConfig, seed: int, env: Any, hybrid_kwargs: dict[str, Any] | None = None
+) -> Any:
     """The SB3 model (:class:`LeocDDPG`, :class:`LeocTD3` or :class:`~leoc.sb3.LeocSAC`) of
     ``config`` on ``env`` (a :class:`~leoc.systems.envs.LeocEnv`, possibly wrapped: its system is
-    the one designed for)."""
+    the one designed for; or any env, with the hybrid's ``hybrid_kwargs`` designed by the
+    caller, :func:`~leoc.sb3.common.policy_of`)."""
     if config.algo == "sac":
-        return build_sac_model(config, seed, env)
+        return build_sac_model(config, seed, env, hybrid_kwargs)
     # LeocTD3Policy is SB3's TD3Policy when the network options are at their defaults
-    policy, policy_kwargs = policy_of(config, env, LeocTD3Policy, HybridTD3Policy)
+    policy, policy_kwargs = policy_of(config, env, LeocTD3Policy, HybridTD3Policy, hybrid_kwargs)
     common: dict[str, Any] = {
         "learning_rate": config.critic_learning_rate,
         "actor_learning_rate": config.actor_learning_rate,
