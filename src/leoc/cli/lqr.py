@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 from leoc.cli._args import SYSTEM_HELP, positive_int, system_name
+from leoc.names import GYM_PREFIX, gym_env_id
 from leoc.names import LQR_METHODS as METHODS
 
 
@@ -19,7 +20,13 @@ def add_parser(commands: Any) -> None:
         "Q, R, the gain K, the observation-space form G(o) = W o + b, the closed-loop "
         "eigenvalues and the stability margins.",
     )
-    lqr.add_argument("system", type=system_name, metavar="SYSTEM", help=SYSTEM_HELP)
+    lqr.add_argument(
+        "system",
+        type=lqr_system,
+        metavar="SYSTEM",
+        help=f"{SYSTEM_HELP}; or {GYM_PREFIX}ENV_ID, a gymnasium env with a default operating "
+        "point (MuJoCo's rest state): the discrete LQR of its own step by central differences",
+    )
     lqr.add_argument(
         "--method",
         choices=METHODS,
@@ -41,6 +48,17 @@ def add_parser(commands: Any) -> None:
     lqr.set_defaults(run=run)
 
 
+def lqr_system(text: str) -> str:
+    """argparse type of ``leoc lqr``'s SYSTEM: a system name or ``gym:ENV_ID``."""
+    if text.startswith(GYM_PREFIX):
+        try:
+            gym_env_id(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+        return text
+    return system_name(text)
+
+
 def print_matrix(name: str, matrix: Any) -> None:
     """Print ``name =`` and the matrix, 6 digits."""
     import numpy as np
@@ -50,6 +68,10 @@ def print_matrix(name: str, matrix: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if gym_env_id(args.system) is not None:
+        from leoc.cli._gym import run_gym_lqr
+
+        return run_gym_lqr(args)
     from leoc.control import design_lqr
     from leoc.experiments.linear import design_summary
     from leoc.systems import make_system

@@ -17,7 +17,7 @@ from leoc.cli._args import (
 )
 from leoc.cli.lqr import print_matrix
 from leoc.cli.simulate import load_controller
-from leoc.names import LYAPUNOV_CHOICES
+from leoc.names import GYM_PREFIX, LYAPUNOV_CHOICES
 
 
 def add_parser(commands: Any) -> None:
@@ -35,7 +35,7 @@ def add_parser(commands: Any) -> None:
     roa.add_argument(
         "system",
         nargs="?",
-        type=system_name,
+        type=roa_system,
         metavar="SYSTEM",
         help=f"{SYSTEM_HELP}; optional with --controller (read from the run folders)",
     )
@@ -110,6 +110,18 @@ def _add_proof_arguments(roa: argparse.ArgumentParser) -> None:
         "through torch's CUDA build; the equilibrium search and the sampled estimates stay on "
         "the CPU)",
     )
+
+
+def roa_system(text: str) -> str:
+    """argparse type of ``leoc roa``'s SYSTEM: a system name; ``gym:ENV_ID`` is refused with
+    the reason (no interval model of a gymnasium env exists)."""
+    if text.startswith(GYM_PREFIX):
+        raise argparse.ArgumentTypeError(
+            f"expected a leoc system, found the gymnasium env {text!r}: it has no interval "
+            "model, so no region of attraction can be proved (a run of 'leoc train "
+            f"{text}' records a sampled level in its design.json)"
+        )
+    return system_name(text)
 
 
 ROA_SLICES = {"pendulum": (0, 1), "cartpole": (2, 3), "mountaincar": (0, 1)}
@@ -468,6 +480,9 @@ def _check_device(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
+    from leoc.cli._gym import refuse_gym_roa
+
+    refuse_gym_roa(list(args.controller or []))
     import torch
 
     torch.set_num_threads(1)

@@ -9,9 +9,15 @@ import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.cli._args import SYSTEM_HELP, positive_float, positive_int, system_or_run_dir
+from leoc.cli._args import (
+    SYSTEM_HELP,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    system_or_run_dir,
+)
 from leoc.cli.lqr import METHODS
-from leoc.names import METRIC_SET_NAMES, VARIANT_NAMES
+from leoc.names import GYM_PREFIX, METRIC_SET_NAMES, VARIANT_NAMES, gym_env_id
 
 LINEAR = "linear"
 
@@ -24,10 +30,15 @@ def add_parser(commands: Any) -> None:
         description="Run the impulse or step test of a controller from the operating point and "
         "print its steady-state error, overshoot, peak deviation and settling time. "
         "'leoc simulate RUN_DIR' simulates the controller of a run folder on the system it "
-        "was trained for.",
+        "was trained for. 'leoc simulate gym:ENV_ID' (the env's LQR) and 'leoc simulate "
+        "RUN_DIR' of 'leoc train gym:ENV_ID' run the test on the gymnasium env itself, from its "
+        "operating state: the impulse forces the first action to --magnitude (default the "
+        "action limit), the step adds --magnitude (default 10%% of the limit) to every action; "
+        "a trained controller is printed beside its LQR, with their largest difference.",
     )
     _add_controller_arguments(simulate)
     _add_test_arguments(simulate)
+    _add_gym_arguments(simulate)
     _add_output_arguments(simulate)
     simulate.set_defaults(run=run)
 
@@ -37,10 +48,10 @@ def _add_controller_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "target",
         nargs="?",
-        type=system_or_run_dir,
+        type=simulate_target,
         metavar="SYSTEM|RUN_DIR",
-        help=f"{SYSTEM_HELP}; or a run folder (its system is read from it). Optional with "
-        "--controller RUN_DIR",
+        help=f"{SYSTEM_HELP}; or {GYM_PREFIX}ENV_ID, a gymnasium env (its LQR); or a run "
+        "folder (its system is read from it). Optional with --controller RUN_DIR",
     )
     parser.add_argument(
         "--controller",
@@ -91,6 +102,35 @@ def _add_test_arguments(parser: argparse.ArgumentParser) -> None:
         help="metric set: leoc's (final-window mean, band 2%% of the peak) or the authors' "
         "(arcsin(sin theta), last sample, band +/- pi/180); default leoc",
     )
+
+
+def _add_gym_arguments(parser: argparse.ArgumentParser) -> None:
+    """The test's options on a gymnasium env (``gym:ENV_ID`` or its run folder)."""
+    group = parser.add_argument_group("gymnasium envs (gym:ENV_ID or its run folder only)")
+    group.add_argument(
+        "--magnitude",
+        type=float,
+        help="the impulse's forced action (default the action space's upper limit) or the "
+        "step's offset (default 10%% of it)",
+    )
+    group.add_argument(
+        "--main-index",
+        type=non_negative_int,
+        help="state entry recorded (default: the pole angle qpos[1] in deg for the inverted "
+        "pendulums, theta for Pendulum-v1, else entry 0 in the state's units)",
+    )
+
+
+def simulate_target(text: str) -> str | Path:
+    """argparse type of ``leoc simulate``'s target: ``gym:ENV_ID`` (the id is checked when
+    the env is made), a system name or a run folder (:func:`system_or_run_dir`)."""
+    if text.startswith(GYM_PREFIX):
+        try:
+            gym_env_id(text)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
+        return text
+    return system_or_run_dir(text)
 
 
 def _add_output_arguments(parser: argparse.ArgumentParser) -> None:
@@ -263,12 +303,16 @@ def _json_report(
 
 
 def run(args: argparse.Namespace) -> int:
+    from leoc.cli._gym import check_gym_options, run_gym_simulate
     from leoc.evaluation.rollout import control_period, response_test
     from leoc.experiments.variants import get_variant
 
     if args.band is not None and args.metrics == "authors":
         raise ValueError("--band: the authors' metrics fix the band (pi/180); leave --band out")
     target = resolve_target(args.target, args.controller)
+    if gym_env_id(target.system) is not None:
+        return run_gym_simulate(args, target.system, target.controller)
+    check_gym_options(args, False)
     args.variant = simulated_variant(target, args.variant)
     variant = get_variant(args.variant)
     system = simulated_system(target, variant)

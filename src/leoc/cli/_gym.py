@@ -1,0 +1,240 @@
+"""``leoc simulate`` and ``leoc roa`` on a gymnasium env (``gym:ENV_ID`` or a run folder of
+``leoc train gym:ENV_ID``); heavy imports inside the functions."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from leoc.names import GYM_PREFIX, gym_env_id
+
+#: ``leoc simulate`` options that describe a leoc system's simulation and mean nothing for a
+#: gymnasium env, with the value that leaves them unset.
+LEOC_ONLY_OPTIONS = {
+    "action_repeat": 1,
+    "method": None,
+    "variant": None,
+    "metrics": "leoc",
+    "video": None,
+    "plot": None,
+}
+
+
+def gym_run_system(path: str | Path) -> str | None:
+    """The ``gym:ENV_ID`` a run folder was trained on, None for any other folder (or none)."""
+    config = Path(path) / "config.json"
+    if not config.is_file():
+        return None
+    try:
+        system = json.loads(config.read_text()).get("system")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return system if isinstance(system, str) and gym_env_id(system) is not None else None
+
+
+def check_gym_options(args: argparse.Namespace, gym: bool) -> None:
+    """Refuse leoc-system options on a gymnasium env, and gymnasium options on a leoc system."""
+    if gym:
+        for name, unset in LEOC_ONLY_OPTIONS.items():
+            if getattr(args, name) != unset:
+                flag = "--" + name.replace("_", "-")
+                raise ValueError(
+                    f"{flag}: expected it left out for a gymnasium env (it sets a leoc "
+                    f"system's simulation), found {getattr(args, name)}"
+                )
+        return
+    for name in ("magnitude", "main_index"):
+        if getattr(args, name) is not None:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(
+                f"{flag}: expected only for a gymnasium env ({GYM_PREFIX}ENV_ID or its run "
+                f"folder), found {getattr(args, name)} for a leoc system"
+            )
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def _record(response: Any) -> dict[str, Any]:
+    """A response as JSON: its metrics, deviation, return and termination."""
+    return {
+        "metrics": response.metrics._asdict(),
+        "deviation": response.deviation.tolist(),
+        "total_reward": response.total_reward,
+        "terminated": response.terminated,
+    }
+
+
+def run_gym_simulate(args: argparse.Namespace, system: str, controller: str) -> int:
+    """``leoc simulate`` on the gymnasium env of ``system`` (``gym:ENV_ID``): its LQR alone
+    (``controller`` 'linear'), or a run folder's controller beside the run's LQR."""
+    from leoc.evaluation.gym_response import gym_comparison, gym_response, load_gym_run
+    from leoc.sb3.gym import gym_plant, make_gym_env
+
+    check_gym_options(args, True)
+    options = {"steps": args.steps, "magnitude": args.magnitude, "main_index": args.main_index}
+    options["band"] = args.band
+    if controller == "linear":
+        env_id = str(gym_env_id(system))
+        env = make_gym_env(env_id)
+        plant = gym_plant(env, env_id)
+        env.close()
+        from leoc.evaluation.gym_response import lqr_controller
+
+        responses = {"lqr": gym_response(plant, lqr_controller(plant), args.test, **options)}
+        distance = None
+    else:
+        if gym_run_system(controller) != system:
+            raise ValueError(
+                f"--controller: expected a run folder trained on {system}, found {controller!r} "
+                f"(trained on {gym_run_system(controller) or 'no gymnasium env'})"
+            )
+        run = load_gym_run(controller)
+        options.update(env_kwargs=run.env_kwargs, seed=run.seed)
+        result = gym_comparison(run.plant, run.controller, args.test, **options)
+        responses = {"trained": result["controller"], "lqr": result["lqr"]}
+        distance = result["distance_pct"]
+    first = next(iter(responses.values()))
+    if args.json:
+        report = {"system": system, "controller": controller, "test": args.test}
+        report.update(
+            magnitude=first.magnitude.tolist(), main_index=first.main_index, unit=first.unit
+        )
+        report.update({key: _record(value) for key, value in responses.items()})
+        report["distance_pct"] = None if distance is None else _finite(distance)
+        print(json.dumps(report))
+        return 0
+    _print_gym(args, system, controller, responses, distance)
+    return 0
+
+
+def _settling(metrics: Any) -> str:
+    if metrics.settling_time is None:
+        return "not settled"
+    return f"{metrics.settling_time} steps ({metrics.settling_seconds:.3g} s)"
+
+
+def _print_gym(
+    args: argparse.Namespace, system: str, controller: str, responses: dict, distance: Any
+) -> None:
+    """The metrics of each response in a column (the trained controller's, then the LQR's)."""
+    first = next(iter(responses.values()))
+    what = "forced to" if args.test == "impulse" else "offset by"
+    print(
+        f"{args.test} response of {controller} on {system} ({len(first.deviation) - 1} steps; "
+        f"action {what} {', '.join(f'{v:.4g}' for v in first.magnitude)} "
+        f"{'for the first step' if args.test == 'impulse' else 'on every step'}; main "
+        f"coordinate: state[{first.main_index}] in {first.unit}; leoc metrics)"
+    )
+    names = {"trained": "trained", "lqr": "LQR"}
+    print(f"  {'':20}" + "".join(f"{names[key]:>22}" for key in responses))
+    rows = (
+        ("steady-state error", lambda r: f"{r.metrics.steady_state_error:.6g}"),
+        ("overshoot", lambda r: f"{r.metrics.overshoot:.6g}"),
+        ("peak deviation", lambda r: f"{r.metrics.peak_deviation:.6g}"),
+        ("settling time", lambda r: _settling(r.metrics)),
+        ("settling band", lambda r: f"{r.metrics.band:.3g}"),
+        ("terminated", lambda r: "yes" if r.terminated else "no"),
+        ("return", lambda r: f"{r.total_reward:.4f}"),
+    )
+    for label, show in rows:
+        print(f"  {label + ':':20}" + "".join(f"{show(r):>22}" for r in responses.values()))
+    if distance is not None:
+        print(f"  largest difference from the LQR: {distance:.4g}% of the LQR's peak deviation")
+
+
+def refuse_gym_roa(specs: list[str]) -> None:
+    """``leoc roa --controller RUN_DIR`` on a gymnasium run: one line saying why nothing can be
+    proved there, with the sampled level of its ``design.json`` when it has one."""
+    for spec in specs:
+        system = gym_run_system(spec)
+        if system is None:
+            continue
+        design = Path(spec) / "design.json"
+        data = (
+            json.loads(design.read_text()).get("relevance_data") or {} if design.is_file() else {}
+        )
+        level = (
+            f"the sampled level in {design} is rho = {data['rho']:.6g} (seeded starts held by "
+            f"the LQR on the env: evidence, not a proof)"
+            if isinstance(data.get("rho"), (int, float))
+            else f"{design} records no sampled level for this run"
+        )
+        raise ValueError(
+            f"--controller: {spec!r} was trained on the gymnasium env {system}, which has no "
+            f"interval model, so no region of attraction can be proved for it; {level}"
+        )
+
+
+def run_gym_lqr(args: argparse.Namespace) -> int:
+    """``leoc lqr gym:ENV_ID``: the discrete LQR of the env's own step (central differences,
+    :func:`leoc.sb3.gym_plant`) about its default operating point, with the error bounds."""
+    import numpy as np
+
+    from leoc.gym_adapter import linearise_env
+    from leoc.sb3.gym import gym_plant, make_gym_env
+
+    if args.method != "discrete" or args.action_repeat != 1:
+        raise ValueError(
+            f"--method, --action-repeat: expected discrete and 1 for a gymnasium env (the "
+            f"discrete LQR of its own step), found {args.method} and {args.action_repeat}"
+        )
+    env_id = str(gym_env_id(args.system))
+    env = make_gym_env(env_id)
+    plant = gym_plant(env, env_id, None, args.q, args.r)
+    lin, lqr = linearise_env(env, plant.state, plant.action), plant.lqr  # plant's, again
+    dt = float(env.unwrapped.dt)
+    env.close()
+    eigenvalues = lqr.closed_loop_eigenvalues
+    summary = {
+        "system": args.system,
+        "dt": dt,
+        "state": lqr.state.tolist(),
+        "action": lqr.action.tolist(),
+        "A_d": lin.A_d.tolist(),
+        "B_d": lin.B_d.tolist(),
+        "error_A": float(np.max(lin.error_A)),
+        "error_B": float(np.max(lin.error_B)),
+        "Q": lqr.Q.tolist(),
+        "R": lqr.R.tolist(),
+        "K": lqr.K.tolist(),
+        "W": plant.gain.tolist(),
+        "b": plant.bias.tolist(),
+        "closed_loop_eigenvalues": [[z.real, z.imag] for z in eigenvalues],
+        "spectral_radius": float(np.max(np.abs(eigenvalues))),
+        "observation_jacobian_error": plant.jacobian_error,
+        "observation_error": plant.observation_error,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    _print_gym_lqr(summary, plant)
+    return 0
+
+
+def _print_gym_lqr(summary: dict[str, Any], plant: Any) -> None:
+    """The text of ``leoc lqr gym:ENV_ID``."""
+    from leoc.cli.lqr import print_matrix
+
+    print(
+        f"LQR design for {summary['system']} (discrete, central differences of the env's own "
+        f"step), dt = {summary['dt']} s; operating state {summary['state']}, action "
+        f"{summary['action']}"
+    )
+    for name in ("A_d", "B_d", "Q", "R", "K"):
+        print_matrix(name + (" (u = u_eq - K (x - x_eq))" if name == "K" else ""), summary[name])
+    print(f"largest error bound of A_d: {summary['error_A']:.3g}, of B_d: {summary['error_B']:.3g}")
+    print_matrix("W (G(o) = W o + b, on the observation)", plant.gain)
+    print_matrix("b", plant.bias)
+    eigenvalues = plant.lqr.closed_loop_eigenvalues
+    print(f"closed-loop eigenvalues: {', '.join(f'{z:.4f}' for z in eigenvalues)}")
+    radius = summary["spectral_radius"]
+    print(f"spectral radius: {radius:.6f} (stable: {radius < 1})")
+    print(
+        f"observation map: Jacobian error {plant.jacobian_error:.3g}, observation error "
+        f"{plant.observation_error:.3g} (relative, at the env's default starts)"
+    )
