@@ -62,7 +62,8 @@ def replay_errors(folder: Path, interval: float) -> ReplayError:
     profile = get_profile(meta["profile"], len(meta["seeds"])).for_variant(meta["variant"])
     specs = run_specs(profile, tuple(meta["systems"]), tuple(meta["controllers"]))
     walls = {(run.system, run.controller, run.seed): run.wall_seconds for run in run_times(folder)}
-    runs = [Finished(profile.expected_seconds(spec), walls[spec], spec.framework) for spec in specs]
+    # the studies ran before the proof and the protocol: their costs without them
+    runs = [Finished(profile.training_seconds(spec), walls[spec], spec.framework) for spec in specs]
     points = replay(runs, int(meta["jobs"]), interval, REPORTS_PROGRESS)
     errors = [(point.eta - point.remaining) / point.remaining for point in points]
     absolute = [abs(error) for error in errors]

@@ -799,16 +799,24 @@ def test_profiles_carry_measured_run_costs() -> None:
     quick, paper, smoke = (get_profile(name) for name in ("quick", "paper", "smoke"))
     spec = RunSpec("cartpole", "pilco_hybrid", 0)
     # results/paper, median over its seeds (tests/test_eta_costs.py checks the whole table)
-    assert paper.expected_seconds(spec) == 176.2
+    assert paper.training_seconds(spec) == 176.2
     assert quick.expected_seconds(spec) < paper.expected_seconds(spec)
     # DDPG and SAC measured at leoc's budgets (21k steps on the cart-pole), none derived
-    assert paper.expected_seconds(RunSpec("cartpole", "ddpg_hybrid", 0)) == 101.2
-    assert paper.expected_seconds(RunSpec("mountaincar", "sac_hybrid", 0)) == 387.2
+    assert paper.training_seconds(RunSpec("cartpole", "ddpg_hybrid", 0)) == 101.2
+    assert paper.training_seconds(RunSpec("mountaincar", "sac_hybrid", 0)) == 387.2
     # a user's system: the mean of the same controller elsewhere
     other = RunSpec("acrobot", "ddpg_hybrid", 0)
-    assert paper.expected_seconds(other) == pytest.approx((52.2 + 101.2 + 99.1) / 3)
+    assert paper.training_seconds(other) == pytest.approx((52.2 + 101.2 + 99.1) / 3)
     assert smoke.cost_model is None and quick.cost_model is not None
-    assert smoke.expected_seconds(spec) == FALLBACK_RUN_SECONDS["pilco"]
+    assert smoke.training_seconds(spec) == FALLBACK_RUN_SECONDS["pilco"]
+    # the proof and the protocol, which the measured studies did not run, come on top: their
+    # system's and learner's cost, else the learner's mean elsewhere, else nothing
+    costs = paper.evaluation_seconds
+    assert paper.expected_seconds(spec) == 176.2 + costs["cartpole/pilco"]
+    assert paper.evaluation_cost(other) == pytest.approx(
+        sum(v for k, v in costs.items() if k.endswith("/ddpg")) / 3
+    )
+    assert smoke.evaluation_cost(spec) == 0.0 and smoke.evaluation_seconds == {}
 
 
 def test_ablation_eta_scales_the_measured_cost_from_leocs_budget(monkeypatch) -> None:

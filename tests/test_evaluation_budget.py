@@ -57,7 +57,7 @@ def _points(points: list[dict]) -> dict[tuple[str, float], dict]:
 
 def test_the_smoke_robustness_points_are_the_full_sweep_s_at_its_scales() -> None:
     system, design, _ = _pendulum()
-    full = EvaluationContext("pendulum", system, lqr_controller(design), 3, LEOC)
+    full = EvaluationContext("pendulum", system, lqr_controller(design), 3, LEOC, "linear")
     smoke = dataclasses.replace(full, budget=SMOKE)
     everything = _points(evaluate_robustness(full))
     reduced = _points(evaluate_robustness(smoke))
@@ -100,7 +100,7 @@ def test_one_response_simulation_serves_both_metric_sets() -> None:
     # a weak gain: the step response leans past 1 degree, where the authors' band and final
     # value differ from leoc's
     controller = LinearController(0.3 * design.W, design.b)
-    responses = evaluate_responses(EvaluationContext("pendulum", system, controller, 0, LEOC))
+    responses = evaluate_responses(EvaluationContext("pendulum", system, controller, 0, LEOC, "linear"))
     for test, entry in responses.items():
         alone = response_test(system, controller, test, RESPONSE_STEPS, metric_set="authors")
         np.testing.assert_allclose(entry["deviation_authors"], alone.deviation, rtol=1e-12)

@@ -18,6 +18,8 @@ from leoc.control import design_lqr
 from leoc.evaluation.rollout import response_test
 from leoc.experiments.controllers import load_trained_controller
 from leoc.experiments.profiles import DEFAULT_CONTROLLERS, get_profile, run_specs
+from leoc.experiments.report import proved_regions as proved_section
+from leoc.experiments.report import robustness_protocol as protocol_section
 from leoc.experiments.reproduce import (
     EVALUATION_FILE,
     pilco_action_repeat,
@@ -266,6 +268,14 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
         for hybrid in ("ddpg_hybrid", "pilco_hybrid"):
             claims = runs[hybrid]["hybrid_claims"]
             assert len(claims["impulse_sweep"]["hybrid"]) == 2, hybrid
+        # every trained run's own proved region (a hybrid's equilibrium is a), none for the
+        # LQRs; every run's robustness protocol at the smoke budget, seed 0
+        assert runs["linear"]["proved_region"] is runs["linear_pilco"]["proved_region"] is None
+        for hybrid in ("ddpg_hybrid", "pilco_hybrid"):
+            proof = runs[hybrid]["proved_region"]
+            assert proof["equilibrium_found"] and max(map(abs, proof["offset"])) < 1e-9, hybrid
+        assert all(run["robustness_protocol"]["level_count"] == 3 for run in runs.values())
+        assert (out / f"robustness_protocol_{system}.png").stat().st_size > 0
         # a held PILCO controller: the same closed loop through reproduce, the library and
         # `leoc simulate` given the run folder reproduce prints
         run_folder = out / "runs" / system / "pilco_hybrid" / "seed0"
@@ -285,6 +295,10 @@ def _smoke_end_to_end(out: Path, systems: list[str]) -> None:
     report = (out / "report.md").read_text()
     assert "## Summary" in report and "**What worked:**" in report
     assert "g is scaled by 0.5x, 1x, 5x: per scale" in report
+    assert "## Proved regions of the trained controllers" in report
+    assert "## Robustness protocol" in report
+    assert proved_section.NOT_MEASURED not in report
+    assert protocol_section.NOT_MEASURED not in report
     # the selection each run recorded: DDPG's best_held, PILCO's final (the smoke profile's)
     assert runs["ddpg_hybrid"]["curve"]["model_selection"] == "best_held"
     assert runs["pilco_hybrid"]["curve"]["model_selection"] == "final"

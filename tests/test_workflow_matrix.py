@@ -106,6 +106,14 @@ PRODUCT = [
 ]
 #: The rest of the product, in the extended suite (about 20 minutes on 2 cores).
 EXTENDED_CASES = [case for case in PRODUCT if case not in FAST_CASES]
+#: Training under perturbation (``--perturb``, ``--randomise``) through the same workflow: a
+#: model-free ROA hybrid (its impulse response is still exactly its LQR's: the evaluations run
+#: on the nominal plant) and a PILCO hybrid under the authors' variant.
+PERTURBED_CASES = [
+    ("td3", "hybrid_roa", "pendulum", "leoc"),
+    ("pilco", "hybrid", "cartpole", "authors"),
+]
+PERTURBATION_ARGS = ["--randomise", "observation_noise=0.1", "--perturb", "actuator_gain=-0.2"]
 
 
 def _case_id(case: tuple[str, str, str, str]) -> str:
@@ -118,8 +126,10 @@ def _run(args: list[str], capsys) -> tuple[int, str, str]:
     return code, captured.out, captured.err
 
 
-def _train_args(learner: str, kind: str, system: str, variant: str, out: Path) -> list[str]:
-    args = ["train", system, "--algo", learner, "--variant", variant, "--profile", "smoke"]
+def _train_args(
+    learner: str, kind: str, system: str, variant: str, out: Path, extra: tuple = ()
+) -> list[str]:
+    args = ["train", system, "--algo", learner, "--variant", variant, "--profile", "smoke", *extra]
     if kind != "baseline":
         args += ["--hybrid", "--relevance", KIND_RELEVANCE[kind]]
     return [*args, "--out", out, "--quiet"]
@@ -174,10 +184,12 @@ def _linear_response(run: Path, learner: str, variant: str, period: int) -> np.n
     return response_test(plant, controller, steps=chosen.steps_for(plant.name)).deviation
 
 
-def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> None:
+def _check_workflow(
+    case: tuple[str, str, str, str], tmp_path: Path, capsys, extra: tuple = ()
+) -> None:
     learner, kind, system, variant = case
     run = tmp_path / "run"
-    train = _train_args(learner, kind, system, variant, run)
+    train = _train_args(learner, kind, system, variant, run, extra)
     code, out, err = _run(train, capsys)
     # the authors' LQR is their own linearisation, which exists for the paper's systems only: a
     # hybrid needs it (refused in one line, nothing written); a baseline trains without it
@@ -197,8 +209,14 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
     # the variant it ran under, or one on the same plant when the rules cannot tell them apart
     assert VARIANTS[response["variant"]].rules_for(system) == VARIANTS[variant].rules_for(system)
     assert response["variant"] == variant or no_authors_lqr
-    recorded_rules = json.loads((run / "config.json").read_text()).get("step_rules") or {}
-    assert response["step_rules"] == dataclasses.asdict(StepRules(**recorded_rules))
+    recorded = json.loads((run / "config.json").read_text())
+    assert response["step_rules"] == dataclasses.asdict(
+        StepRules(**(recorded.get("step_rules") or {}))
+    )
+    # what it was trained under, as recorded (nothing for a nominal run)
+    trained_under = recorded.get("training_perturbations")
+    assert bool(trained_under) == bool(extra)
+    assert response["training_perturbations"] == (trained_under or {"fixed": {}, "randomised": {}})
     deviation = np.asarray(response["deviation"])
     assert deviation.size > 1 and np.isfinite(deviation).all()
 
@@ -225,6 +243,7 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
     assert code == 0, err
     report = json.loads(out)
     assert report["system"] == system
+    assert report["trained_under"] == {str(run): response["training_perturbations"]}
     assert report["plant"]["legacy_integrator"] == (variant == "authors" and system == "pendulum")
     (held,) = [entry for label, entry in report["basins"].items() if label == run.name]
     assert 0.0 <= held["certified_set_held"] <= 1.0
@@ -249,6 +268,11 @@ def _check_workflow(case: tuple[str, str, str, str], tmp_path: Path, capsys) -> 
 @pytest.mark.parametrize("case", FAST_CASES, ids=_case_id)
 def test_workflow(case, tmp_path, capsys) -> None:
     _check_workflow(case, tmp_path, capsys)
+
+
+@pytest.mark.parametrize("case", PERTURBED_CASES, ids=_case_id)
+def test_workflow_under_perturbation(case, tmp_path, capsys) -> None:
+    _check_workflow(case, tmp_path, capsys, tuple(PERTURBATION_ARGS))
 
 
 @pytest.mark.slow

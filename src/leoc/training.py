@@ -31,6 +31,9 @@ Run folder (every file written atomically)::
     learning_curve.png   mean return (+/- std) against interaction time
     controller file      PILCO ``controller.pt``, DDPG/TD3 ``model.zip`` (loaded with its
                          control period by ``experiments.controllers.load_trained_controller``)
+    training_plants.json a run trained under perturbation only (its config's
+                         ``training_perturbations``): the levels of every training episode
+                         begun, in order (:func:`write_training_plants`)
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ CONFIG_FILE = "config.json"
 CURVE_JSON = "curve.json"
 CURVE_CSV = "curve.csv"
 CURVE_PNG = "learning_curve.png"
+TRAINING_PLANTS_FILE = "training_plants.json"
 #: Columns of every learning-curve row (``curve.csv``).
 CURVE_COLUMNS = ("steps", "interaction_seconds", "mean_return", "std_return", "held_fraction")
 MODEL_SELECTION = "final"
@@ -219,6 +223,18 @@ def write_curve(
     write_json_atomic(run_dir / CURVE_JSON, {"curve": list(curve), "summary": summary}, indent=2)
     write_csv_atomic(run_dir / CURVE_CSV, curve, CURVE_COLUMNS)
     plot_curve(curve, title, run_dir / CURVE_PNG)
+
+
+def write_training_plants(run_dir: Path, plants: Any) -> None:
+    """``training_plants.json`` of a run trained under perturbation: its
+    ``training_perturbations``, seed and the levels of each training episode begun
+    (``plants``: the run's :class:`~leoc.systems.EpisodePlants`)."""
+    record = {
+        "training_perturbations": plants.spec.as_dict(),
+        "seed": plants.seed,
+        "episodes": plants.levels(),
+    }
+    write_json_atomic(Path(run_dir) / TRAINING_PLANTS_FILE, record, indent=2)
 
 
 def run_folder(root: str | Path, system: str, controller: str, seed: int) -> Path:

@@ -114,3 +114,21 @@ def numbers(text: str) -> float | tuple[float, ...]:
             f"expected a number or comma-separated numbers, found {text!r}"
         ) from None
     return values[0] if len(values) == 1 else values
+
+
+def category_level(text: str) -> tuple[str, float]:
+    """argparse type: ``KEY=NUMBER``, a perturbation category (``parameter_error.CONSTANT`` for
+    a parameter error) and its level, as ``(key, number)``; which keys and levels are valid is
+    :class:`leoc.systems.TrainingPerturbations`'s to say."""
+    key, separator, value = text.partition("=")
+    if not separator or not key.strip():
+        raise argparse.ArgumentTypeError(
+            f"expected CATEGORY=LEVEL (e.g. observation_noise=0.1), found {text!r}"
+        )
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected CATEGORY=LEVEL with LEVEL a number, found {text!r}"
+        ) from None
+    return key.strip(), number

@@ -200,27 +200,16 @@ LINEAR_PART_ATOL = 1e-12
 design: equal up to rounding)."""
 
 
-def _output_saturation(controller) -> str:
-    """The squash of a loaded run's output: that of its outermost module with a ``saturation``
-    (the hybrid's or PILCO's ``sin``); ``clip`` when it has none or it is the actuator's."""
-    from leoc.policies.hybrid import ACTUATOR_CLIPS
-
-    for module in controller.modules():
-        saturation = getattr(module, "saturation", None)
-        if isinstance(saturation, str):
-            return "clip" if saturation in ACTUATOR_CLIPS else saturation
-    return "clip"
-
-
 def run_lqr(spec: str, controller) -> CertifiedLQR:
     """The LQR the run in ``spec`` (loaded as ``controller``) was trained with: its config's
     ``lqr_method``, the loaded controller's control period and output squash."""
     from leoc.experiments.controllers import trainer_dir
+    from leoc.policies.hybrid import output_saturation
     from leoc.systems.rollout import control_period
     from leoc.training import read_config
 
     method = read_config(trainer_dir(spec)).get("lqr_method") or DEFAULT_LQR_METHOD
-    return CertifiedLQR(str(method), control_period(controller), _output_saturation(controller))
+    return CertifiedLQR(str(method), control_period(controller), output_saturation(controller))
 
 
 def certified_lqr_choice(args: argparse.Namespace, runs: dict) -> CertifiedLQR:
@@ -485,6 +474,8 @@ def run(args: argparse.Namespace) -> int:
     refuse_gym_roa(list(args.controller or []))
     import torch
 
+    from leoc.experiments.controllers import trained_under
+
     torch.set_num_threads(1)
     started = time.perf_counter()
     if args.prove and not args.controller:
@@ -500,6 +491,7 @@ def run(args: argparse.Namespace) -> int:
     cover = _box_cover(args, system, certified.certificate)
     basins = _measure_basins(args, system, certified, lqr, runs, cover.box)
     report = _roa_report(args, system, lqr, runs, certified, cover, basins)
+    report["trained_under"] = trained_under(list(runs))  # certified on the nominal plant
     if args.prove:
         report["proofs"] = _prove_controllers(args, system, certified, runs, cover.box)
     if args.plot:

@@ -249,6 +249,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from leoc.evaluation.robustness_protocol import CATEGORY_NAMES, run_protocol
+    from leoc.experiments.controllers import trained_under
 
     torch.set_num_threads(1)
     started = time.perf_counter()
@@ -273,6 +274,7 @@ def run(args: argparse.Namespace) -> int:
             progress=_progress(label),
         )
     report = _report(args, system, results, controllers)
+    report["trained_under"] = trained_under(scored.specs)  # the protocol's plant is nominal
     if args.plot:
         from leoc.evaluation.plots.robustness_protocol import plot_protocol_scores
 

@@ -284,16 +284,30 @@ def simulated_system(target: Target, variant):
     return trained_plant(target.controller)
 
 
+def _trained_under(target: Target) -> Any:
+    """What ``target``'s controller was trained under (nominal for the LQR)."""
+    from leoc.systems import TrainingPerturbations
+
+    if target.controller == LINEAR:
+        return TrainingPerturbations()
+    from leoc.experiments.controllers import trained_perturbations
+
+    return trained_perturbations(target.controller)
+
+
 def _json_report(
     args: argparse.Namespace, target: Target, system: Any, result: Any, period: int
 ) -> dict[str, Any]:
-    """What ``--json`` prints: the test, its plant and rules, metrics and record."""
+    """What ``--json`` prints: the test, its plant and rules, what a run was trained under
+    (``training_perturbations``, {} for the LQR and nominal runs: the test itself runs on the
+    nominal plant), metrics and record."""
     return {
         "system": target.system,
         "controller": target.controller,
         "test": args.test,
         "variant": args.variant,
         "step_rules": dataclasses.asdict(system.rules),
+        "training_perturbations": _trained_under(target).as_dict(),
         "metrics_set": args.metrics,
         "action_repeat": period,
         "metrics": result.metrics._asdict(),
@@ -377,3 +391,6 @@ def _print_metrics(args: argparse.Namespace, target: Target, system, result, per
     print(f"  settling time:      {settling} (band {band})")
     print(f"  terminated:         {'yes' if metrics.terminated else 'no'}")
     print(f"  return:             {result.trajectory.total_reward:.4f}")
+    trained_under = _trained_under(target)
+    if not trained_under.is_nominal:
+        print(f"  trained under:      {trained_under.describe()} (simulated on the nominal plant)")

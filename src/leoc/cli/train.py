@@ -9,6 +9,7 @@ from typing import Any
 
 from leoc.cli._args import (
     SYSTEM_HELP,
+    category_level,
     non_negative_int,
     numbers,
     positive_int,
@@ -20,6 +21,7 @@ from leoc.names import (
     LEARNER_NAMES,
     PROFILE_NAMES,
     RELEVANCE_NAMES,
+    ROBUSTNESS_CATEGORIES,
     VARIANT_NAMES,
     ControllerName,
     gym_env_id,
@@ -56,8 +58,13 @@ DESCRIPTION = (
     "same command resumes an interrupted run from its last checkpoint (PILCO: every iteration; "
     "DDPG/TD3/SAC: every 1000 steps, exactly as if it had not stopped) and returns a finished "
     "one without training; PILCO extends a run given more --iterations. A run folder holding "
-    "another configuration is refused unless --overwrite."
+    "another configuration is refused unless --overwrite. --perturb and --randomise train on a "
+    "perturbed plant (the robustness protocol's categories; docs/user_guide/"
+    "robustness_protocol.md); the evaluations stay on the nominal plant."
 )
+PERTURBATION_FLAGS = {"fixed": "--perturb", "randomised": "--randomise"}
+"""Each :class:`~leoc.systems.TrainingPerturbations` field and the ``leoc train`` flag that
+fills it."""
 
 
 def add_parser(commands: Any) -> None:
@@ -112,6 +119,7 @@ def add_parser(commands: Any) -> None:
         "(default: refuse, naming the settings that differ)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
+    add_perturbation_arguments(train)
     train.set_defaults(run=run)
 
 
@@ -125,6 +133,34 @@ def train_system(text: str) -> str:
             raise argparse.ArgumentTypeError(str(error)) from None
         return text
     return system_name(text)
+
+
+def add_perturbation_arguments(train: argparse.ArgumentParser) -> None:
+    """Add ``--perturb`` and ``--randomise`` (training under perturbation) to ``train``."""
+    group = train.add_argument_group(
+        "training under perturbation (categories and units of 'leoc robustness': "
+        f"{', '.join(ROBUSTNESS_CATEGORIES)}; a parameter error as parameter_error.CONSTANT; "
+        "each category once; evaluations stay on the nominal plant)"
+    )
+    group.add_argument(
+        "--perturb",
+        action="append",
+        type=category_level,
+        metavar="CATEGORY=LEVEL",
+        help="train on the plant with this level of CATEGORY in every episode (signed for "
+        "actuator_gain and parameter_error: gain - 1, factor - 1); repeatable",
+    )
+    group.add_argument(
+        "--randomise",
+        "--randomize",
+        dest="randomise",
+        action="append",
+        type=category_level,
+        metavar="CATEGORY=MAX",
+        help="domain randomisation: each training episode draws the level of CATEGORY "
+        "uniformly between none and MAX (-MAX to MAX for actuator_gain and parameter_error, "
+        "whole steps for action_delay), from --seed; repeatable",
+    )
 
 
 def add_relevance_arguments(train: argparse.ArgumentParser) -> None:
@@ -312,7 +348,35 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     settings = profile.training_settings(variant, controller_of(args), args.system, budget)
     # the flags given win over the variant's and the profile's refinements of the hybrid
     settings.update({k: v for k, v in hybrid_changes(args).items() if k != "relevance"})
+    perturbations = perturbations_of(args)
+    if perturbations is not None:  # the flags replace a profile's training perturbations
+        settings["training_perturbations"] = perturbations
     return settings
+
+
+def perturbations_of(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The ``training_perturbations`` setting of ``--perturb`` and ``--randomise``
+    (:meth:`leoc.systems.TrainingPerturbations.as_dict`), checked against the system; None
+    when neither is given.
+
+    Raises
+    ------
+    ValueError
+        Naming the flag, the entry, what was expected and what was found.
+    """
+    if not args.perturb and not args.randomise:
+        return None
+    from leoc.systems import TrainingPerturbations, make_system
+
+    try:
+        spec = TrainingPerturbations(tuple(args.perturb or ()), tuple(args.randomise or ()))
+        spec.check(make_system(args.system))
+    except ValueError as error:
+        field, _, rest = str(error).partition(": ")
+        if field not in PERTURBATION_FLAGS:
+            raise
+        raise ValueError(f"{PERTURBATION_FLAGS[field]}: {rest}") from None
+    return spec.as_dict()
 
 
 def check_run_folder_hybrid(run_dir: Path, hybrid: Any, overwrite: bool) -> None:
@@ -366,6 +430,7 @@ def run(args: argparse.Namespace) -> int:
     check_run_folder_hybrid(run_dir, hybrid, args.overwrite)
     # the system, built once: the variant's, stepping under the rules the settings record
     system = get_variant(args.variant).system(args.system)
+    announce_perturbations(settings, args.quiet)
     try:
         result = get_learner(args.algo).train(
             system,
@@ -399,6 +464,12 @@ def run_gym(args: argparse.Namespace) -> int:
             f"--variant, --profile: expected neither for a gymnasium env (leoc's settings, "
             f"GYM_DEFAULTS), found --variant {args.variant} --profile {args.profile}"
         )
+    if getattr(args, "perturb", None) or getattr(args, "randomise", None):
+        raise ValueError(
+            "--perturb, --randomise: expected neither for a gymnasium env (leoc's perturbations "
+            "act on a leoc system's plant), found "
+            f"{[*(args.perturb or []), *(args.randomise or [])]}"
+        )
     hybrid = hybrid_of(args)
     from leoc.sb3.gym import train_gym
 
@@ -422,3 +493,14 @@ def run_gym(args: argparse.Namespace) -> int:
         raise ValueError(message) from error
     print(f"run folder: {result.run_dir}")
     return 0
+
+
+def announce_perturbations(settings: dict[str, Any], quiet: bool) -> None:
+    """Say on stdout what a run is trained under, when it is perturbed (not ``quiet``)."""
+    record = settings.get("training_perturbations")
+    if quiet or not record:
+        return
+    from leoc.systems import TrainingPerturbations
+
+    spec = TrainingPerturbations.from_dict(record)
+    print(f"training under perturbation: {spec.describe()} (evaluations on the nominal plant)")

@@ -10,7 +10,10 @@ point a:
 - ``volume_ratio``: the proved ellipsoid's volume over the LQR's (exact: from ``rho`` and
   ``det P``; it may exceed the box);
 - the equilibrium ``offset`` ``x* - a``: a baseline's steady-state error (0 for a hybrid);
-- what limited the proof and its seconds.
+- what limited the proof and its seconds;
+- for an ROA-relevance hybrid, whether its proved set lies inside its flat top
+  ``{V_flat <= rho_in}`` (``flat_top_cover`` <= 1, :func:`flat_top_cover`): there r == 1,
+  the hybrid is its saturated LQR, and its proved region is the LQR's by construction.
 
 A proved share is a guarantee; the empirical basins of :mod:`leoc.evaluation.basins` (where the
 controller is *seen* to converge) stay beside it as the sampled, larger, figure.
@@ -29,7 +32,7 @@ from leoc.control.trained import ControllerCertificate, certify_controller, log_
 from leoc.evaluation.basins import box_fraction
 from leoc.systems.base import System
 
-__all__ = ["describe_proved_region", "proved_region"]
+__all__ = ["describe_proved_region", "flat_top_cover", "proved_region"]
 
 
 def _ratio(value: float, reference: float) -> float | None:
@@ -62,6 +65,45 @@ def _comparison(
         "volume_ratio": volume_ratio,
         "lqr_rho": lqr.rho,
     }
+
+
+def _flat_top(controller: Any) -> tuple[float, np.ndarray] | None:
+    """``rho_in`` and the matrix of an ROA relevance inside ``controller`` (None without)."""
+    import torch
+
+    from leoc.policies.relevance import ROARelevance
+
+    modules = controller.modules() if isinstance(controller, torch.nn.Module) else ()
+    for module in modules:
+        if isinstance(module, ROARelevance):
+            matrix = module.lyapunov_matrix.detach().cpu().numpy().astype(float)
+            return float(module.rho_in), matrix
+    return None
+
+
+def flat_top_cover(controller: Any, proved: ControllerCertificate, offset: Any) -> float | None:
+    r"""An upper bound on :math:`\max V_{flat}(x - a) / \rho_{in}` over the proved set
+    :math:`\{(x - x^*)^\top P (x - x^*) \le \rho\}` of an ROA-relevance hybrid, whose
+    relevance is 1 on :math:`\{V_{flat} \le \rho_{in}\}`; None for another controller or
+    when nothing is proved. At most 1: r == 1 on the whole proved set.
+
+    With :math:`d = x^* - a` (``offset``) and :math:`\lambda` the largest generalised
+    eigenvalue of :math:`(P_{flat}, P)`, the triangle inequality in the :math:`P_{flat}` norm
+    gives :math:`\sqrt{V_{flat}} \le \sqrt{d^\top P_{flat} d} + \sqrt{\lambda \rho}`
+    (angles compared unwrapped: the proved set lies in the allowed region, well inside
+    :math:`\pm\pi`).
+    """
+    found = _flat_top(controller)
+    if found is None or not proved.rho > 0.0:
+        return None
+    rho_in, flat = found
+    # lambda_max of P^-1 P_flat through the Cholesky factor of P (symmetric, no inverse)
+    lower = np.linalg.cholesky(np.asarray(proved.certificate.P, dtype=float))
+    scaled = np.linalg.solve(lower, np.linalg.solve(lower, flat).T)
+    largest = float(np.linalg.eigvalsh(0.5 * (scaled + scaled.T)).max())
+    shift = np.asarray(offset, dtype=float)
+    reach = math.sqrt(max(0.0, float(shift @ flat @ shift))) + math.sqrt(largest * proved.rho)
+    return reach**2 / rho_in
 
 
 def proved_region(
@@ -98,8 +140,9 @@ def proved_region(
     -------
     dict
         :meth:`~leoc.control.ControllerCertificate.summary` with the comparison
-        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``),
-        ``seconds`` and the ``device`` of the box search.
+        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``), the flat
+        top (``flat_top_rho``, ``flat_top_cover``: :func:`flat_top_cover`; None without an
+        ROA relevance), ``seconds`` and the ``device`` of the box search.
     """
     proved = certify_controller(
         system,
@@ -112,9 +155,13 @@ def proved_region(
         device=device,
     )
     half = np.asarray(box, dtype=float)
+    summary = proved.summary(system)
+    found = _flat_top(controller)
     return {
-        **proved.summary(system),
+        **summary,
         **_comparison(system, proved, lqr, half, seed),
+        "flat_top_rho": None if found is None else found[0],
+        "flat_top_cover": flat_top_cover(controller, proved, summary["offset"]),
         "seconds": proved.seconds,
         "device": str(device),
     }

@@ -25,7 +25,9 @@ the hold band for at least the system's minimum hold duration at the end). Then
 with ``L_c`` the levels of category ``c`` (times its constants for the parameter errors),
 ``K`` the start kinds, ``N`` the episodes per start kind and ``C`` the categories run.
 
-Categories (the level, and what it perturbs):
+Categories (the level, and what it perturbs; the one mapping from a level to the plant is
+:func:`leoc.systems.perturbation_levels.category_perturbations`, which training under
+perturbation uses too):
 
 =====================  ===============================================================
 ``observation_noise``  std of Gaussian noise on the observed velocities (their units);
@@ -39,7 +41,8 @@ Categories (the level, and what it perturbs):
 ``parameter_error``    ``factor - 1`` of one physical constant at a time, two-sided;
                        one sub-sweep per constant of the system's table entry
 ``push``               velocity change of the main coordinate per push, at random
-                       times (:data:`PUSHES_PER_EPISODE` expected per episode)
+                       times (:data:`~leoc.systems.PUSHES_PER_EPISODE`
+                       expected per episode)
 =====================  ===============================================================
 
 Friction is two categories, as RealAIGym scores damping and Coulomb friction apart: they act
@@ -73,16 +76,11 @@ import numpy as np
 from leoc.io import write_json_atomic
 from leoc.names import ROBUSTNESS_CATEGORIES, ROBUSTNESS_EPISODES, ROBUSTNESS_LEVELS
 from leoc.systems.base import System
-from leoc.systems.perturbations import (
-    ActionDelay,
-    ActuatorGain,
-    Friction,
-    ObservationNoise,
-    ParameterError,
-    Perturbation,
-    Push,
-    TorqueNoise,
+from leoc.systems.perturbation_levels import (
+    TWO_SIDED_CATEGORIES,
+    category_perturbations,
 )
+from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import Controller, control_period, hold_step, simulate
 
 __all__ = [
@@ -94,8 +92,6 @@ __all__ = [
     "DEFAULT_LEVELS",
     "DEFAULT_MAX_LEVELS",
     "PROTOCOL_START_KINDS",
-    "PUSHES_PER_EPISODE",
-    "TWO_SIDED_CATEGORIES",
     "MAX_LEVEL_DIGITS",
     "CategoryResult",
     "FailureLevel",
@@ -121,10 +117,6 @@ DEFAULT_LEVELS: int = ROBUSTNESS_LEVELS
 DEFAULT_EPISODES: int = ROBUSTNESS_EPISODES
 #: Where the episodes start: the operating region, and the swing-up start.
 PROTOCOL_START_KINDS: tuple[str, ...] = ("operating_region", "swing_up")
-#: Categories whose level is a signed deviation from a nominal factor of 1.
-TWO_SIDED_CATEGORIES: tuple[str, ...] = ("actuator_gain", "parameter_error")
-#: Expected pushes per episode (the push rate is this over the episode's duration).
-PUSHES_PER_EPISODE = 2.0
 STARTS_STREAM = 0  # the SeedSequence key of the starts (categories count from 1)
 
 
@@ -279,41 +271,6 @@ class Setting(NamedTuple):
     perturbations: tuple[Perturbation, ...]
 
 
-def _velocity_noise(system: System, level: float, seed: int) -> tuple[Perturbation, ...]:
-    """Observation noise of std ``level`` on the observed velocities, none elsewhere."""
-    columns = system.observation.state_columns()
-    velocity = {columns[i] for i in system.velocity_indices if i in columns}
-    if not velocity:
-        raise ValueError(
-            f"observation_noise: system {system.name!r} observes no velocity as itself "
-            "(velocity_indices and its observation map)"
-        )
-    std = tuple(level if column in velocity else 0.0 for column in range(system.obs_dim))
-    return (ObservationNoise(std, seed),)
-
-
-def _perturbations(
-    system: System, category: str, level: float, seed: int, repeat: int, constant: str | None
-) -> tuple[Perturbation, ...]:
-    """The plant's perturbations at ``level`` of ``category`` (module docstring's table)."""
-    if category == "observation_noise":
-        return _velocity_noise(system, level, seed)
-    if category == "action_delay":
-        return (ActionDelay(level / repeat),)
-    if category == "actuator_gain":
-        return (ActuatorGain(1.0 + level),)
-    if category == "torque_noise":
-        return (TorqueNoise(level, seed),)
-    if category == "viscous_friction":
-        return (Friction(viscous=level),)
-    if category == "coulomb_friction":
-        return (Friction(coulomb=level),)
-    if category == "parameter_error":
-        return (ParameterError(str(constant), 1.0 + level),)
-    rate = PUSHES_PER_EPISODE / (system.episode_steps * system.dt)
-    return (Push(level, rate, seed=seed),)
-
-
 def category_settings(
     system: System,
     category: str,
@@ -329,7 +286,9 @@ def category_settings(
     constants = max_levels.constants if category == "parameter_error" else (None,)
     return [
         Setting(
-            level, constant, _perturbations(system, category, level, seed, action_repeat, constant)
+            level,
+            constant,
+            category_perturbations(system, category, level, seed, action_repeat, constant),
         )
         for constant in constants
         for level in grid
@@ -651,7 +610,7 @@ def _fails(system, controller, starts, category, level, constant, seed) -> bool:
         pushed[:, index] += (level, -level)
         return not all(_held(system, controller, pushed, Setting(level, None, ())))
     repeat = control_period(controller)
-    perturbations = _perturbations(system, category, level, seed, repeat, constant)
+    perturbations = category_perturbations(system, category, level, seed, repeat, constant)
     return not any(_held(system, controller, starts, Setting(level, constant, perturbations)))
 
 

@@ -18,6 +18,7 @@ from leoc.names import LINEAR
 from leoc.training import read_config
 
 if TYPE_CHECKING:
+    from leoc.systems import TrainingPerturbations
     from leoc.systems.base import StepRules, System
 
 REPRODUCE_TRAIN_DIR = "train"
@@ -97,6 +98,36 @@ def trained_step_rules(run_dir: str | Path) -> StepRules:
             f"run folder: {folder / 'config.json'} records step_rules {rules!r}, which are not "
             f"StepRules fields ({error})"
         ) from error
+
+
+def trained_perturbations(run_dir: str | Path) -> TrainingPerturbations:
+    """What the controller in ``run_dir`` was trained under: its config's
+    ``training_perturbations`` (:class:`~leoc.systems.TrainingPerturbations`; nominal when the
+    config records none, as every run trained on the nominal plant). Evaluations run on the
+    nominal plant (:func:`trained_plant`) whatever it says; it tells them how the run was
+    trained.
+
+    Raises
+    ------
+    ValueError
+        The record is not a valid spec (the message names the file).
+    """
+    from leoc.systems import TrainingPerturbations
+
+    folder = trainer_dir(run_dir)
+    record = read_config(folder).get("training_perturbations")
+    try:
+        return TrainingPerturbations.from_dict(record)
+    except ValueError as error:
+        raise ValueError(f"run folder: {folder / 'config.json'}: {error}") from error
+
+
+def trained_under(specs: list[str]) -> dict[str, dict]:
+    """Per run folder of ``specs`` (``linear`` skipped), what it was trained under
+    (:func:`trained_perturbations` as a dict; empty entries for a nominal run): what
+    ``leoc roa`` and ``leoc robustness`` record beside results that are all of the nominal
+    plant."""
+    return {str(spec): trained_perturbations(spec).as_dict() for spec in specs if spec != LINEAR}
 
 
 def trained_plant(run_dir: str | Path) -> System:

@@ -4,12 +4,15 @@ A run's ``evaluation.json`` (:func:`leoc.experiments.reproduce.execute_run`) sta
 :func:`evaluate_controller`'s dict: ``{evaluator.name: evaluator(context)}`` for every
 evaluator of :data:`EVALUATORS`, in that order. An evaluator is a name (its key in the file)
 and a function of an :class:`EvaluationContext` (the system stepping under the variant's rules,
-the controller at its own control period, the run's seed, the variant, and the LQR designed
-for that period with its proved certificate, computed once and shared) returning a
-JSON-friendly value. A new evaluation is one new evaluator and one entry of the list.
+the controller at its own control period, the run's seed, the variant, the profile's
+evaluation budget, and the LQR designed for that period with its proved certificate, computed
+once and shared) returning a JSON-friendly value. A new evaluation is one new evaluator and one
+entry of the list.
 
 Every evaluation is seeded on its own (the run's seed, or fixed seeds), so the values do not
-depend on the order of the list.
+depend on the order of the list. The proved region and the robustness protocol use fixed seeds
+(:data:`PROOF_SEED`, :data:`PROTOCOL_SEED`): every controller of a study meets the same samples,
+starts, noise and pushes, so their comparison is paired.
 """
 
 from __future__ import annotations
@@ -31,11 +34,14 @@ from leoc.evaluation.rollout import (
 from leoc.experiments.layout import SWING_UP_EPISODES
 from leoc.experiments.profiles import EvaluationBudget, RunSpec
 from leoc.experiments.variants import LEOC, Variant
+from leoc.names import controller_framework
 from leoc.systems.base import System
 from leoc.training import evaluate_episodes, evaluation_starts
 
 __all__ = [
     "EVALUATORS",
+    "PROOF_SEED",
+    "PROTOCOL_SEED",
     "CertifiedLQR",
     "EvaluationContext",
     "Evaluator",
@@ -44,14 +50,23 @@ __all__ = [
     "evaluate_controller",
     "evaluate_hybrid_claims",
     "evaluate_lqr_agreement",
+    "evaluate_proved_region",
     "evaluate_relevance",
     "evaluate_responses",
     "evaluate_robustness",
+    "evaluate_robustness_protocol",
     "evaluate_roa",
     "evaluate_swing_up",
     "hybrid_claims_of",
     "region_of_attraction",
 ]
+
+PROOF_SEED = 0
+"""Seed of a proved region's sampled estimates and box shares (``leoc roa``'s default): the
+same samples for every controller, and for the LQR beside it."""
+PROTOCOL_SEED = 0
+"""The robustness protocol's one seed (``leoc robustness``' default): every controller of a
+study, the LQRs included, runs from the same starts and meets the same noise and pushes."""
 
 
 DEFAULT_BUDGET = EvaluationBudget()
@@ -151,6 +166,9 @@ class EvaluationContext:
     seed : int
         The run's seed.
     variant : Variant
+    controller_name : str
+        The controller's name (``RunSpec.controller``; ``linear`` and ``linear_pilco`` are the
+        LQRs).
     budget : EvaluationBudget
         How large the costliest evaluations are (the profile's; default: their own defaults).
     """
@@ -160,6 +178,7 @@ class EvaluationContext:
     controller: torch.nn.Module
     seed: int
     variant: Variant
+    controller_name: str
     budget: EvaluationBudget = DEFAULT_BUDGET
 
     @functools.cached_property
@@ -270,6 +289,53 @@ def evaluate_lqr_agreement(context: EvaluationContext) -> dict[str, Any] | None:
     return lqr_agreement(context.system, context.controller, lqr)
 
 
+def evaluate_proved_region(context: EvaluationContext) -> dict[str, Any] | None:
+    """The controller's own proved region of attraction beside its LQR's
+    (:func:`leoc.evaluation.proved_regions.proved_region`, as ``leoc roa --controller RUN
+    --prove``): the LQR at its period, saturated as its output is (PILCO's ``sin``), on the
+    system's basin box, within the budget's ``proof_seconds``; with ``saturation`` and
+    ``budget_seconds``. None for the LQRs (their region is the ``roa`` entry's certificate)."""
+    from leoc.evaluation.basins import default_basin_box
+    from leoc.evaluation.proved_regions import proved_region
+    from leoc.policies.hybrid import lqr_certificate, output_saturation
+
+    if controller_framework(context.controller_name) == "linear":
+        return None
+    system, design = context.system, context.lqr.design
+    saturation = output_saturation(context.controller)
+    entry = proved_region(
+        system,
+        context.controller,
+        design,
+        lqr_certificate(system, design, saturation),
+        default_basin_box(system),
+        seed=PROOF_SEED,
+        max_seconds=context.budget.proof_seconds,
+    )
+    return {**entry, "saturation": saturation, "budget_seconds": context.budget.proof_seconds}
+
+
+def evaluate_robustness_protocol(context: EvaluationContext) -> dict[str, Any] | None:
+    """The robustness protocol (:func:`leoc.evaluation.robustness_protocol.run_protocol`) at
+    the budget's levels and episodes, seeded with :data:`PROTOCOL_SEED`, on the system's
+    measured maximum levels: :meth:`~leoc.evaluation.robustness_protocol.ProtocolResult.as_dict`
+    (every level's held episodes, and the scores). None for a system without measured maximum
+    levels (a user's: ``leoc robustness SYSTEM --calibrate`` measures them)."""
+    from leoc.evaluation.robustness_protocol import DEFAULT_MAX_LEVELS, run_protocol
+
+    if context.system.name not in DEFAULT_MAX_LEVELS:
+        return None
+    result = run_protocol(
+        context.system,
+        context.controller,
+        context.controller_name,
+        levels=context.budget.protocol_levels,
+        episodes=context.budget.protocol_episodes,
+        seed=PROTOCOL_SEED,
+    )
+    return result.as_dict()
+
+
 #: The evaluations of :func:`evaluate_controller`, in the order of ``evaluation.json``'s keys.
 EVALUATORS: tuple[Evaluator, ...] = (
     Evaluator("action_repeat", evaluate_action_repeat),
@@ -280,6 +346,8 @@ EVALUATORS: tuple[Evaluator, ...] = (
     Evaluator("swing_up", evaluate_swing_up),
     Evaluator("relevance", evaluate_relevance),
     Evaluator("lqr_agreement", evaluate_lqr_agreement),
+    Evaluator("proved_region", evaluate_proved_region),
+    Evaluator("robustness_protocol", evaluate_robustness_protocol),
 )
 
 
@@ -295,5 +363,7 @@ def evaluate_controller(
     ``variant.system(spec.system)``), sized by ``budget`` (the profile's):
     ``{evaluator.name: evaluator(context)}`` in order."""
     system = variant.system(spec.system) if system is None else system
-    context = EvaluationContext(spec.system, system, controller, spec.seed, variant, budget)
+    context = EvaluationContext(
+        spec.system, system, controller, spec.seed, variant, spec.controller, budget
+    )
     return {evaluator.name: evaluator(context) for evaluator in EVALUATORS}

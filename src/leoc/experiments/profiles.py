@@ -6,7 +6,14 @@ import dataclasses
 from typing import Any, NamedTuple
 
 from leoc.learners import ControllerSpec, get_learner
-from leoc.names import CONTROLLERS, DEFAULT_CONTROLLERS, controller_framework, parse_controller
+from leoc.names import (
+    CONTROLLERS,
+    DEFAULT_CONTROLLERS,
+    ROBUSTNESS_EPISODES,
+    ROBUSTNESS_LEVELS,
+    controller_framework,
+    parse_controller,
+)
 from leoc.systems import SYSTEM_NAMES, system_names
 
 # Every controller, in report order, and the default set (the paper's controllers and the two
@@ -39,6 +46,19 @@ CONTROLLER_LABELS = {
 }
 
 
+PROOF_SECONDS = 480.0
+"""The paper profile's proof budget [s]: ``leoc roa --proof-seconds``' default
+(:data:`leoc.control.proof.MAX_SECONDS`, not imported here: this module imports no torch)."""
+
+
+def _check_count(value: Any, name: str, least: int) -> None:
+    """Raise naming ``name`` unless ``value`` is an integer >= ``least``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise ValueError(
+            f"EvaluationBudget.{name}: expected an integer >= {least}, found {value!r}"
+        )
+
+
 @dataclasses.dataclass(frozen=True)
 class EvaluationBudget:
     """How large a profile's costliest evaluations are (:mod:`leoc.experiments.evaluators`):
@@ -55,12 +75,31 @@ class EvaluationBudget:
         Sizes of the hybrids' impulse sweep against their LQR (``hybrid_claims``; default
         :data:`leoc.evaluation.impulse_sweep.SWEEP_POINTS`), >= 2: the paper's size and the
         LQR's failure size at least.
+    proof_seconds : float
+        Wall-clock budget [s] of one controller's box searches (``proved_region``;
+        :func:`leoc.control.certify_controller`'s ``max_seconds``, shared by its candidate V);
+        past it the level proved so far is kept, limited by ``budget``.
+    protocol_levels : int
+        Levels per category of the robustness protocol (``robustness_protocol``), >= 2
+        (:func:`leoc.evaluation.robustness_protocol.run_protocol`'s ``levels``).
+    protocol_episodes : int
+        Episodes per level and start kind of the robustness protocol, >= 1.
     """
 
     robustness_scales: tuple[float, ...] | None = None
     impulse_sweep_points: int | None = None
+    proof_seconds: float = PROOF_SECONDS
+    protocol_levels: int = ROBUSTNESS_LEVELS
+    protocol_episodes: int = ROBUSTNESS_EPISODES
 
     def __post_init__(self) -> None:
+        seconds = self.proof_seconds
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not seconds > 0:
+            raise ValueError(
+                f"EvaluationBudget.proof_seconds: expected a positive number, found {seconds!r}"
+            )
+        _check_count(self.protocol_levels, "protocol_levels", 2)
+        _check_count(self.protocol_episodes, "protocol_episodes", 1)
         scales = self.robustness_scales
         if scales is not None and (
             not isinstance(scales, tuple)
@@ -121,6 +160,15 @@ class Profile:
     evaluation : EvaluationBudget
         How large the costliest evaluations of each run are (default: every evaluation's own
         default).
+    evaluation_seconds : dict ``"system/learner"`` -> float
+        Expected wall time [s] that :attr:`evaluation`'s proof and protocol add to one run of
+        that system and learner (``linear`` for the LQRs), beyond :attr:`run_seconds`, which
+        were measured before those evaluations existed; see :meth:`expected_seconds`.
+    training_perturbations : dict
+        The perturbations every trained run of the profile is trained under
+        (:meth:`leoc.systems.TrainingPerturbations.as_dict`: fixed levels, randomised maxima);
+        empty (every built-in profile): the nominal plant. ``leoc train --perturb`` and
+        ``--randomise`` replace it.
     """
 
     name: str
@@ -135,6 +183,8 @@ class Profile:
     run_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
     variant_run_seconds: dict[str, dict[str, float]] = dataclasses.field(default_factory=dict)
     evaluation: EvaluationBudget = EvaluationBudget()
+    evaluation_seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+    training_perturbations: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def for_variant(self, variant: str) -> Profile:
         """This profile costed as it runs under ``variant`` (a name of
@@ -146,9 +196,16 @@ class Profile:
         return dataclasses.replace(self, run_seconds={**self.run_seconds, **measured})
 
     def expected_seconds(self, spec: RunSpec) -> float:
-        """Expected wall time of ``spec`` on one worker: its measured kind, else the mean of
-        the measured runs of its controller on other systems, else the framework's fallback
-        (see :attr:`cost_model` for a profile with no measurements at all)."""
+        """Expected wall time of ``spec`` on one worker: :meth:`training_seconds` plus
+        :meth:`evaluation_cost` (see :attr:`cost_model` for a profile with no measurements at
+        all)."""
+        return self.training_seconds(spec) + self.evaluation_cost(spec)
+
+    def training_seconds(self, spec: RunSpec) -> float:
+        """Expected wall time of ``spec``'s training and of the evaluations the measured
+        studies ran (all but the proof and the protocol): its kind's :attr:`run_seconds`, else
+        the mean of the measured runs of its controller on other systems, else the framework's
+        fallback."""
         known = self.run_seconds.get(f"{spec.system}/{spec.controller}")
         if known is not None:
             return known
@@ -156,6 +213,15 @@ class Profile:
         if same:
             return sum(same) / len(same)
         return FALLBACK_RUN_SECONDS[spec.framework]
+
+    def evaluation_cost(self, spec: RunSpec) -> float:
+        """What the proof and the protocol add to ``spec`` [s]: :attr:`evaluation_seconds` of
+        its system and learner, else the mean of that learner's on other systems, else 0."""
+        known = self.evaluation_seconds.get(f"{spec.system}/{spec.framework}")
+        if known is not None:
+            return known
+        same = [v for k, v in self.evaluation_seconds.items() if k.endswith(f"/{spec.framework}")]
+        return sum(same) / len(same) if same else 0.0
 
     @property
     def cost_model(self):
@@ -180,7 +246,8 @@ class Profile:
         assembly ``leoc reproduce`` and ``leoc train`` share. The learner's ``settings_of``
         says whose settings it takes (TD3 DDPG's); its ``budget_unit`` which budget (PILCO's
         iterations, or the others' environment steps). The hybrid itself is
-        ``controller.hybrid``, which these fields may refine (the authors' Lambda)."""
+        ``controller.hybrid``, which these fields may refine (the authors' Lambda). A profile's
+        :attr:`training_perturbations` is added when it has any."""
         learner = get_learner(controller.learner)
         iterations = learner.budget_unit == "iterations"
         if budget is None:
@@ -192,6 +259,8 @@ class Profile:
         # the relevance design is the controller's own (its name says which): a variant's or a
         # profile's settings refine the hybrid's parameters, never switch its design
         settings.pop("relevance", None)
+        if self.training_perturbations:
+            settings["training_perturbations"] = dict(self.training_perturbations)
         return settings
 
 
@@ -297,8 +366,53 @@ QUICK_RUN_SECONDS = {
     "mountaincar/pilco_hybrid": 44.0,
     "mountaincar/pilco_hybrid_roa": 44.0,
 }
+# What the proof and the protocol add to a run [s] (Profile.evaluation_seconds): the tables
+# above were measured before they existed. The LQR's protocol at the paper's budget on one core
+# of the same machine (docs/user_guide/robustness_protocol.md's table); a learned controller's
+# protocol costs a factor more per episode (measured side by side on one loaded core, CPU time:
+# a DDPG actor 2.0x the LQR, a PILCO RBF policy at its period 1.4x; SAC's actor is DDPG's MLP);
+# the quick budget's 5 levels x 2 episodes run 0.3x the paper's settings (CPU time, measured).
+# A trained controller's proof: 25 s on the 2-D systems (benchmarks/bench_controller_proof.py:
+# trained pendulum controllers 18-25 s with both V; a mountain-car hybrid 10 s on a loaded
+# core), the cart-pole's its whole budget (its LQR alone takes 168 s, docs/user_guide/roa.md).
+PROTOCOL_LQR_SECONDS = {"pendulum": 15.0, "cartpole": 16.0, "mountaincar": 31.0}
+"""The LQR's robustness protocol at the paper's budget [s] per system (one core)."""
+PROTOCOL_LEARNER_FACTOR = {"linear": 1.0, "ddpg": 2.0, "sac": 2.0, "pilco": 1.4}
+"""A learner's controller's protocol time over the LQR's (measured side by side)."""
+QUICK_PROTOCOL_SHARE = 0.3
+"""The quick budget's protocol time over the paper's (measured)."""
+TRAINED_PROOF_SECONDS = {"pendulum": 25.0, "cartpole": PROOF_SECONDS, "mountaincar": 25.0}
+"""A trained controller's proof [s] per system, without a budget cut (the cart-pole's: the
+paper's whole budget)."""
 
-SMOKE_EVALUATION = EvaluationBudget(robustness_scales=(0.5, 1.0, 5.0), impulse_sweep_points=2)
+
+def evaluation_costs(protocol_share: float, proof_seconds: float) -> dict[str, float]:
+    """Expected seconds the proof and the protocol add to a run, by ``"system/learner"``:
+    the protocol at ``protocol_share`` of the paper's settings, and a trained controller's
+    proof cut at ``proof_seconds`` (the tables and their sources are in the comment above)."""
+    costs = {}
+    for system, protocol in PROTOCOL_LQR_SECONDS.items():
+        for learner, factor in PROTOCOL_LEARNER_FACTOR.items():
+            proof = (
+                0.0 if learner == "linear" else min(TRAINED_PROOF_SECONDS[system], proof_seconds)
+            )
+            costs[f"{system}/{learner}"] = round(protocol * factor * protocol_share + proof, 1)
+    return costs
+
+
+QUICK_EVALUATION_SECONDS = evaluation_costs(QUICK_PROTOCOL_SHARE, 30.0)
+"""The quick profile's :attr:`Profile.evaluation_seconds` (30 s proofs, 5 levels x 2 episodes)."""
+PAPER_EVALUATION_SECONDS = evaluation_costs(1.0, PROOF_SECONDS)
+"""The paper profile's :attr:`Profile.evaluation_seconds` (480 s proofs, 21 levels x 5
+episodes)."""
+
+SMOKE_EVALUATION = EvaluationBudget(
+    robustness_scales=(0.5, 1.0, 5.0),
+    impulse_sweep_points=2,
+    proof_seconds=2.0,
+    protocol_levels=3,
+    protocol_episodes=1,
+)
 """The smoke profile's evaluation budget: the robustness sweep at the smallest, the nominal and
 the largest scale, the impulse sweep at the paper's size and the LQR's failure size (every
 evaluation still runs, on 6 robustness points instead of 20: the pipeline check costs about
@@ -317,6 +431,8 @@ PROFILES: dict[str, Profile] = {
             "paper's budgets); numbers are indicative, not a reproduction of the paper's"
         ),
         run_seconds=QUICK_RUN_SECONDS,
+        evaluation=EvaluationBudget(proof_seconds=30.0, protocol_levels=5, protocol_episodes=2),
+        evaluation_seconds=QUICK_EVALUATION_SECONDS,
     ),
     "smoke": Profile(
         name="smoke",
@@ -357,6 +473,8 @@ PROFILES: dict[str, Profile] = {
         ),
         run_seconds=PAPER_RUN_SECONDS,
         variant_run_seconds={"authors": AUTHORS_RUN_SECONDS},
+        evaluation=EvaluationBudget(),
+        evaluation_seconds=PAPER_EVALUATION_SECONDS,
     ),
 }
 PROFILE_NAMES = tuple(PROFILES)

@@ -307,6 +307,7 @@ def _study_meta(
             "ddpg_steps": profile.ddpg_steps,
             "pilco_overrides": profile.pilco_overrides,
             "ddpg_overrides": profile.ddpg_overrides,
+            "evaluation": dataclasses.asdict(profile.evaluation),
         },
         "systems": list(systems),
         "controllers": list(controllers),

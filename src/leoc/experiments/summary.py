@@ -24,12 +24,14 @@ FLAG_SECTIONS = {
     "robustness": "robustness",
     "swing_up": "swing-up",
     "roa": "region of attraction",
+    "proved_regions": "proved regions",
 }
 """Report section of each group of checks (``results.json``'s ``flags`` and ``checks``)."""
 SHOWN_FAILURES = 3
 """Failures named per check in the report's summary (the biggest)."""
-SUMMARY_MAX_LINES = 15
-"""Lines of the report's summary at most (its heading included)."""
+SUMMARY_MAX_LINES = 17
+"""Lines of the report's summary at most (its heading included): a worked and a failed line
+per check of :data:`FLAG_SECTIONS`, the runs without results, headings and blank lines."""
 
 
 class Failure(NamedTuple):

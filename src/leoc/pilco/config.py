@@ -100,6 +100,12 @@ class PilcoConfig:
     step_rules : dict
         Fields of the :class:`~leoc.systems.StepRules` the real system steps under (empty:
         leoc's rules; the authors' variant sets theirs).
+    training_perturbations : dict
+        The perturbations of the real rollouts, the GP's data
+        (:meth:`leoc.systems.TrainingPerturbations.as_dict`: fixed levels and randomised
+        maxima, rollout ``k``'s plant drawn from the seed); empty: the nominal plant. The GP
+        model and the evaluation episodes are not perturbed. Recorded by :meth:`to_dict` only
+        when not empty.
     """
 
     system: str = "pendulum"
@@ -128,6 +134,7 @@ class PilcoConfig:
     deploy_action_repeat: int | None = None
     select_best_from: int = 0
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
+    training_perturbations: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @classmethod
     def for_system(cls, name: str, **overrides: Any) -> PilcoConfig:
@@ -200,6 +207,11 @@ class PilcoConfig:
         self.start_mean = _optional_floats(self.start_mean, "start_mean")
         self.start_variance = _optional_floats(self.start_variance, "start_variance", 0.0, True)
         self.policy_restarts = _counts(self.policy_restarts, "policy_restarts")
+        from leoc.systems.perturbation_levels import training_setting
+
+        self.training_perturbations = training_setting(
+            self.training_perturbations, self.system, self.action_repeat
+        )
 
     @property
     def training_rollout_steps(self) -> int:
@@ -216,9 +228,12 @@ class PilcoConfig:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The settings as plain data (JSON-ready), nested ``gp`` and ``hybrid`` included."""
+        """The settings as plain data (JSON-ready), nested ``gp`` and ``hybrid`` included
+        (``training_perturbations`` only when not empty: a nominal run's config is as before)."""
         data = dataclasses.asdict(self)
         data["hybrid"] = None if self.hybrid is None else self.hybrid.to_dict()
+        if not self.training_perturbations:
+            del data["training_perturbations"]
         return data
 
     @classmethod

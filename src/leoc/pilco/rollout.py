@@ -9,11 +9,13 @@ episode is therefore ``ceil(200 / repeat)`` decisions; only complete held decisi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from leoc.systems.base import System
+from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import Controller, Trajectory, hold_step, rollout
 
 
@@ -44,11 +46,21 @@ class Rollout(NamedTuple):
 
 
 def run_rollout(
-    system: System, controller: Controller, start: np.ndarray, steps: int, repeat: int
+    system: System,
+    controller: Controller,
+    start: np.ndarray,
+    steps: int,
+    repeat: int,
+    perturbations: Sequence[Perturbation] = (),
 ) -> Rollout:
     """Run ``steps`` simulator steps from ``start`` with ``controller`` deciding every
-    ``repeat`` steps, and cut the episode into GP data (see the module docstring)."""
-    trajectory = rollout(system, controller, start, steps, action_repeat=repeat)
+    ``repeat`` steps, and cut the episode into GP data (see the module docstring). With
+    ``perturbations`` the episode runs on that perturbed plant: the inputs are the observations
+    the controller saw (noisy ones with observation noise), the targets the plant's state
+    changes."""
+    trajectory = rollout(
+        system, controller, start, steps, action_repeat=repeat, perturbations=perturbations
+    )
     decisions = trajectory.steps // repeat
     index = np.arange(decisions) * repeat
     observations = trajectory.observations[index]

@@ -13,6 +13,13 @@ on the ``action_repeat``-step held map, so pi(a) = G(a) and dpi/dx(a) = W hold f
 loop actually run. ``deploy_action_repeat`` (the authors' choice: 1) evaluates, returns and saves
 it at another period instead.
 
+Training under perturbation (``training_perturbations``): each real rollout ``k`` (counted
+from 0, the random rollouts first) runs on episode ``k``'s plant of
+:class:`~leoc.systems.TrainingPerturbations` (the run's seed), so the data come from the
+perturbed plant; the GP model, the policy optimisation and the evaluation episodes are not
+perturbed. The plant depends on the seed and ``k`` only, so a resumed or extended run meets the
+plants the uninterrupted run would have.
+
 Model selection: the final policy (:mod:`leoc.training`), or with ``select_best_from = k`` the
 best-evaluated policy of iterations >= k (the authors' rule), written as ``controller.pt`` and
 returned at the end; the checkpoint keeps the latest policy, so a resumed run goes on from it.
@@ -52,8 +59,9 @@ from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
 from leoc.policies.spec import HybridSpec
 from leoc.progress import ProgressLine, evaluation_text, iterations_line
-from leoc.systems import StepRules, make_system
+from leoc.systems import EpisodePlants, StepRules, TrainingPerturbations, make_system
 from leoc.systems.base import System
+from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import RandomController
 from leoc.training import (
     CONFIG_FILE,
@@ -64,6 +72,7 @@ from leoc.training import (
     evaluation_starts,
     run_folder,
     write_curve,
+    write_training_plants,
 )
 
 __all__ = ["PilcoResult", "load_pilco_controller", "train_pilco"]
@@ -100,10 +109,19 @@ def _log_row(
     return row
 
 
+def _rollout_plant(system: System, config: PilcoConfig, index: int) -> tuple[Perturbation, ...]:
+    """The perturbations of real rollout ``index`` (module docstring); none for a run on the
+    nominal plant."""
+    spec = TrainingPerturbations.from_dict(config.training_perturbations)
+    if spec.is_nominal:
+        return ()
+    return spec.episode(system, config.seed, index, config.action_repeat).perturbations
+
+
 def _random_rollouts(
     system: System, config: PilcoConfig, rng: np.random.Generator
 ) -> tuple[list[Rollout], float]:
-    """The random rollouts of iteration 0 and their wall time."""
+    """The random rollouts of iteration 0 (real rollouts 0, 1, ...) and their wall time."""
     start_time = time.perf_counter()
     controller = RandomController(system, rng, config.action_repeat)
     rollouts = [
@@ -113,8 +131,9 @@ def _random_rollouts(
             system.sample_start(rng, "swing_up"),
             config.training_rollout_steps,
             config.action_repeat,
+            _rollout_plant(system, config, index),
         )
-        for _ in range(config.initial_rollouts)
+        for index in range(config.initial_rollouts)
     ]
     return rollouts, time.perf_counter() - start_time
 
@@ -220,6 +239,7 @@ def _iterate(
         system.sample_start(rng, "swing_up"),
         config.training_rollout_steps,
         config.action_repeat,
+        _rollout_plant(system, config, config.initial_rollouts + state.iteration),
     )
     steps = state.interaction_steps + rollout.steps
     inputs = np.concatenate([state.inputs, rollout.inputs])
@@ -354,6 +374,11 @@ def _finish(
             f"(iteration {state.best.iteration})"
         )
     write_curve(run_path, state.log, summary, _title(config))
+    spec = TrainingPerturbations.from_dict(config.training_perturbations)
+    if not spec.is_nominal:
+        plants = EpisodePlants(spec, plant, config.seed, config.action_repeat)
+        plants.episodes = config.initial_rollouts + state.iteration  # the real rollouts run
+        write_training_plants(run_path, plants)
     policy.eval()
     held = HeldPolicy(policy, config.controller_action_repeat).eval()
     return TrainResult(held, run_path, state.log, config.to_dict(), summary, model)

@@ -82,6 +82,7 @@ __all__ = [
     "HybridPolicy",
     "SMOOTH_SATURATION_ATOL",
     "lqr_certificate",
+    "output_saturation",
     "saturated_lqr",
 ]
 
@@ -388,6 +389,19 @@ class HybridPolicy(nn.Module):
 ACTUATOR_CLIPS = ("clip", "none")
 """Saturations of G that are the actuator's own clip (the step clips every action to
 ``system.action_limit``), so that the saturated LQR is the design's plain ``G``."""
+
+
+def output_saturation(controller: Any) -> str:
+    """The squash of a loaded controller's output: that of its outermost module with a
+    ``saturation`` (the hybrid's or PILCO's ``sin``); ``clip`` when it has none or it is the
+    actuator's (:data:`ACTUATOR_CLIPS`). The LQR a run was trained with is saturated so
+    (:func:`saturated_lqr`, :func:`lqr_certificate`)."""
+    modules = controller.modules() if hasattr(controller, "modules") else ()
+    for module in modules:
+        saturation = getattr(module, "saturation", None)
+        if isinstance(saturation, str):
+            return "clip" if saturation in ACTUATOR_CLIPS else saturation
+    return "clip"
 
 
 def saturated_lqr(

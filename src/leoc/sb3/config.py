@@ -341,6 +341,12 @@ class DDPGConfig:
         Fields of the :class:`~leoc.systems.StepRules` the training and evaluation environments
         step under (empty: leoc's rules; :meth:`for_system` sets the reward of the next state
         on the cart-pole and the mountain car; the authors' variant sets theirs).
+    training_perturbations : dict
+        The perturbations of the training environment
+        (:meth:`leoc.systems.TrainingPerturbations.as_dict`: fixed levels and randomised
+        maxima, each episode's plant drawn from the run's seed); empty: the nominal plant.
+        The evaluation episodes run on the nominal plant. Recorded in ``config.json`` only
+        when not empty (a nominal run's config is as before).
     """
 
     system: str
@@ -381,10 +387,12 @@ class DDPGConfig:
     sac_target_entropy: str | float = AUTO
     sac_action_noise: bool = False
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
+    training_perturbations: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from leoc.names import gym_env_id
         from leoc.systems import system_names
+        from leoc.systems.perturbation_levels import training_setting
 
         if self.system not in system_names() and gym_env_id(self.system) is None:
             raise ValueError(
@@ -432,6 +440,8 @@ class DDPGConfig:
             raise ValueError(f"step_rules: {error}") from error
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts: expected >= 0, found {self.learning_starts}")
+        setting = training_setting(self.training_perturbations, self.system)
+        object.__setattr__(self, "training_perturbations", setting)
         self._check_authors_fields()
         self._check_algo_fields()
 
@@ -559,12 +569,15 @@ class DDPGConfig:
         }
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-friendly dict (tuples become lists)."""
+        """JSON-friendly dict (tuples become lists; ``training_perturbations`` only when not
+        empty)."""
         data = dataclasses.asdict(self)
         for key, value in data.items():
             if isinstance(value, tuple):
                 data[key] = list(value)
         data["hybrid"] = None if self.hybrid is None else self.hybrid.to_dict()
+        if not self.training_perturbations:  # a nominal run's config is as it always was
+            del data["training_perturbations"]
         return data
 
     @classmethod

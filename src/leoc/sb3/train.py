@@ -56,6 +56,7 @@ from leoc.training import (
     CURVE_CSV,
     CURVE_JSON,
     CURVE_PNG,
+    TRAINING_PLANTS_FILE,
     TrainResult,
     curve_summary,
     evaluation_starts,
@@ -64,6 +65,7 @@ from leoc.training import (
     run_folder,
     same_run,
     write_curve,
+    write_training_plants,
 )
 
 __all__ = [
@@ -78,7 +80,7 @@ __all__ = [
 DEFAULT_RUN_ROOT = Path("runs")
 MODEL_FILES = {"final": "model.zip", "best": "best_model.zip"}
 #: What a run writes beside its models (:func:`leoc.training.write_curve`).
-RUN_OUTPUTS = (CURVE_JSON, CURVE_CSV, CURVE_PNG)
+RUN_OUTPUTS = (CURVE_JSON, CURVE_CSV, CURVE_PNG, TRAINING_PLANTS_FILE)
 ALGO_CLASSES = {"ddpg": LeocDDPG, "td3": LeocTD3, "sac": LeocSAC}
 
 
@@ -251,6 +253,15 @@ def _plant(system: str | System, config: DDPGConfig) -> System:
     return plant.with_rules(StepRules(**config.step_rules))
 
 
+def _episode_plants(config: DDPGConfig, plant: System, seed: int) -> Any:
+    """The training episodes' plants (:class:`~leoc.systems.EpisodePlants`, from the run's
+    seed) of a run trained under perturbation; None for the nominal plant."""
+    from leoc.systems import EpisodePlants, TrainingPerturbations
+
+    spec = TrainingPerturbations.from_dict(config.training_perturbations)
+    return None if spec.is_nominal else EpisodePlants(spec, plant, seed)
+
+
 def _earlier_run(
     run_path: Path,
     config_dict: dict[str, Any],
@@ -288,7 +299,8 @@ def _start_model(run: _Run) -> Any:
                 flush=True,
             )
         return resumed["model"]
-    model = build_model(config, seed, make_env(plant))  # may refuse the config: nothing written
+    env = make_env(plant, plants=_episode_plants(config, plant, seed))
+    model = build_model(config, seed, env)  # may refuse the config: nothing written
     run_path.mkdir(parents=True, exist_ok=True)
     # a fresh run (new, or replacing another with --overwrite) keeps nothing of an earlier
     # one: an old controller beside the new config would read as this run, complete
@@ -335,6 +347,9 @@ def _learn(
         reset_num_timesteps=resumed is None,
     )
     _atomic_save_model(model, run_path / MODEL_FILES["final"])
+    plants = getattr(env.envs[0].unwrapped, "plants", None)  # None: nominal, or an older env
+    if plants is not None:
+        write_training_plants(run_path, plants)
     env.close()
     summary = {
         **curve_summary(callback.curve, plant.dt),

@@ -25,6 +25,15 @@ from leoc.systems.mountaincar import (
 )
 from leoc.systems.observation import ObsComponent, ObservationMap, angle_entries, state_entry
 from leoc.systems.pendulum import Pendulum, PendulumParams, pendulum_reward, pendulum_step
+from leoc.systems.perturbation_levels import (
+    PUSHES_PER_EPISODE,
+    RANDOMISATION_STREAM,
+    TWO_SIDED_CATEGORIES,
+    EpisodeDraw,
+    EpisodePlants,
+    TrainingPerturbations,
+    category_perturbations,
+)
 from leoc.systems.perturbations import (
     ActionDelay,
     ActuatorGain,
@@ -70,6 +79,13 @@ from leoc.systems.acrobot import Acrobot  # noqa: E402
 register_system("acrobot", Acrobot, replace=True)
 
 __all__ = [
+    "PUSHES_PER_EPISODE",
+    "RANDOMISATION_STREAM",
+    "TWO_SIDED_CATEGORIES",
+    "EpisodeDraw",
+    "EpisodePlants",
+    "TrainingPerturbations",
+    "category_perturbations",
     "ActionDelay",
     "ActuatorGain",
     "Friction",

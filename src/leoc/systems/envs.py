@@ -18,6 +18,12 @@ a reset without a seed, the same random draws as a ``simulate`` call with batch 
 ``reset(seed=s)`` restarts the perturbations' streams from their seeds and ``s``. The info's
 ``state`` is the plant's true state; the observation is what the controller sees.
 
+Training under perturbation: ``plants=EpisodePlants(...)``
+(:class:`~leoc.systems.perturbation_levels.EpisodePlants`) gives each episode its own plant,
+built at every ``reset`` (episode ``k``'s fixed and drawn levels, from the run's seed), in place
+of one fixed list; the observation space is that of the widest plant (unbounded on the entries
+any episode makes noisy).
+
 Rendering, as gymnasium's classic control: ``render_mode`` ``None``, ``"rgb_array"``
 (``render()`` returns the ``(H, W, 3)`` uint8 frame of the current state) or ``"human"`` (a
 matplotlib window, redrawn by ``reset`` and ``step`` at ``metadata["render_fps"]`` = 1 / dt).
@@ -38,6 +44,7 @@ from leoc.systems.base import DTYPE, START_KINDS, PhysicalParams, System
 from leoc.systems.cartpole import CartPole
 from leoc.systems.mountaincar import MountainCar
 from leoc.systems.pendulum import Pendulum
+from leoc.systems.perturbation_levels import EpisodePlants
 from leoc.systems.perturbations import Perturbation, PerturbedPlant
 from leoc.systems.registry import env_id, make_system
 from leoc.systems.rendering import RENDER_MODES, Renderer
@@ -66,6 +73,8 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
     action_repeat : int
         Simulator steps per decision of the agent that drives the env (each ``step`` is one
         simulator step); it only converts an action delay's periods into steps.
+    plants : EpisodePlants, optional
+        A plant per episode (module docstring), instead of ``perturbations``.
     """
 
     # render_fps is set per instance from the system's dt (gymnasium reads the class's
@@ -81,6 +90,7 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         render_mode: str | None = None,
         perturbations: Sequence[Perturbation] = (),
         action_repeat: int = 1,
+        plants: EpisodePlants | None = None,
     ) -> None:
         if start not in START_KINDS:
             raise ValueError(f"start: expected one of {START_KINDS}, found {start!r}")
@@ -97,7 +107,13 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         elif params is not None:
             raise ValueError("params: only with a system name, found a System object as well")
         self.system = system
-        self.plant = PerturbedPlant(system, perturbations, action_repeat)
+        self.plants = plants
+        if plants is None:
+            self.plant = PerturbedPlant(system, perturbations, action_repeat)
+        elif tuple(perturbations):
+            raise ValueError("perturbations: expected none with plants (a plant per episode)")
+        else:
+            self.plant = plants.widest()  # the reset builds each episode's own
         self.default_start = start
         limit = np.float32(self.system.action_limit)
         shape = (self.system.action_dim,)
@@ -127,6 +143,9 @@ class LeocEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         super().reset(seed=seed)
         self._steps = 0
+        plants = getattr(self, "plants", None)  # an env pickled before it had plants: None
+        if plants is not None:
+            self.plant = plants.next()
         self.plant.reset(1, seed)
         options = dict(options or {})
         unknown = set(options) - set(RESET_OPTION_KEYS)

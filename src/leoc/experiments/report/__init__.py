@@ -6,9 +6,10 @@ Outputs in the reproduce folder: ``results.json`` (every aggregated number), ``r
 ``report.md``.
 
 Each section of ``report.md`` is a module of this package (``header``, ``overview``,
-``definitions``, ``appendix``, ``responses``, ``robustness``, ``swing_up``, ``roa``, ``claims``,
-``seeds``, ``figures``) with the interface of ``leoc.experiments.report.base.Section``:
-what it computes from the runs, what it checks, what it renders. ``build`` assembles them in
+``definitions``, ``appendix``, ``responses``, ``robustness``, ``robustness_protocol``,
+``swing_up``, ``roa``, ``proved_regions``, ``claims``, ``seeds``, ``figures``) with the
+interface of ``leoc.experiments.report.base.Section``: what it computes from the runs, what it
+checks, what it renders. ``build`` assembles them in
 the order of its ``SECTIONS``. This package re-exports the names other code uses.
 """
 
@@ -29,6 +30,11 @@ from leoc.experiments.report.header import (
     model_selection_text,
     recorded_selection,
 )
+from leoc.experiments.report.proved_regions import (
+    PROVED_REGION_CHECK,
+    proved_region_summary,
+    proved_region_table,
+)
 from leoc.experiments.report.responses import (
     RESPONSE_CHECK,
     paper_cells,
@@ -41,6 +47,7 @@ from leoc.experiments.report.robustness import (
     robustness_summary,
     robustness_table,
 )
+from leoc.experiments.report.robustness_protocol import protocol_summary, protocol_table
 from leoc.experiments.report.seeds import (
     first_hold_seconds,
     improvement_rows,
@@ -55,6 +62,7 @@ from leoc.experiments.report.swing_up import (
 )
 
 __all__ = [
+    "PROVED_REGION_CHECK",
     "RESPONSE_CHECK",
     "ROA_CHECK",
     "ROBUSTNESS_CHECK",
@@ -75,6 +83,10 @@ __all__ = [
     "machine_line",
     "model_selection_text",
     "paper_cells",
+    "protocol_summary",
+    "protocol_table",
+    "proved_region_summary",
+    "proved_region_table",
     "record_companion",
     "recorded_selection",
     "relevance_traces",

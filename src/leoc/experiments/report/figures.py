@@ -19,6 +19,7 @@ from leoc.experiments.animations import write_report_animations
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.profiles import CONTROLLER_LABELS, CONTROLLERS
 from leoc.experiments.report.base import Report, Section, Study
+from leoc.experiments.report.robustness_protocol import write_protocol_figures
 from leoc.experiments.stats import MIN_RUNS_FOR_INTERVAL, curve_bands
 from leoc.systems import make_system
 
@@ -105,7 +106,8 @@ def _write_responses_figure(evaluations: Evaluations, path: Path) -> None:
 
 def write_figures(study: Study, tables: dict[str, Any]) -> list[tuple[str, str]]:
     """Draw every figure the tables allow into the study's folder: (title, file) of each, in
-    the report's order."""
+    the report's order (the robustness protocol's figures are drawn too, and shown in their
+    own section, not listed)."""
     out, evaluations = study.out, study.evaluations
     figures = []
     if evaluations:
@@ -128,6 +130,8 @@ def write_figures(study: Study, tables: dict[str, Any]) -> list[tuple[str, str]]
         figures.append(("Empirical basins and the certified region of attraction", "basins.png"))
     if write_relevance_figure(evaluations, out / "relevance.png"):
         figures.append(("Relevance along a swing-up (paper figure 4)", "relevance.png"))
+    # drawn here, once the numbers are written; shown in the robustness protocol's section
+    write_protocol_figures(study)
     for system, animation in write_report_animations(out, evaluations).items():
         title = f"{system}: a hybrid's swing-up and impulse response, r(x) shown"
         figures.append((title, animation.relative_to(out).as_posix()))

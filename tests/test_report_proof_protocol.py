@@ -1,0 +1,319 @@
+"""The report's proved regions of the trained controllers and its robustness protocol (issue 42
+item 3, issue 43 item 2): their numbers against the saved entries read by hand, what a study
+without the entries says, and a smoke study that writes both (evaluated, reported, replotted)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leoc.evaluation.robustness_protocol import CategoryResult, LevelResult, ProtocolResult
+from leoc.experiments.profiles import EvaluationBudget, get_profile
+from leoc.experiments.report import PROVED_REGION_CHECK, Report, Study
+from leoc.experiments.report import proved_regions as proved_section
+from leoc.experiments.report import robustness_protocol as protocol_section
+from leoc.experiments.report.base import label
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+# ------------------------------------------------------------------------ synthetic entries
+def _proof(rho, share, lqr_share, offset=(0.0, 0.0), lyapunov="lqr", cover=None, **more):
+    """A ``proved_region`` entry with the fields the section reads."""
+    return {
+        "rho": rho,
+        "box_share": share,
+        "lqr_box_share": lqr_share,
+        "box_share_ratio": share / lqr_share,
+        "offset": list(offset),
+        "lyapunov": lyapunov,
+        "limited_by": more.get("limit", "decrease"),
+        "equilibrium_found": more.get("found", True),
+        "flat_top_cover": cover,
+        "flat_top_rho": None if cover is None else 2.0,
+        "seconds": 1.5,
+        "budget_seconds": 2.0,
+        "saturation": "clip",
+    }
+
+
+def _runs(controller: str, entries: list) -> list[dict]:
+    return [
+        {"spec": {"system": "pendulum", "controller": controller, "seed": seed}, "proved_region": e}
+        for seed, e in enumerate(entries)
+    ]
+
+
+def _proof_evaluations() -> dict:
+    """Three seeds of a paper-relevance hybrid (one proving less than its LQR, one with the own
+    V), an ROA hybrid whose proved set lies in its flat top on two seeds of three, a baseline
+    with an offset equilibrium on one seed and none found on the other, and the LQR (its entry
+    None)."""
+    hybrid = [
+        _proof(4.0, 0.60, 0.60),
+        _proof(2.0, 0.30, 0.60, limit="budget"),
+        _proof(9.0, 0.66, 0.60, lyapunov="own"),
+    ]
+    roa = [
+        _proof(4.0, 0.60, 0.60, cover=0.5),
+        _proof(4.0, 0.60, 0.60, cover=1.0 + 1e-12),
+        _proof(5.0, 0.65, 0.60, cover=1.3),
+    ]
+    baseline = [
+        _proof(1.0, 0.20, 0.60, offset=(0.03, 0.0), lyapunov="own"),
+        _proof(0.0, 0.0, 0.60, found=False, limit="no equilibrium"),
+    ]
+    linear = [{"spec": {"system": "pendulum", "controller": "linear", "seed": 0}}]
+    linear[0]["proved_region"] = None
+    return {
+        "pendulum": {
+            "linear": linear,
+            "ddpg_baseline": _runs("ddpg_baseline", baseline),
+            "ddpg_hybrid": _runs("ddpg_hybrid", hybrid),
+            "ddpg_hybrid_roa": _runs("ddpg_hybrid_roa", roa),
+        }
+    }
+
+
+def _table_cells(lines: list[str]) -> dict[str, dict[str, str]]:
+    """The markdown table in ``lines`` as controller label -> header -> cell."""
+    rows = [line for line in lines if line.startswith("| ")]
+    headers = [cell.strip() for cell in rows[0].strip("|").split("|")]
+    table = {}
+    for line in rows[1:]:
+        cells = dict(zip(headers, (c.strip() for c in line.strip("|").split("|")), strict=True))
+        table[cells.get("controller")] = cells
+    return table
+
+
+def _report(evaluations: dict, tables: dict, flags: dict | None = None) -> Report:
+    study = Study(Path("."), {}, evaluations)
+    return Report(study, tables, flags or {}, {}, [], 0.0)
+
+
+def test_the_proved_region_table_is_the_saved_entries_read_by_hand() -> None:
+    evaluations = _proof_evaluations()
+    rows = proved_section.proved_region_summary(evaluations)
+    tables = {"proved_regions": rows}
+    flags = {"proved_regions": PROVED_REGION_CHECK.flags(rows)}
+    lines = proved_section.render(_report(evaluations, tables, flags))
+    cells = _table_cells(lines)
+    assert set(cells) == {"DDPG baseline", "DDPG hybrid", "DDPG hybrid (ROA relevance)"}
+    hybrid = cells["DDPG hybrid"]
+    # by hand: rho 4, 2, 9 -> median 4 [2, 9]; shares 60%, 30%, 66%; ratios 1, 0.5, 1.1
+    assert hybrid["proved rho"] == "4 [2, 9]"
+    assert hybrid["share of the box"] == "60% [30%, 66%]"
+    assert hybrid["LQR's share"] == "60%"
+    assert hybrid["ratio to the LQR's share"] == "1x [0.5x, 1.1x]"
+    assert hybrid["V kept"] == "lqr 2/3, own 1/3"
+    assert hybrid["limited by"] == "decrease 2/3, budget 1/3"
+    assert hybrid["x* - a"] == "0"
+    assert hybrid["by construction"] == "evidence"  # the paper's relevance: no flat top
+    roa = cells["DDPG hybrid (ROA relevance)"]
+    assert roa["by construction"] == "by construction in 2/3 seeds"  # cover 0.5, 1 + 1e-12
+    assert roa["proved rho"] == "4 [4, 5]"
+    baseline = cells["DDPG baseline"]
+    assert baseline["x* - a"] == "theta +0.03 (none found in 1/2 seeds)"
+    assert baseline["by construction"] == "–"
+    assert baseline["ratio to the LQR's share"] == f"{0.2 / 0.6 / 2:.3g}x [0x, {0.2 / 0.6:.3g}x]"
+    assert baseline["limited by"] == "decrease 1/2, no equilibrium 1/2"
+    # the check: the hybrid's seed 1 proves half its LQR's share; the ROA hybrid keeps it; the
+    # baseline is no case
+    checked, failures = PROVED_REGION_CHECK.failures(rows)
+    assert checked == 2
+    assert [(f.subject, f.size) for f in failures] == [("pendulum DDPG hybrid", 0.5)]
+    assert "limited by decrease 2/3, budget 1/3" in failures[0].flag
+    assert any("**pendulum DDPG hybrid** proves as little as 0.5x" in line for line in lines)
+    text = "\n".join(lines)
+    assert "Budget: 2 s of box search per run" in text
+    assert "the proofs took 1.5 s (median per controller)" in text
+
+
+def _protocol(controller: str, held: list[list[bool]], seed: int = 0) -> dict:
+    """A protocol record of two categories with two levels each; ``held``: per level of both
+    categories (4 lists), the operating-region episodes (the swing-up ones all fail)."""
+    levels = [
+        LevelResult(float(i % 2), None, {"operating_region": h, "swing_up": [False] * len(h)}, {})
+        for i, h in enumerate(held)
+    ]
+    categories = [
+        CategoryResult("observation_noise", 0.5, levels[:2]),
+        CategoryResult("push", 2.0, levels[2:]),
+    ]
+    maxima = {"observation_noise": 0.5, "push": 2.0, "constants": ["mass"]}
+    starts = {"operating_region": [[0.0, 0.0]] * 2, "swing_up": [[3.1, 0.0]] * 2}
+    return ProtocolResult(
+        "pendulum", controller, seed, 2, 2, 1, maxima, starts, categories
+    ).as_dict()
+
+
+def test_the_protocol_table_is_the_held_episodes_counted_by_hand() -> None:
+    both, none_, one = [True, True], [False, False], [True, False]
+    evaluations = {
+        "pendulum": {
+            "linear": [{"robustness_protocol": _protocol("linear", [both, one, none_, none_])}],
+            "ddpg_hybrid": [
+                {"robustness_protocol": _protocol("ddpg_hybrid", [both, both, both, one])},
+                {"robustness_protocol": _protocol("ddpg_hybrid", [both, none_, one, one])},
+            ],
+        }
+    }
+    rows = protocol_section.protocol_summary(evaluations)
+    # by hand: a category's score is held / (2 levels x 2 kinds x 2 episodes = 8)
+    linear, hybrid = rows
+    assert linear["scores"]["observation_noise"]["median"] == 3 / 8
+    assert linear["scores"]["push"]["median"] == 0.0
+    assert linear["robustness"]["median"] == (3 / 8 + 0) / 2
+    assert hybrid["per_seed"][0] == {
+        "observation_noise": 4 / 8,
+        "push": 3 / 8,
+        "robustness": 7 / 16,
+    }
+    assert hybrid["per_seed"][1] == {
+        "observation_noise": 2 / 8,
+        "push": 2 / 8,
+        "robustness": 4 / 16,
+    }
+    cells = _table_cells(protocol_section.protocol_table(rows))
+    assert cells["DDPG hybrid"]["observation noise"] == "0.38 [0.25, 0.50]"
+    assert cells["DDPG hybrid"]["push"] == "0.31 [0.25, 0.38]"
+    assert cells["linear (LQR at dt)"]["robustness"] == "0.19"
+    # the figure's pooled result: each level holds both seeds' episodes, shares their mean
+    results = protocol_section.protocol_results(evaluations)["pendulum"]["ddpg_hybrid"]
+    pooled = protocol_section.pooled(results)
+    assert pooled.episodes == 4
+    assert pooled.scores() == pytest.approx({"observation_noise": 6 / 16, "push": 5 / 16})
+    lines = protocol_section.render(_report(evaluations, {"robustness_protocol": rows}))
+    assert "Sweeps up to: observation noise 0.5, push 2 (parameter errors of mass" in "\n".join(
+        lines
+    )
+    assert "![Robustness protocol: pendulum](robustness_protocol_pendulum.png)" in lines
+
+
+def test_a_study_without_the_entries_says_they_were_not_measured() -> None:
+    old = {"pendulum": {"ddpg_hybrid": [{"spec": {"seed": 0}}], "linear": [{"spec": {}}]}}
+    tables = {
+        "proved_regions": proved_section.proved_region_summary(old),
+        "robustness_protocol": protocol_section.protocol_summary(old),
+    }
+    report = _report(old, tables, {"proved_regions": []})
+    assert proved_section.render(report)[-1] == proved_section.NOT_MEASURED
+    assert protocol_section.render(report)[-1] == protocol_section.NOT_MEASURED
+    # a study of LQRs only measured the protocol and has no trained controller to prove; a
+    # user's system without measured maximum levels has no protocol
+    linear = {"tilted": {"linear": [{"proved_region": None, "robustness_protocol": None}]}}
+    report = _report(linear, {"proved_regions": [], "robustness_protocol": []})
+    assert proved_section.render(report)[-1].startswith("No trained controller in these runs")
+    assert protocol_section.render(report)[-1] == protocol_section.NO_MAXIMA
+    from types import SimpleNamespace
+
+    from leoc.experiments.evaluators import evaluate_proved_region, evaluate_robustness_protocol
+
+    user = SimpleNamespace(system=SimpleNamespace(name="tilted"), controller_name="linear")
+    assert evaluate_robustness_protocol(user) is None  # rather than a failed run
+    assert evaluate_proved_region(user) is None  # an LQR: its region is the roa entry's
+    # the committed studies predate both: their reports say so (leoc plot regenerates them)
+    for study in ("paper", "paper-authors"):
+        text = (RESULTS / study / "report.md").read_text()
+        assert proved_section.NOT_MEASURED in text and protocol_section.NOT_MEASURED in text
+
+
+def test_profiles_budget_the_proof_and_the_protocol() -> None:
+    from leoc.control.proof import MAX_SECONDS
+    from leoc.names import ROBUSTNESS_EPISODES, ROBUSTNESS_LEVELS
+
+    paper = get_profile("paper").evaluation
+    assert paper == EvaluationBudget(MAX_SECONDS, ROBUSTNESS_LEVELS, ROBUSTNESS_EPISODES)
+    assert get_profile("quick").evaluation == EvaluationBudget(30.0, 5, 2)
+    assert get_profile("smoke").evaluation == EvaluationBudget(2.0, 3, 1)
+    for field, value, message in (
+        ("proof_seconds", 0.0, "proof_seconds: expected a positive number, found 0.0"),
+        ("protocol_levels", 1, "protocol_levels: expected an integer >= 2, found 1"),
+        ("protocol_episodes", 2.5, "protocol_episodes: expected an integer >= 1, found 2.5"),
+    ):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            EvaluationBudget(**{field: value})
+
+
+# ------------------------------------------------------------------------------ smoke study
+def _section(text: str, heading: str) -> list[str]:
+    """The lines of ``report.md``'s section ``heading`` up to the next ``## ``."""
+    lines = text.splitlines()
+    start = lines.index(heading)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), None)
+    return lines[start:end]
+
+
+@pytest.mark.slow
+def test_a_smoke_study_proves_and_scores_its_controllers_and_replots_them(tmp_path) -> None:
+    """One system, the LQR and an ROA hybrid at the smoke budgets: both sections and the
+    figure, their numbers those of the saved entries, and ``leoc plot`` the same bytes."""
+    from leoc.cli import main
+    from leoc.experiments.reproduce import reproduce
+
+    reproduce(
+        tmp_path,
+        profile_name="smoke",
+        systems=["pendulum"],
+        controllers=["linear", "ddpg_hybrid_roa"],
+        jobs=1,
+        echo=lambda _: None,
+    )
+    runs = tmp_path / "runs" / "pendulum"
+    hybrid = json.loads((runs / "ddpg_hybrid_roa/seed0/evaluation.json").read_text())
+    linear = json.loads((runs / "linear/seed0/evaluation.json").read_text())
+    assert linear["proved_region"] is None and hybrid["proved_region"]["budget_seconds"] == 2.0
+    text = (tmp_path / "report.md").read_text()
+    proof = _table_cells(_section(text, "## Proved regions of the trained controllers"))
+    entry = hybrid["proved_region"]
+    row = proof["DDPG hybrid (ROA relevance)"]
+    assert row["proved rho"] == f"{entry['rho']:.3g}"
+    assert row["V kept"] == entry["lyapunov"] and row["limited by"] == entry["limited_by"]
+    assert row["x* - a"] == "0"  # a hybrid's equilibrium is a
+    protocol = _table_cells(_section(text, "## Robustness protocol"))
+    for run in (linear, hybrid):
+        record = run["robustness_protocol"]
+        assert record["level_count"] == 3 and record["episodes"] == 1 and record["seed"] == 0
+        # by hand: the share of every level's held episodes, per category
+        for category in record["categories"]:
+            held = [
+                h for level in category["levels"] for kind in level["held"].values() for h in kind
+            ]
+            cell = protocol[label(run["spec"]["controller"])]
+            assert cell[category["name"].replace("_", " ")] == f"{np.mean(held):.2f}"
+    assert (tmp_path / "robustness_protocol_pendulum.png").stat().st_size > 0
+    before = {name: (tmp_path / name).read_bytes() for name in ("report.md", "results.json")}
+    assert main(["plot", str(tmp_path)]) == 0
+    for name, content in before.items():
+        assert (tmp_path / name).read_bytes() == content, name
+
+
+def test_the_flat_top_cover_is_the_largest_flat_top_level_on_the_proved_set() -> None:
+    """Centred on a, the bound is the exact maximum of V_flat / rho_in on the proved ellipsoid
+    (sampled on its boundary here); an offset only raises it; no ROA relevance: None."""
+    from types import SimpleNamespace
+
+    import torch
+
+    from leoc.evaluation.proved_regions import flat_top_cover
+    from leoc.policies.relevance import ROARelevance
+    from leoc.systems import make_system
+
+    system = make_system("pendulum")
+    flat = np.array([[4.0, 1.0], [1.0, 2.0]])
+    relevance = ROARelevance(system.obs_layout, system.operating_state, flat, rho_in=0.5)
+    controller = torch.nn.Sequential(relevance)
+    proved_p, rho = np.array([[3.0, -0.5], [-0.5, 1.0]]), 0.2
+    proved = SimpleNamespace(rho=rho, certificate=SimpleNamespace(P=proved_p))
+    angles = np.linspace(0.0, 2.0 * np.pi, 20001)
+    circle = np.stack([np.cos(angles), np.sin(angles)])
+    boundary = np.linalg.solve(np.linalg.cholesky(proved_p).T, circle) * np.sqrt(rho)
+    sampled = np.max(np.einsum("in,ij,jn->n", boundary, flat, boundary)) / 0.5
+    assert flat_top_cover(controller, proved, [0.0, 0.0]) == pytest.approx(sampled, rel=1e-6)
+    assert flat_top_cover(controller, proved, [0.05, 0.0]) > sampled
+    assert flat_top_cover(torch.nn.Linear(3, 1), proved, [0.0, 0.0]) is None
+    assert flat_top_cover(controller, SimpleNamespace(rho=0.0, certificate=None), [0, 0]) is None
