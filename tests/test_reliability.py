@@ -108,6 +108,8 @@ def _numbers(out: Path) -> dict[str, dict]:
         data = json.loads(path.read_text())
         for key in ("wall_seconds", "train_wall_seconds"):
             data.pop(key, None)
+        if isinstance(data.get("proved_region"), dict):
+            data["proved_region"].pop("seconds", None)  # the proof's wall time
         found[str(path.relative_to(out))] = data
     return found
 

@@ -223,15 +223,18 @@ def test_a_study_without_the_entries_says_they_were_not_measured() -> None:
 
 
 def test_profiles_budget_the_proof_and_the_protocol() -> None:
-    from leoc.control.proof import MAX_SECONDS
+    from leoc.control.proof import MAX_BOXES, MAX_SECONDS
     from leoc.names import ROBUSTNESS_EPISODES, ROBUSTNESS_LEVELS
 
     paper = get_profile("paper").evaluation
-    assert paper == EvaluationBudget(MAX_SECONDS, ROBUSTNESS_LEVELS, ROBUSTNESS_EPISODES)
+    expected = EvaluationBudget(MAX_SECONDS, ROBUSTNESS_LEVELS, ROBUSTNESS_EPISODES, MAX_BOXES)
+    assert paper == expected
     assert get_profile("quick").evaluation == EvaluationBudget(30.0, 5, 2)
-    assert get_profile("smoke").evaluation == EvaluationBudget(2.0, 3, 1)
+    # the smoke study's proofs stop at a box budget: the same level on every rerun
+    assert get_profile("smoke").evaluation == EvaluationBudget(60.0, 3, 1, proof_boxes=2_000)
     for field, value, message in (
         ("proof_seconds", 0.0, "proof_seconds: expected a positive number, found 0.0"),
+        ("proof_boxes", 0, "proof_boxes: expected an integer >= 1, found 0"),
         ("protocol_levels", 1, "protocol_levels: expected an integer >= 2, found 1"),
         ("protocol_episodes", 2.5, "protocol_episodes: expected an integer >= 1, found 2.5"),
     ):

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from leoc.control.proof import MAX_SECONDS
+from leoc.control.proof import MAX_BOXES, MAX_SECONDS
 from leoc.control.roa import DEFAULT_SAMPLES, LyapunovCertificate
 from leoc.control.trained import ControllerCertificate, certify_controller, log_volume
 from leoc.evaluation.basins import box_fraction
@@ -118,6 +118,7 @@ def proved_region(
     seed: int = 0,
     max_seconds: float = MAX_SECONDS,
     device: Any = "cpu",
+    max_boxes: int = MAX_BOXES,
 ) -> dict[str, Any]:
     """The proved region of ``controller`` beside its LQR's (module docstring), JSON-friendly.
 
@@ -127,13 +128,11 @@ def proved_region(
         The plant the controller was trained on.
     controller : callable
         A loaded controller (float64 observations -> actions, at its own control period).
-    design : LQRDesign
-        Its LQR (the ``lqr`` candidate V).
-    lqr : LyapunovCertificate
-        The LQR's certificate (the reference of the ratios).
+    design, lqr : LQRDesign, LyapunovCertificate
+        Its LQR (the ``lqr`` candidate V) and the LQR's certificate (the ratios' reference).
     box : (S,) half-widths
         The box around a the shares are measured on.
-    lyapunov, samples, seed, max_seconds, device :
+    lyapunov, samples, seed, max_seconds, device, max_boxes :
         :func:`leoc.control.certify_controller`'s options; ``seed`` also seeds the box shares.
 
     Returns
@@ -153,6 +152,7 @@ def proved_region(
         seed=seed,
         max_seconds=max_seconds,
         device=device,
+        max_boxes=max_boxes,
     )
     half = np.asarray(box, dtype=float)
     summary = proved.summary(system)

@@ -49,6 +49,9 @@ CONTROLLER_LABELS = {
 PROOF_SECONDS = 480.0
 """The paper profile's proof budget [s]: ``leoc roa --proof-seconds``' default
 (:data:`leoc.control.proof.MAX_SECONDS`, not imported here: this module imports no torch)."""
+PROOF_BOXES = 3_000_000
+"""The paper profile's box budget per candidate V: the proof engine's default
+(:data:`leoc.control.proof.MAX_BOXES`)."""
 
 
 def _check_count(value: Any, name: str, least: int) -> None:
@@ -84,6 +87,10 @@ class EvaluationBudget:
         (:func:`leoc.evaluation.robustness_protocol.run_protocol`'s ``levels``).
     protocol_episodes : int
         Episodes per level and start kind of the robustness protocol, >= 1.
+    proof_boxes : int
+        Box budget of each candidate V's search (``max_boxes``): unlike the wall-clock budget
+        it gives the same level on every machine and every rerun, so the small profiles bound
+        their proofs by boxes and keep the seconds as a safety valve.
     """
 
     robustness_scales: tuple[float, ...] | None = None
@@ -91,6 +98,7 @@ class EvaluationBudget:
     proof_seconds: float = PROOF_SECONDS
     protocol_levels: int = ROBUSTNESS_LEVELS
     protocol_episodes: int = ROBUSTNESS_EPISODES
+    proof_boxes: int = PROOF_BOXES
 
     def __post_init__(self) -> None:
         seconds = self.proof_seconds
@@ -98,6 +106,7 @@ class EvaluationBudget:
             raise ValueError(
                 f"EvaluationBudget.proof_seconds: expected a positive number, found {seconds!r}"
             )
+        _check_count(self.proof_boxes, "proof_boxes", 1)
         _check_count(self.protocol_levels, "protocol_levels", 2)
         _check_count(self.protocol_episodes, "protocol_episodes", 1)
         scales = self.robustness_scales
@@ -129,6 +138,16 @@ class EvaluationBudget:
             parts.append(f"robustness at {scales} only")
         if self.impulse_sweep_points is not None:
             parts.append(f"{self.impulse_sweep_points} impulse-sweep sizes")
+        if self.proof_boxes != PROOF_BOXES:
+            parts.append(f"proofs of {self.proof_boxes} boxes per candidate V")
+        if (self.protocol_levels, self.protocol_episodes) != (
+            ROBUSTNESS_LEVELS,
+            ROBUSTNESS_EPISODES,
+        ):
+            parts.append(
+                f"robustness protocol at {self.protocol_levels} levels x "
+                f"{self.protocol_episodes} episodes"
+            )
         return "; ".join(parts)
 
 
@@ -409,14 +428,16 @@ episodes)."""
 SMOKE_EVALUATION = EvaluationBudget(
     robustness_scales=(0.5, 1.0, 5.0),
     impulse_sweep_points=2,
-    proof_seconds=2.0,
+    proof_seconds=60.0,
+    proof_boxes=2_000,
     protocol_levels=3,
     protocol_episodes=1,
 )
 """The smoke profile's evaluation budget: the robustness sweep at the smallest, the nominal and
-the largest scale, the impulse sweep at the paper's size and the LQR's failure size (every
-evaluation still runs, on 6 robustness points instead of 20: the pipeline check costs about
-half as much)."""
+the largest scale, the impulse sweep at the paper's size and the LQR's failure size, each
+trained controller's proof bounded by 2000 boxes per candidate V (a box budget proves the same
+level on every machine and every rerun; the 60 s are a safety valve), the robustness protocol
+at 3 levels and 1 episode. Every evaluation still runs, on fewer points."""
 
 #: The ``leoc reproduce`` profiles by name: ``quick`` (default), ``smoke`` and ``paper``.
 PROFILES: dict[str, Profile] = {
