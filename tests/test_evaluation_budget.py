@@ -100,7 +100,9 @@ def test_one_response_simulation_serves_both_metric_sets() -> None:
     # a weak gain: the step response leans past 1 degree, where the authors' band and final
     # value differ from leoc's
     controller = LinearController(0.3 * design.W, design.b)
-    responses = evaluate_responses(EvaluationContext("pendulum", system, controller, 0, LEOC, "linear"))
+    responses = evaluate_responses(
+        EvaluationContext("pendulum", system, controller, 0, LEOC, "linear")
+    )
     for test, entry in responses.items():
         alone = response_test(system, controller, test, RESPONSE_STEPS, metric_set="authors")
         np.testing.assert_allclose(entry["deviation_authors"], alone.deviation, rtol=1e-12)
@@ -126,10 +128,14 @@ def test_a_bad_budget_is_a_one_line_error_naming_the_field(fields, message) -> N
 
 def test_the_budget_in_words() -> None:
     assert EvaluationBudget().describe() == ""
-    assert SMOKE.describe() == "robustness at 0.5x, 1x, 5x only; 2 impulse-sweep sizes"
+    assert SMOKE.describe() == (
+        "robustness at 0.5x, 1x, 5x only; 2 impulse-sweep sizes; proofs of 2000 boxes per "
+        "candidate V; robustness protocol at 3 levels x 1 episode"
+    )
     assert SMOKE.describe() in get_profile("smoke").description
-    for name in ("quick", "paper"):
-        assert get_profile(name).evaluation == EvaluationBudget()
+    assert get_profile("paper").evaluation == EvaluationBudget()
+    quick = get_profile("quick").evaluation  # shorter proofs and protocol, the full grids
+    assert quick.robustness_scales is None and quick.impulse_sweep_points is None
 
 
 @pytest.mark.parametrize(

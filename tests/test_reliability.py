@@ -114,6 +114,28 @@ def _numbers(out: Path) -> dict[str, dict]:
     return found
 
 
+def _differences(expected, found, path: str = "") -> list[str]:
+    """The paths where two JSON values differ, with both values (what a failure shows)."""
+    if isinstance(expected, dict) and isinstance(found, dict):
+        keys = sorted(set(expected) | set(found))
+        return [
+            line
+            for key in keys
+            for line in (
+                _differences(expected[key], found[key], f"{path}/{key}")
+                if key in expected and key in found
+                else [f"{path}/{key}: on one side only"]
+            )
+        ]
+    if isinstance(expected, list) and isinstance(found, list) and len(expected) == len(found):
+        return [
+            line
+            for index, pair in enumerate(zip(expected, found, strict=True))
+            for line in _differences(*pair, f"{path}[{index}]")
+        ]
+    return [] if expected == found else [f"{path}: {expected!r:.80} != {found!r:.80}"]
+
+
 def _alive_in_group(group: int) -> list[int]:
     alive = []
     for entry in Path("/proc").iterdir():
@@ -178,7 +200,8 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
     assert (stopped["ended"], stopped["interrupted"]) == ("interrupted", True)
     rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert rerun.returncode == 0, rerun.stderr
-    assert _numbers(tmp_path) == uninterrupted
+    resumed = _numbers(tmp_path)
+    assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]
     assert [
         item["ended"] for item in json.loads((tmp_path / "meta.json").read_text())["invocations"]
     ] == ["interrupted", "finished"]
@@ -269,4 +292,5 @@ def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
             json.loads(path.read_text())  # whatever finished is whole
     rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert rerun.returncode == 0, rerun.stderr
-    assert _numbers(tmp_path) == uninterrupted
+    resumed = _numbers(tmp_path)
+    assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]

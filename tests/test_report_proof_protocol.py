@@ -131,6 +131,16 @@ def test_the_proved_region_table_is_the_saved_entries_read_by_hand() -> None:
     text = "\n".join(lines)
     assert "Budget: 2 s of box search per run" in text
     assert "the proofs took 1.5 s (median per controller)" in text
+    # runs that recorded a box budget (every run since the smoke profile's 2000) say it first
+    for runs in evaluations["pendulum"].values():
+        for run in runs:
+            if run["proved_region"] is not None:
+                run["proved_region"]["budget_boxes"] = 2000
+    boxed = proved_section.proved_region_summary(evaluations)
+    lines = proved_section.render(_report(evaluations, {"proved_regions": boxed}, flags))
+    assert "Budget: 2,000 boxes per candidate V within 2 s of box search per run" in "\n".join(
+        lines
+    )
 
 
 def _protocol(controller: str, held: list[list[bool]], seed: int = 0) -> dict:
@@ -231,7 +241,9 @@ def test_profiles_budget_the_proof_and_the_protocol() -> None:
     assert paper == expected
     assert get_profile("quick").evaluation == EvaluationBudget(30.0, 5, 2)
     # the smoke study's proofs stop at a box budget: the same level on every rerun
-    assert get_profile("smoke").evaluation == EvaluationBudget(60.0, 3, 1, proof_boxes=2_000)
+    # (and its robustness sweep and impulse sweep on fewer points: tests/test_evaluation_budget)
+    smoke = EvaluationBudget(60.0, 3, 1, 2_000, (0.5, 1.0, 5.0), 2)
+    assert get_profile("smoke").evaluation == smoke
     for field, value, message in (
         ("proof_seconds", 0.0, "proof_seconds: expected a positive number, found 0.0"),
         ("proof_boxes", 0, "proof_boxes: expected an integer >= 1, found 0"),
@@ -269,7 +281,8 @@ def test_a_smoke_study_proves_and_scores_its_controllers_and_replots_them(tmp_pa
     runs = tmp_path / "runs" / "pendulum"
     hybrid = json.loads((runs / "ddpg_hybrid_roa/seed0/evaluation.json").read_text())
     linear = json.loads((runs / "linear/seed0/evaluation.json").read_text())
-    assert linear["proved_region"] is None and hybrid["proved_region"]["budget_seconds"] == 2.0
+    assert linear["proved_region"] is None and hybrid["proved_region"]["budget_seconds"] == 60.0
+    assert hybrid["proved_region"]["budget_boxes"] == 2000
     text = (tmp_path / "report.md").read_text()
     proof = _table_cells(_section(text, "## Proved regions of the trained controllers"))
     entry = hybrid["proved_region"]

@@ -11,6 +11,10 @@ rerun. Each succeeds, or refuses in one line where a refusal is right (the autho
 the acrobot, which has no authors' linearisation; a linear reference, which has no controller
 file).
 
+A gymnasium env (``leoc train gym:InvertedPendulum-v5``, MuJoCo) runs its own path: each
+model-free learner and each kind once, train, rerun, simulate on the env beside its LQR, and
+``roa``'s one-line refusal (no interval model of an env exists).
+
 The fast suite runs a pairwise cover of the three paper systems (every pair of learner, kind,
 system and variant appears in some case); the slow suite (CI) runs the acrobot under the
 authors' variant and ``leoc reproduce`` on one system and variant; the extended suite (``pytest
@@ -108,10 +112,11 @@ PRODUCT = [
 EXTENDED_CASES = [case for case in PRODUCT if case not in FAST_CASES]
 #: Training under perturbation (``--perturb``, ``--randomise``) through the same workflow: a
 #: model-free ROA hybrid (its impulse response is still exactly its LQR's: the evaluations run
-#: on the nominal plant) and a PILCO hybrid under the authors' variant.
+#: on the nominal plant) and, in the slow suite, a PILCO hybrid under the authors' variant (its
+#: cart-pole certificate is the costliest of the fast suite's: about a minute).
 PERTURBED_CASES = [
     ("td3", "hybrid_roa", "pendulum", "leoc"),
-    ("pilco", "hybrid", "cartpole", "authors"),
+    pytest.param(("pilco", "hybrid", "cartpole", "authors"), marks=pytest.mark.slow),
 ]
 PERTURBATION_ARGS = ["--randomise", "observation_noise=0.1", "--perturb", "actuator_gain=-0.2"]
 
@@ -434,3 +439,46 @@ def test_pilco_extends_a_run_given_more_iterations_and_refuses_fewer(tmp_path, c
     code, _, err = _run([*train, "--iterations", "1", "--overwrite", "--quiet"], capsys)
     assert code == 0, err
     assert [r["iteration"] for r in json.loads((run / "curve.json").read_text())["curve"]] == [0, 1]
+
+
+#: The gymnasium path (``leoc train gym:ENV_ID``, :mod:`leoc.sb3.gym`): each model-free
+#: learner once, each kind once (pairwise, as the fast cover), on MuJoCo's InvertedPendulum-v5.
+GYM_CASES = [("ddpg", "baseline"), ("td3", "hybrid_roa"), ("sac", "hybrid_lyapunov")]
+GYM_SYSTEM = "gym:InvertedPendulum-v5"
+#: Training steps of a gymnasium case: the path, not the learning.
+GYM_STEPS = 50
+
+
+@pytest.mark.usefixtures("single_thread")
+@pytest.mark.parametrize(("learner", "kind"), GYM_CASES, ids=["-".join(c) for c in GYM_CASES])
+def test_workflow_on_a_gymnasium_env(learner, kind, tmp_path, capsys) -> None:
+    """train, a rerun (nothing trained, the controller unchanged), simulate (the trained
+    controller beside its LQR on the env), roa (a one-line refusal: no interval model), and a
+    hybrid's action at the operating observation is its LQR's, u_eq = 0."""
+    pytest.importorskip("mujoco")
+    from leoc.sb3.gym import load_gym_controller
+
+    run = tmp_path / "run"
+    train = ["train", GYM_SYSTEM, "--algo", learner, "--steps", GYM_STEPS, "--out", run]
+    if kind != "baseline":
+        train += ["--hybrid", "--relevance", KIND_RELEVANCE[kind]]
+    code, _, err = _run([*train, "--quiet"], capsys)
+    assert code == 0, err
+    model = (run / "model.zip").read_bytes()
+    code, out, err = _run(train, capsys)
+    assert code == 0 and "nothing to train" in out, err
+    assert (run / "model.zip").read_bytes() == model
+    code, out, err = _run(["simulate", run, "--json"], capsys)
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["lqr"]["metrics"]["peak_deviation"] > 0.0
+    assert np.isfinite(report["trained"]["metrics"]["peak_deviation"])
+    code, _, err = _run(["roa", "--controller", run], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "no interval model" in err
+    controller = load_gym_controller(run)
+    if kind != "baseline":  # the rest state is the operating observation: G(a) = u_eq = 0
+        assert abs(float(controller(np.zeros(4))[0])) < 1e-9
+    if kind == "hybrid_roa":  # r == 1 near a: the action is the LQR's -K x (observation = state)
+        gain = np.asarray(json.loads((run / "design.json").read_text())["K"])
+        state = np.array([0.01, -0.02, 0.03, 0.01])
+        np.testing.assert_allclose(controller(state), -gain @ state, rtol=1e-9, atol=1e-12)

@@ -294,8 +294,8 @@ def evaluate_proved_region(context: EvaluationContext) -> dict[str, Any] | None:
     (:func:`leoc.evaluation.proved_regions.proved_region`, as ``leoc roa --controller RUN
     --prove``): the LQR at its period, saturated as its output is (PILCO's ``sin``), on the
     system's basin box, within the budget's ``proof_boxes`` and ``proof_seconds``; with
-    ``saturation`` and ``budget_seconds``. None for the LQRs (their region is the ``roa``
-    entry's certificate)."""
+    ``saturation``, ``budget_seconds`` and ``budget_boxes``. None for the LQRs (their region is
+    the ``roa`` entry's certificate)."""
     from leoc.evaluation.basins import default_basin_box
     from leoc.evaluation.proved_regions import proved_region
     from leoc.policies.hybrid import lqr_certificate, output_saturation
@@ -314,7 +314,12 @@ def evaluate_proved_region(context: EvaluationContext) -> dict[str, Any] | None:
         max_seconds=context.budget.proof_seconds,
         max_boxes=context.budget.proof_boxes,
     )
-    return {**entry, "saturation": saturation, "budget_seconds": context.budget.proof_seconds}
+    return {
+        **entry,
+        "saturation": saturation,
+        "budget_seconds": context.budget.proof_seconds,
+        "budget_boxes": context.budget.proof_boxes,
+    }
 
 
 def evaluate_robustness_protocol(context: EvaluationContext) -> dict[str, Any] | None:

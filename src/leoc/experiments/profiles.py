@@ -65,19 +65,13 @@ def _check_count(value: Any, name: str, least: int) -> None:
 @dataclasses.dataclass(frozen=True)
 class EvaluationBudget:
     """How large a profile's costliest evaluations are (:mod:`leoc.experiments.evaluators`):
-    each field None (the default) keeps the evaluation's own default, which the ``quick`` and
-    ``paper`` profiles use; the ``smoke`` profile, a pipeline check, evaluates on fewer points.
+    the trained controllers' own proofs, the robustness protocol, the robustness sweep and the
+    hybrids' impulse sweep. The defaults are the paper profile's, each evaluation's own default;
+    the ``quick`` profile proves and runs the protocol on shorter budgets, the ``smoke``
+    profile, a pipeline check, evaluates everything on fewer points.
 
     Attributes
     ----------
-    robustness_scales : tuple of float or None
-        Factors on the mass and on g of the robustness sweep (``evaluation.json``'s
-        ``robustness``; default :data:`leoc.evaluation.robustness.SCALE_FACTORS`, 0.5 ... 5.0
-        in steps of 0.5).
-    impulse_sweep_points : int or None
-        Sizes of the hybrids' impulse sweep against their LQR (``hybrid_claims``; default
-        :data:`leoc.evaluation.impulse_sweep.SWEEP_POINTS`), >= 2: the paper's size and the
-        LQR's failure size at least.
     proof_seconds : float
         Wall-clock budget [s] of one controller's box searches (``proved_region``;
         :func:`leoc.control.certify_controller`'s ``max_seconds``, shared by its candidate V);
@@ -91,14 +85,22 @@ class EvaluationBudget:
         Box budget of each candidate V's search (``max_boxes``): unlike the wall-clock budget
         it gives the same level on every machine and every rerun, so the small profiles bound
         their proofs by boxes and keep the seconds as a safety valve.
+    robustness_scales : tuple of float or None
+        Factors on the mass and on g of the robustness sweep (``robustness``; None: every
+        factor of :data:`leoc.evaluation.robustness.SCALE_FACTORS`, 0.5 ... 5.0 in steps of
+        0.5).
+    impulse_sweep_points : int or None
+        Sizes of the hybrids' impulse sweep against their LQR (``hybrid_claims``; None:
+        :data:`leoc.evaluation.impulse_sweep.SWEEP_POINTS`), >= 2: the paper's size and the
+        LQR's failure size at least.
     """
 
-    robustness_scales: tuple[float, ...] | None = None
-    impulse_sweep_points: int | None = None
     proof_seconds: float = PROOF_SECONDS
     protocol_levels: int = ROBUSTNESS_LEVELS
     protocol_episodes: int = ROBUSTNESS_EPISODES
     proof_boxes: int = PROOF_BOXES
+    robustness_scales: tuple[float, ...] | None = None
+    impulse_sweep_points: int | None = None
 
     def __post_init__(self) -> None:
         seconds = self.proof_seconds
@@ -131,7 +133,8 @@ class EvaluationBudget:
             )
 
     def describe(self) -> str:
-        """The budget in words, for the report ("" when every evaluation keeps its default)."""
+        """Where the budget reduces the evaluations, in words, for the report ("" for the
+        paper profile's)."""
         parts = []
         if self.robustness_scales is not None:
             scales = ", ".join(f"{s:g}x" for s in self.robustness_scales)
@@ -146,7 +149,7 @@ class EvaluationBudget:
         ):
             parts.append(
                 f"robustness protocol at {self.protocol_levels} levels x "
-                f"{self.protocol_episodes} episodes"
+                f"{self.protocol_episodes} episode{'s' if self.protocol_episodes != 1 else ''}"
             )
         return "; ".join(parts)
 

@@ -94,6 +94,7 @@ def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[st
         "by_construction": [_by_construction(e) for e in entries],
         "seconds_median": float(np.median([e["seconds"] for e in entries])),
         "budget_seconds": sorted({e.get("budget_seconds") for e in entries}, key=str),
+        "budget_boxes": sorted({e.get("budget_boxes") for e in entries}, key=str),
         "saturation": sorted({e.get("saturation", "clip") for e in entries}),
     }
 
@@ -230,6 +231,9 @@ def _budget_text(rows: Rows) -> str:
     budgets = sorted({b for row in rows for b in row["budget_seconds"] if b is not None})
     times = [row["seconds_median"] for row in rows]
     budget = " / ".join(f"{FMT.format(b)} s" for b in budgets) or "an unrecorded budget"
+    boxes = sorted({b for row in rows for b in row.get("budget_boxes", []) if b is not None})
+    if boxes:
+        budget = f"{' / '.join(f'{b:,}' for b in boxes)} boxes per candidate V within {budget}"
     took = FMT.format(min(times))
     if max(times) > min(times):
         took += f"-{FMT.format(max(times))}"
