@@ -169,9 +169,11 @@ def test_a_smoke_study_reports_the_lyapunov_hybrid_with_its_label(smoke_study):
     out, report, results = smoke_study
     label = "DDPG hybrid (Lyapunov relevance)"
     rows = [line for line in report.splitlines() if line.startswith(f"| pendulum | {label} |")]
-    # impulse, step, robustness (mass, gravity), swing-up, ROA, five seed statistics and the
-    # probability of improvement: a row in each table
-    assert len(rows) == 2 + 2 + 1 + 1 + 5 + 1
+    # impulse, step, robustness (mass, gravity), swing-up, ROA, the trained controllers'
+    # proved regions, five seed statistics and the probability of improvement: a row in each
+    # table (the robustness protocol's tables are per system, their rows without it)
+    assert len(rows) == 2 + 2 + 1 + 1 + 1 + 5 + 1
+    assert sum(row.split("|")[4].strip() in ("lqr", "own") for row in rows) == 1  # V kept
     # compared with its LQR (the responses check) and its baseline (probability of improvement)
     tests = {r["test"] for r in results["responses"] if r["controller"] == "ddpg_hybrid_lyapunov"}
     assert tests == {"impulse", "step"}
