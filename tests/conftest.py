@@ -52,6 +52,26 @@ def single_thread():
     torch.set_num_threads(threads)
 
 
+@pytest.fixture(scope="session")
+def tiny_gym_settings() -> dict:
+    """Settings of a ``leoc.sb3.train_gym`` run small enough for the test suite: tiny
+    networks, 60-step episodes, two evaluation episodes, a coarse sampled region, a checkpoint
+    every 100 steps. A test changes what it needs on a copy: ``{**tiny_gym_settings, ...}``."""
+    return {
+        "env_kwargs": {"max_episode_steps": 60},
+        "eval_interval": 200,
+        "eval_episodes": 2,
+        "roa_samples": 4,
+        "roa_steps": 150,
+        "actor_hidden": (16, 16),
+        "critic_hidden": (16, 16),
+        "batch_size": 32,
+        "learning_starts": 100,
+        "checkpoint_interval": 100,
+        "progress": False,
+    }
+
+
 def pytest_collection_modifyitems(config, items) -> None:
     """Modules holding a ``heavy`` test run first, each module's tests kept together and in
     order (their module-scoped fixtures are set up once): a worker of ``pytest -n`` that meets a

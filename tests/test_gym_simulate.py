@@ -17,20 +17,6 @@ from leoc.sb3.gym import gym_plant, make_gym_env, train_gym
 
 pytestmark = pytest.mark.usefixtures("single_thread")
 
-#: A run small enough for the test suite (as tests/test_gym_training.py's).
-TINY = {
-    "env_kwargs": {"max_episode_steps": 120},
-    "eval_interval": 250,
-    "eval_episodes": 1,
-    "roa_samples": 4,
-    "roa_steps": 150,
-    "actor_hidden": (16, 16),
-    "critic_hidden": (16, 16),
-    "batch_size": 32,
-    "learning_starts": 100,
-    "progress": False,
-}
-
 
 def hand_impulse(steps: int, impulse: float) -> tuple[np.ndarray, bool]:
     """InvertedPendulum-v5 from the rest state: the first action forced to ``impulse``, then
@@ -117,15 +103,17 @@ def test_bad_options_are_one_line_errors():
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory):
-    """A tiny SAC hybrid run on InvertedPendulum-v5."""
+def run_dir(tmp_path_factory, tiny_gym_settings):
+    """A tiny SAC hybrid run on InvertedPendulum-v5 (120-step episodes, one evaluation
+    episode)."""
     pytest.importorskip("mujoco")
     import torch
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     folder = tmp_path_factory.mktemp("gymsim") / "run"
-    train_gym("InvertedPendulum-v5", "sac", True, 0, folder, 250, **TINY)
+    tiny = {**tiny_gym_settings, "env_kwargs": {"max_episode_steps": 120}, "eval_episodes": 1}
+    train_gym("InvertedPendulum-v5", "sac", True, 0, folder, 250, **tiny)
     torch.set_num_threads(threads)
     return folder
 

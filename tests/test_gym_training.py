@@ -25,21 +25,6 @@ from leoc.sb3.gym import (
 
 pytestmark = pytest.mark.usefixtures("single_thread")
 
-#: A run small enough for the test suite: tiny networks, 60-step episodes, two evaluation
-#: episodes, a coarse sampled region.
-TINY = {
-    "env_kwargs": {"max_episode_steps": 60},
-    "eval_interval": 200,
-    "eval_episodes": 2,
-    "roa_samples": 4,
-    "roa_steps": 150,
-    "actor_hidden": (16, 16),
-    "critic_hidden": (16, 16),
-    "batch_size": 32,
-    "learning_starts": 100,
-    "checkpoint_interval": 100,
-    "progress": False,
-}
 #: Fixed observations the final models are compared on.
 PROBES = np.random.default_rng(3).normal(scale=0.05, size=(16, 4))
 
@@ -91,13 +76,15 @@ def test_double_pendulum_gain_is_the_lqr_to_first_order():
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(tmp_path_factory, tiny_gym_settings):
     """A tiny SAC hybrid run on InvertedPendulum-v5, and the same run interrupted after its
     checkpoint at step 200 and resumed."""
     pytest.importorskip("mujoco")
     torch.set_num_threads(1)
     root = tmp_path_factory.mktemp("gym")
-    whole = train_gym("InvertedPendulum-v5", "sac", True, 0, root / "whole", 400, **TINY)
+    whole = train_gym(
+        "InvertedPendulum-v5", "sac", True, 0, root / "whole", 400, **tiny_gym_settings
+    )
     original = GymEvaluationCallback._on_step
 
     def interrupt(self):
@@ -108,11 +95,13 @@ def runs(tmp_path_factory):
     GymEvaluationCallback._on_step = interrupt
     try:
         with pytest.raises(KeyboardInterrupt):
-            train_gym("InvertedPendulum-v5", "sac", True, 0, root / "cut", 400, **TINY)
+            train_gym("InvertedPendulum-v5", "sac", True, 0, root / "cut", 400, **tiny_gym_settings)
     finally:
         GymEvaluationCallback._on_step = original
     assert (root / "cut" / "checkpoint.pkl").is_file()
-    resumed = train_gym("InvertedPendulum-v5", "sac", True, 0, root / "cut", 400, **TINY)
+    resumed = train_gym(
+        "InvertedPendulum-v5", "sac", True, 0, root / "cut", 400, **tiny_gym_settings
+    )
     return whole, resumed
 
 
@@ -130,7 +119,7 @@ def test_hybrid_run_is_its_lqr_at_the_operating_point(runs):
     assert design["relevance_data"]["rho"] > 0.0
 
 
-def test_resumed_run_equals_uninterrupted_and_rerun_is_a_no_op(runs):
+def test_resumed_run_equals_uninterrupted_and_rerun_is_a_no_op(runs, tiny_gym_settings):
     whole, resumed = runs
     controller = load_gym_controller(whole.run_dir)
     again = load_gym_controller(resumed.run_dir)
@@ -140,11 +129,13 @@ def test_resumed_run_equals_uninterrupted_and_rerun_is_a_no_op(runs):
     for name in ("config.json", "model.zip", "curve.json", "curve.csv", "learning_curve.png"):
         assert (whole.run_dir / name).is_file()
     stamp = (whole.run_dir / "model.zip").stat().st_mtime_ns
-    rerun = train_gym("InvertedPendulum-v5", "sac", True, 0, whole.run_dir, 400, **TINY)
+    rerun = train_gym(
+        "InvertedPendulum-v5", "sac", True, 0, whole.run_dir, 400, **tiny_gym_settings
+    )
     assert (whole.run_dir / "model.zip").stat().st_mtime_ns == stamp
     assert rerun.curve == json.loads((whole.run_dir / "curve.json").read_text())["curve"]
     with pytest.raises(ValueError, match="another configuration"):
-        train_gym("InvertedPendulum-v5", "sac", True, 0, whole.run_dir, 500, **TINY)
+        train_gym("InvertedPendulum-v5", "sac", True, 0, whole.run_dir, 500, **tiny_gym_settings)
 
 
 def lqr_held(env_id: str, seeds: list[int], steps: int) -> float:
@@ -162,7 +153,7 @@ def lqr_held(env_id: str, seeds: list[int], steps: int) -> float:
     return float(np.mean(held))
 
 
-def test_untrained_hybrid_holds_like_its_lqr(runs):
+def test_untrained_hybrid_holds_like_its_lqr(runs, tiny_gym_settings):
     """Step 0 of the curve (before any update): the hybrid holds every seeded default start,
     as the LQR alone does; there r is within 1e-6 of 1 (measured over 100 default starts:
     1 - r <= 6.8e-8 with the default floored relevance, 6.3e-4 with the paper's), so the
@@ -170,7 +161,7 @@ def test_untrained_hybrid_holds_like_its_lqr(runs):
     whole, _ = runs
     first = whole.curve[0]
     assert first["steps"] == 0
-    seeds = [10_000 + k for k in range(TINY["eval_episodes"])]
+    seeds = [10_000 + k for k in range(tiny_gym_settings["eval_episodes"])]
     assert first["held_fraction"] == lqr_held("InvertedPendulum-v5", seeds, 60) == 1.0
     env = gym.make("InvertedPendulum-v5")
     starts = torch.as_tensor(np.array([env.reset(seed=s)[0] for s in seeds]))

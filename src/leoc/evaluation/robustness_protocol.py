@@ -25,25 +25,11 @@ the hold band for at least the system's minimum hold duration at the end). Then
 with ``L_c`` the levels of category ``c`` (times its constants for the parameter errors),
 ``K`` the start kinds, ``N`` the episodes per start kind and ``C`` the categories run.
 
-Categories (the level, and what it perturbs; the one mapping from a level to the plant is
-:func:`leoc.systems.perturbation_levels.category_perturbations`, which training under
-perturbation uses too):
-
-=====================  ===============================================================
-``observation_noise``  std of Gaussian noise on the observed velocities (their units);
-                       positions and cos/sin pairs exact (encoders; RealAIGym's choice)
-``action_delay``       delay in whole simulator steps (a controller at a longer period
-                       gets fractions of its period)
-``actuator_gain``      ``gain - 1``: the torque response factor, two-sided
-``torque_noise``       std of Gaussian noise on the delivered force or torque (N, N m)
-``viscous_friction``   ``b`` on every degree of freedom (N s/m, N m s/rad)
-``coulomb_friction``   ``mu`` on every degree of freedom (N, N m)
-``parameter_error``    ``factor - 1`` of one physical constant at a time, two-sided;
-                       one sub-sweep per constant of the system's table entry
-``push``               velocity change of the main coordinate per push, at random
-                       times (:data:`~leoc.systems.PUSHES_PER_EPISODE`
-                       expected per episode)
-=====================  ===============================================================
+Categories: each level's unit and what it perturbs are tabled once, in
+:mod:`leoc.systems.perturbation_levels`, whose
+:func:`~leoc.systems.perturbation_levels.category_perturbations` is the one mapping from a
+level to the plant (training under perturbation uses it too). The protocol sweeps the parameter
+errors one constant at a time: one sub-sweep per constant of the system's table entry.
 
 Friction is two categories, as RealAIGym scores damping and Coulomb friction apart: they act
 differently (damping slows, Coulomb friction makes a dead zone), and one category would need an

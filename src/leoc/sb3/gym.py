@@ -92,11 +92,11 @@ from leoc.sb3.train import (
     DEFAULT_RUN_ROOT,
     MODEL_FILES,
     RUN_OUTPUTS,
-    _atomic_save_model,
-    _earlier_run,
-    _versions,
     build_model,
+    earlier_run,
+    library_versions,
     load_ddpg_model,
+    save_model_atomic,
 )
 from leoc.training import (
     CONFIG_FILE,
@@ -685,7 +685,7 @@ def train_gym(
     gym_options = (env_kwargs, operating_point)
     options = (seed, run_dir, total_steps, progress)
     run, interval = _gym_run(env_id, algo, hybrid, options, gym_options, overrides)
-    resumed, done = _earlier_run(run.run_path, run.config_dict, overwrite, False, progress)
+    resumed, done = earlier_run(run.run_path, run.config_dict, overwrite, False, progress)
     if done is not None:
         return done
     model = resumed["model"] if resumed is not None else _fresh_model(run)
@@ -748,7 +748,7 @@ def _fresh_model(run: _GymRun) -> Any:
     run.run_path.mkdir(parents=True, exist_ok=True)
     for stale in (CHECKPOINT_FILE, DESIGN_FILE, *MODEL_FILES.values(), *RUN_OUTPUTS):
         (run.run_path / stale).unlink(missing_ok=True)
-    record = {**run.config_dict, "versions": _versions()}
+    record = {**run.config_dict, "versions": library_versions()}
     write_text_atomic(run.run_path / CONFIG_FILE, json.dumps(record, indent=2))
     write_text_atomic(
         run.run_path / DESIGN_FILE, json.dumps(_design_record(plant, design), indent=2)
@@ -791,7 +791,7 @@ def _learn_gym(run: _GymRun, model: Any, resumed: Any, checkpoint_interval: int)
         callback=CallbackList([checkpoint, callback]),
         reset_num_timesteps=resumed is None,
     )
-    _atomic_save_model(model, run.run_path / MODEL_FILES["final"])
+    save_model_atomic(model, run.run_path / MODEL_FILES["final"])
     summary = {**curve_summary(callback.curve, dt), "model_selection": "final"}
     kind = "hybrid" if config.hybrid else "baseline"
     title = f"{run.env_id} {config.algo.upper()} {kind} (seed {seed})"

@@ -101,7 +101,8 @@ POLICY_CLASSES = {
 DDPGResult = TrainResult  # the one trainer result (leoc.training)
 
 
-def _atomic_save_model(model: Any, path: Path) -> None:
+def save_model_atomic(model: Any, path: Path) -> None:
+    """Save an SB3 ``model`` to ``path`` atomically: a crash leaves the old file or the new."""
     buffer = io.BytesIO()
     model.save(buffer)
     write_bytes_atomic(path, buffer.getvalue())
@@ -150,7 +151,8 @@ def build_model(
     return LeocDDPG(policy, env, **common)
 
 
-def _versions() -> dict[str, str]:
+def library_versions() -> dict[str, str]:
+    """The versions of the libraries a run's ``config.json`` records."""
     import gymnasium
     import stable_baselines3
 
@@ -215,7 +217,7 @@ def train_ddpg(
     config = DDPGConfig.for_system(name, algo, hybrid=hybrid, **overrides)
     config_dict = {**config.as_dict(), "seed": seed}
     run_path = _run_path(config, run_dir, seed)
-    resumed, done = _earlier_run(run_path, config_dict, overwrite, bool(callbacks), progress)
+    resumed, done = earlier_run(run_path, config_dict, overwrite, bool(callbacks), progress)
     if done is not None:
         return done
     run = _Run(config, config_dict, seed, _plant(system, config), run_path, resumed, progress)
@@ -262,7 +264,7 @@ def _episode_plants(config: DDPGConfig, plant: System, seed: int) -> Any:
     return None if spec.is_nominal else EpisodePlants(spec, plant, seed)
 
 
-def _earlier_run(
+def earlier_run(
     run_path: Path,
     config_dict: dict[str, Any],
     overwrite: bool,
@@ -308,7 +310,7 @@ def _start_model(run: _Run) -> Any:
         (run_path / stale).unlink(missing_ok=True)
     write_text_atomic(
         run_path / CONFIG_FILE,
-        json.dumps({**config_dict, "versions": _versions()}, indent=2),
+        json.dumps({**config_dict, "versions": library_versions()}, indent=2),
     )
     return model
 
@@ -327,7 +329,7 @@ def _learn(
         plant,
         evaluation_starts(plant, seed, config.eval_episodes),
         config.eval_interval,
-        save_best=lambda m: _atomic_save_model(m, run_path / MODEL_FILES["best"]),
+        save_best=lambda m: save_model_atomic(m, run_path / MODEL_FILES["best"]),
         progress=progress,
         total_steps=config.total_steps,
         model_selection=config.model_selection,
@@ -346,7 +348,7 @@ def _learn(
         callback=CallbackList([checkpoint, *callbacks, callback]),
         reset_num_timesteps=resumed is None,
     )
-    _atomic_save_model(model, run_path / MODEL_FILES["final"])
+    save_model_atomic(model, run_path / MODEL_FILES["final"])
     plants = getattr(env.envs[0].unwrapped, "plants", None)  # None: nominal, or an older env
     if plants is not None:
         write_training_plants(run_path, plants)
