@@ -13,11 +13,12 @@
   (nrjc/LEOC) settings, :func:`authors_pilco_overrides`;
 - :mod:`~leoc.pilco.policy`: the RBF baseline and the hybrid, built from the initial data;
 - :mod:`~leoc.pilco.objective`: the predicted horizon cost and its L-BFGS minimisation;
-- :mod:`~leoc.pilco.checkpoint`: resumable checkpoint and saved controller;
+- :mod:`~leoc.pilco.checkpoint`: resumable checkpoint, saved controller and trained run
+  (:func:`load_pilco_run`);
 - :mod:`~leoc.pilco.train`: the training loop only.
 """
 
-from leoc.pilco.checkpoint import load_pilco_controller
+from leoc.pilco.checkpoint import PilcoRun, load_pilco_controller, load_pilco_run
 from leoc.pilco.config import PilcoConfig, authors_pilco_overrides
 from leoc.pilco.cost import expected_saturating_cost, saturating_cost
 from leoc.pilco.gp import CholeskyError, GPPosterior, GPSettings, fit_gp, gp_predict
@@ -40,6 +41,7 @@ __all__ = [
     "MomentMatch",
     "PilcoConfig",
     "PilcoResult",
+    "PilcoRun",
     "SaturatedPolicy",
     "action_moments",
     "authors_pilco_overrides",
@@ -49,6 +51,7 @@ __all__ = [
     "gp_predict",
     "linear_moments",
     "load_pilco_controller",
+    "load_pilco_run",
     "observation_moments",
     "predict",
     "quadrature_moments",

@@ -6,7 +6,7 @@ import dataclasses
 import math
 import typing
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from leoc.control.lqr import DesignMethod
 from leoc.pilco.gp import GPSettings
@@ -16,6 +16,9 @@ from leoc.policies.spec import (
     legacy_hybrid_config,
     with_hybrid_overrides,
 )
+
+if TYPE_CHECKING:
+    from leoc.systems.base import System
 
 
 @dataclasses.dataclass
@@ -226,6 +229,18 @@ class PilcoConfig:
         return (
             self.action_repeat if self.deploy_action_repeat is None else self.deploy_action_repeat
         )
+
+    def plant(self, system: System | None = None) -> System:
+        """The system a run of these settings trains on: a copy of ``system`` (default: the
+        registered system named ``self.system``) stepping under ``step_rules``, with
+        ``episode_steps`` steps an episode. :func:`~leoc.pilco.train_pilco` and
+        :func:`~leoc.pilco.load_pilco_run` build it here."""
+        from leoc.systems import StepRules, make_system
+
+        base = make_system(self.system) if system is None else system
+        plant = base.with_rules(StepRules(**self.step_rules))
+        plant.episode_steps = self.episode_steps
+        return plant
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain data (JSON-ready), nested ``gp`` and ``hybrid`` included

@@ -59,7 +59,7 @@ from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
 from leoc.policies.spec import HybridSpec
 from leoc.progress import ProgressLine, evaluation_text, iterations_line
-from leoc.systems import EpisodePlants, StepRules, TrainingPerturbations, make_system
+from leoc.systems import EpisodePlants, TrainingPerturbations
 from leoc.systems.base import System
 from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import RandomController
@@ -347,9 +347,7 @@ def train_pilco(
     relevance = None if config.hybrid is None else config.hybrid.relevance
     controller = ControllerName("pilco", relevance).name
     run_path = Path(run_dir or run_folder(DEFAULT_RUN_ROOT, name, controller, seed))
-    plant = make_system(name) if isinstance(system, str) else system
-    plant = plant.with_rules(StepRules(**config.step_rules))
-    plant.episode_steps = config.episode_steps
+    plant = config.plant(None if isinstance(system, str) else system)
     run = _start_run(plant, config, run_path, resume)
     state, model = _learn(plant, config, run_path, run, progress)
     return _finish(plant, config, run_path, run.policy, state, model)
