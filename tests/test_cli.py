@@ -143,6 +143,7 @@ COMMAND_NAMES = [
     "export",
     "reproduce",
     "ablation",
+    "gym-study",
     "plot",
     "publish",
 ]

@@ -262,6 +262,18 @@ ABLATION_ALL_SETTINGS = (
 ABLATION_TEST_EPISODES = 5
 """Held-out swing-up episodes of the ablation's success test, per evaluation."""
 
+GYM_STUDY_ENVS = ("InvertedPendulum-v5", "InvertedDoublePendulum-v5")
+"""The gymnasium envs of ``leoc gym-study`` by default (``leoc.experiments.gym_study``)."""
+GYM_STUDY_DEFAULT_NOISE = "default"
+"""``leoc gym-study``'s word for the env's own ``reset_noise_scale`` (no keyword passed)."""
+GYM_STUDY_NOISES = (GYM_STUDY_DEFAULT_NOISE, "0.5", "0.8")
+"""The start noises (``reset_noise_scale``) of ``leoc gym-study`` by default."""
+GYM_STUDY_PROFILES = ("smoke", "full")
+"""The profiles of ``leoc gym-study`` (``leoc.experiments.gym_study.STUDY_PROFILES``)."""
+GYM_STUDY_CONTROLLERS = ("lqr", "sac_baseline", "sac_hybrid", "sac_hybrid_roa")
+"""The controllers of ``leoc gym-study``, in table order: the clipped LQR alone, SAC alone, the
+SAC hybrid with the paper's relevance (no floor) and with the ROA relevance."""
+
 
 def register_builtin_envs() -> None:
     """Register the built-in systems' gymnasium ids by entry point, without building them.

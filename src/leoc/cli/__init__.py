@@ -18,6 +18,7 @@ from leoc import __version__
 from leoc.cli import (
     ablation,
     export,
+    gym_study,
     lqr,
     plot,
     publish,
@@ -33,8 +34,20 @@ from leoc.cli._args import OneLineParser
 EXIT_SIGINT = 128 + signal.SIGINT
 EXIT_SIGTERM = 128 + signal.SIGTERM
 EXIT_SIGPIPE = 128 + signal.SIGPIPE
-COMMANDS = (lqr, simulate, roa, robustness, train, export, reproduce, ablation, plot, publish)
-RESUMABLE_COMMANDS = ("reproduce", "ablation", "train")
+COMMANDS = (
+    lqr,
+    simulate,
+    roa,
+    robustness,
+    train,
+    export,
+    reproduce,
+    ablation,
+    gym_study,
+    plot,
+    publish,
+)
+RESUMABLE_COMMANDS = ("reproduce", "ablation", "gym-study", "train")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -132,3 +132,53 @@ def category_level(text: str) -> tuple[str, float]:
             f"expected CATEGORY=LEVEL with LEVEL a number, found {text!r}"
         ) from None
     return key.strip(), number
+
+
+def option_value(text: str) -> int | float | bool | str:
+    """A ``KEY=VALUE`` option's value as Python reads it: an integer (``1000``), a number
+    (``0.5``, ``1e-3``), ``true``/``false`` (any case), else the text itself."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    lowered = text.strip().lower()
+    return {"true": True, "false": False}.get(lowered, text)
+
+
+def env_option(text: str) -> tuple[str, int | float | bool | str]:
+    """argparse type of ``--env-option``: ``KEY=VALUE``, a keyword of ``gymnasium.make`` (a
+    Python name) and its value (:func:`option_value`), as ``(key, value)``."""
+    key, separator, value = text.partition("=")
+    if not separator or not key.strip().isidentifier() or not value.strip():
+        raise argparse.ArgumentTypeError(
+            f"expected KEY=VALUE with KEY a keyword of gymnasium.make (e.g. "
+            f"reset_noise_scale=0.5), found {text!r}"
+        )
+    return key.strip(), option_value(value.strip())
+
+
+def env_kwargs_of(options: list[tuple[str, object]] | None) -> dict[str, object]:
+    """The ``env_kwargs`` of repeated ``--env-option`` values; a key given twice is refused."""
+    found: dict[str, object] = {}
+    for key, value in options or ():
+        if key in found:
+            raise ValueError(
+                f"--env-option: expected each KEY once, found {key!r} twice ({found[key]!r}, "
+                f"{value!r})"
+            )
+        found[key] = value
+    return found
+
+
+def add_env_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup, scope: str) -> None:
+    """Add the repeatable ``--env-option KEY=VALUE`` (:func:`env_option`) to ``parser``;
+    ``scope`` leads its help (where it applies)."""
+    parser.add_argument(
+        "--env-option",
+        action="append",
+        type=env_option,
+        metavar="KEY=VALUE",
+        help=f"{scope}: a keyword of gymnasium.make (numbers read as numbers, e.g. "
+        "reset_noise_scale=0.5 or max_episode_steps=1000); repeatable",
+    )

@@ -46,8 +46,8 @@ def check_gym_options(args: argparse.Namespace, gym: bool) -> None:
                     f"system's simulation), found {getattr(args, name)}"
                 )
         return
-    for name in ("magnitude", "main_index"):
-        if getattr(args, name) is not None:
+    for name in ("magnitude", "main_index", "env_option"):
+        if getattr(args, name, None) is not None:
             flag = "--" + name.replace("_", "-")
             raise ValueError(
                 f"{flag}: expected only for a gymnasium env ({GYM_PREFIX}ENV_ID or its run "
@@ -79,15 +79,25 @@ def run_gym_simulate(args: argparse.Namespace, system: str, controller: str) -> 
     options = {"steps": args.steps, "magnitude": args.magnitude, "main_index": args.main_index}
     options["band"] = args.band
     if controller == "linear":
-        env_id = str(gym_env_id(system))
-        env = make_gym_env(env_id)
-        plant = gym_plant(env, env_id)
-        env.close()
+        from leoc.cli._args import env_kwargs_of
+        from leoc.cli.train import check_env_kwargs
         from leoc.evaluation.gym_response import lqr_controller
 
+        env_id = str(gym_env_id(system))
+        kwargs = env_kwargs_of(getattr(args, "env_option", None))
+        check_env_kwargs(env_id, kwargs)
+        env = make_gym_env(env_id, kwargs)
+        plant = gym_plant(env, env_id)
+        env.close()
+        options["env_kwargs"] = kwargs
         responses = {"lqr": gym_response(plant, lqr_controller(plant), args.test, **options)}
         distance = None
     else:
+        if getattr(args, "env_option", None):
+            raise ValueError(
+                f"--env-option: expected it left out for a run folder (the run's own env_kwargs "
+                f"are used), found {[f'{k}={v}' for k, v in args.env_option]}"
+            )
         if gym_run_system(controller) != system:
             raise ValueError(
                 f"--controller: expected a run folder trained on {system}, found {controller!r} "

@@ -11,6 +11,7 @@ from typing import Any, NamedTuple
 
 from leoc.cli._args import (
     SYSTEM_HELP,
+    add_env_option,
     non_negative_int,
     positive_float,
     positive_int,
@@ -119,6 +120,7 @@ def _add_gym_arguments(parser: argparse.ArgumentParser) -> None:
         help="state entry recorded (default: the pole angle qpos[1] in deg for the inverted "
         "pendulums, theta for Pendulum-v1, else entry 0 in the state's units)",
     )
+    add_env_option(group, f"{GYM_PREFIX}ENV_ID only (a run folder uses its own)")
 
 
 def simulate_target(text: str) -> str | Path:

@@ -9,7 +9,9 @@ from typing import Any
 
 from leoc.cli._args import (
     SYSTEM_HELP,
+    add_env_option,
     category_level,
+    env_kwargs_of,
     non_negative_int,
     numbers,
     positive_int,
@@ -119,6 +121,7 @@ def add_parser(commands: Any) -> None:
         "(default: refuse, naming the settings that differ)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
+    add_env_option(train, f"{GYM_PREFIX}ENV_ID only, saved in the run's config")
     add_perturbation_arguments(train)
     train.set_defaults(run=run)
 
@@ -422,6 +425,12 @@ def run(args: argparse.Namespace) -> int:
 
     if gym_env_id(args.system) is not None:
         return run_gym(args)
+    if getattr(args, "env_option", None):
+        options = [f"{key}={value}" for key, value in args.env_option]
+        raise ValueError(
+            f"--env-option: expected only for a gymnasium env ({GYM_PREFIX}ENV_ID), found "
+            f"{options} for the leoc system {args.system!r}"
+        )
     check_budget_arguments(args)
     controller = controller_of(args)  # checks the relevance flags first
     run_dir = args.out or default_run_dir(args)
@@ -471,9 +480,11 @@ def run_gym(args: argparse.Namespace) -> int:
             f"{[*(args.perturb or []), *(args.randomise or [])]}"
         )
     hybrid = hybrid_of(args)
+    env_kwargs = env_kwargs_of(getattr(args, "env_option", None))
     from leoc.sb3.gym import train_gym
 
     env_id = gym_env_id(args.system)
+    check_env_kwargs(str(env_id), env_kwargs)
     run_dir = args.out or default_run_dir(args)
     try:
         result = train_gym(
@@ -483,6 +494,7 @@ def run_gym(args: argparse.Namespace) -> int:
             args.seed,
             run_dir,
             total_steps=args.steps,
+            env_kwargs=env_kwargs,
             progress=not args.quiet,
             overwrite=args.overwrite,
         )
@@ -493,6 +505,28 @@ def run_gym(args: argparse.Namespace) -> int:
         raise ValueError(message) from error
     print(f"run folder: {result.run_dir}")
     return 0
+
+
+def check_env_kwargs(env_id: str, env_kwargs: dict[str, Any]) -> None:
+    """Make and reset the env with ``env_kwargs`` once, so that keywords it refuses are one
+    line naming ``--env-option`` before anything is written (an unknown env id speaks for
+    itself)."""
+    if not env_kwargs:
+        return
+    from leoc.sb3.gym import make_gym_env
+
+    try:
+        env = make_gym_env(env_id, env_kwargs)
+        env.reset(seed=0)
+        env.close()
+    except (TypeError, ValueError) as error:
+        if isinstance(error, ValueError) and str(error).startswith("env"):
+            raise
+        reason = f"{type(error).__name__}: {error}".splitlines()[0]
+        raise ValueError(
+            f"--env-option: expected keywords and values that gymnasium.make({env_id!r}) "
+            f"accepts, found {env_kwargs} ({reason})"
+        ) from None
 
 
 def announce_perturbations(settings: dict[str, Any], quiet: bool) -> None:

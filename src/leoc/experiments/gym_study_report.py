@@ -1,0 +1,191 @@
+"""The report of ``leoc gym-study`` (:mod:`leoc.experiments.gym_study`), written from
+``study.json`` alone: ``README.md`` (the tables, the command, the budget against the zoo's)
+and one learning-curve figure per env. The same ``study.json`` gives the same bytes."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leoc.experiments.markdown import markdown_table
+from leoc.io import save_figure_atomic, write_text_atomic
+
+__all__ = [
+    "CONTROLLER_LABELS",
+    "README_FILE",
+    "figure_name",
+    "study_markdown",
+    "write_study_report",
+]
+
+#: The report, in the study folder.
+README_FILE = "README.md"
+#: How the report names each controller of the study.
+CONTROLLER_LABELS = {
+    "lqr": "clipped LQR alone",
+    "sac_baseline": "SAC alone",
+    "sac_hybrid": "SAC hybrid, paper relevance (r_min none)",
+    "sac_hybrid_roa": "SAC hybrid, ROA relevance (sampled region)",
+}
+
+
+def figure_name(env_id: str) -> str:
+    """The learning-curve figure of ``env_id``, in the study folder."""
+    return f"learning_curve_{env_id}.png"
+
+
+def _mean_std(values: Sequence[float]) -> str:
+    """``mean ± std`` (std over seeds, ddof 1; none for one seed)."""
+    if len(values) < 2:
+        return f"{np.mean(values):.2f}"
+    return f"{np.mean(values):.2f} ± {np.std(values, ddof=1):.2f}"
+
+
+def _steps(runs: Sequence[Mapping[str, Any]]) -> str:
+    """Steps to 95 % per seed ("not reached"; "-" for the LQR, which has no curve)."""
+    if all(run["curve"] is None for run in runs):
+        return "-"
+    return ", ".join(
+        "not reached" if run["steps_to_95"] is None else str(run["steps_to_95"]) for run in runs
+    )
+
+
+def _distance(runs: Sequence[Mapping[str, Any]], controller: str) -> str:
+    if controller == "lqr":
+        return "0 (the reference)"
+    values = [run["distance_pct"] for run in runs]
+    finite = [v for v in values if v is not None]
+    text = f"{np.mean(finite):.3g}" if finite else "-"
+    missing = len(values) - len(finite)
+    return text + (f" ({missing} terminated unlike the LQR)" if missing else "")
+
+
+def _table(entry: Mapping[str, Any]) -> list[str]:
+    """The table of one env at one noise: a row per controller."""
+    rows = []
+    for controller, data in entry["controllers"].items():
+        label = CONTROLLER_LABELS.get(controller, controller)
+        runs = data["runs"]
+        if not data["available"]:
+            rows.append([label, data["reason"], "", "", "", ""])
+            continue
+        shares = [run["held_share"] for run in runs]
+        per_seed = ", ".join(f"{share:.2f}" for share in shares)
+        returns = _mean_std([run["mean_return"] for run in runs])
+        rows.append(
+            [label, _mean_std(shares), per_seed, _steps(runs), returns, _distance(runs, controller)]
+        )
+    headers = (
+        "controller",
+        "held share (mean ± std)",
+        "held share per seed",
+        "steps to 95 % of max return",
+        "final return (mean ± std)",
+        "impulse distance from LQR (%)",
+    )
+    return markdown_table(headers, rows)
+
+
+def _header(study: Mapping[str, Any]) -> list[str]:
+    """The report's opening: what was run, by which command, on which budget."""
+    steps, zoo = study["total_steps"], study["zoo_steps"]
+    seeds = study["seeds"]
+    return [
+        "# LEOC on MuJoCo's inverted pendulums (gymnasium)",
+        "",
+        "Made by:",
+        "",
+        "```",
+        study["command"] or "(no command recorded)",
+        "```",
+        "",
+        f"Profile `{study['profile']}`: {len(seeds)} seed(s) ({', '.join(map(str, seeds))}), "
+        f"{study['episodes']} evaluation episode(s) per run. SAC settings: "
+        f"`{json.dumps(study['settings'], sort_keys=True)}`, from {study['zoo_source']}.",
+        "",
+        f"**Budget**: {steps} environment steps per SAC run, {steps / zoo:.3g} of the zoo's "
+        f"{zoo} (`n_timesteps`): far smaller than the budget those settings were tuned for, so "
+        "the learned controllers here are not the zoo's.",
+        "",
+        "Held share: the share of the seeded evaluation episodes (episode j of seed s from "
+        "`reset(seed=s + 20000 + j)`, the same starts for every controller) held to the time "
+        "limit without termination. Steps to 95 %: the first step of the learning curve whose "
+        "mean evaluation return reaches 95 % of the maximum return (every step's reward at rest "
+        "at the operating point), per seed. Final return: the evaluation episodes' mean return. "
+        "Impulse distance: the largest difference of the impulse response's main coordinate from "
+        "the LQR's, in percent of the LQR's peak, mean over seeds.",
+        "",
+    ]
+
+
+def study_markdown(study: Mapping[str, Any]) -> str:
+    """The README of ``study`` (the contents of ``study.json``)."""
+    lines = _header(study)
+    for env_id, noises in study["envs"].items():
+        lines += [f"## {env_id}", "", f"![learning curves]({figure_name(env_id)})", ""]
+        for noise, entry in noises.items():
+            scale = entry["reset_noise_scale"]
+            lines += [
+                f"### start noise {noise} (reset_noise_scale {scale:g}; maximum return "
+                f"{entry['maximum_return']:.6g})",
+                "",
+                *_table(entry),
+                "",
+            ]
+    seconds = sum(
+        run["wall_seconds"]
+        for noises in study["envs"].values()
+        for entry in noises.values()
+        for data in entry["controllers"].values()
+        for run in data["runs"]
+    )
+    lines += [
+        f"Wall time of the runs (training and evaluation, this machine): {seconds:.0f} s.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _figure(env_id: str, noises: Mapping[str, Any]) -> Any:
+    """One panel per noise: each trained controller's mean held share on the learning curve
+    (mean over seeds) against steps, and the LQR's held share as a dashed line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, len(noises), figsize=(4.5 * len(noises), 3.5), squeeze=False)
+    for axis, (noise, entry) in zip(axes[0], noises.items(), strict=True):
+        for controller, data in entry["controllers"].items():
+            runs = data["runs"]
+            if not runs:
+                continue
+            label = CONTROLLER_LABELS.get(controller, controller)
+            if runs[0]["curve"] is None:
+                share = float(np.mean([run["held_share"] for run in runs]))
+                axis.axhline(share, linestyle="--", color="black", label=f"{label} (final starts)")
+                continue
+            steps = [row["steps"] for row in runs[0]["curve"]]
+            held = np.mean([[row["held_fraction"] for row in run["curve"]] for run in runs], 0)
+            axis.plot(steps, held, marker=".", label=label)
+        axis.set_title(f"{env_id}, noise {noise}")
+        axis.set_xlabel("environment steps")
+        axis.set_ylabel("held share (learning-curve episodes)")
+        axis.set_ylim(-0.05, 1.05)
+    axes[0][0].legend(fontsize="small")
+    figure.tight_layout()
+    return figure
+
+
+def write_study_report(out: str | Path) -> Path:
+    """Write ``README.md`` and the figures of the study folder ``out`` from its ``study.json``
+    alone; returns the README's path."""
+    folder = Path(out)
+    study = json.loads((folder / "study.json").read_text())
+    for env_id, noises in study["envs"].items():
+        save_figure_atomic(_figure(env_id, noises), folder / figure_name(env_id))
+    return write_text_atomic(folder / README_FILE, study_markdown(study))
