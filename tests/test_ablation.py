@@ -117,6 +117,7 @@ CELLS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("setting", "system", "controller"), CELLS)
 def test_each_setting_differs_from_leoc_in_exactly_its_fields_with_the_authors_values(
     setting, system, controller
@@ -415,6 +416,7 @@ def test_model_selection_rules_re_apply_to_the_recorded_runs(tmp_path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_the_figure_reads_cleanly_for_the_full_grid() -> None:
     from leoc.evaluation.plots import layout_problems
     from leoc.evaluation.plots.ablation import draw_success_vs_budget
@@ -441,6 +443,7 @@ def test_the_figure_reads_cleanly_for_the_full_grid() -> None:
 PLAN = AblationPlan(budgets={"pendulum": 400}, eval_intervals={"pendulum": 100}, overrides=TINY)
 
 
+@pytest.mark.slow
 def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> None:
     specs = [
         AblationSpec("pendulum", "ddpg_baseline", "leoc", 0),
@@ -478,6 +481,7 @@ def test_a_partial_folder_continues_without_redoing_finished_runs(tmp_path) -> N
         run_ablation(moved, specs, AblationPlan(overrides=TINY), jobs=1, echo=quiet.append)
 
 
+@pytest.mark.slow
 def test_the_command_runs_the_records_run_ablation_makes_and_resumes(tmp_path, capsys) -> None:
     """``leoc ablation`` on one cell gives the record :func:`run_ablation` gives called
     directly (same plan), pins the command line, publishes, and a rerun trains nothing."""
@@ -506,6 +510,7 @@ def test_the_command_runs_the_records_run_ablation_makes_and_resumes(tmp_path, c
     assert "1 runs: 1 already done, 0 to run" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_short_run_is_the_prefix_of_a_long_one_and_selection_matches_the_trainer(
     tmp_path,
 ) -> None:
@@ -561,6 +566,7 @@ def test_sac_controllers_take_only_the_settings_that_are_not_ddpg_choices() -> N
         assert bool(_differences(expected, config)) == (spec.setting == "exit_penalty")
 
 
+@pytest.mark.slow
 def test_a_short_sac_run_is_the_prefix_of_a_long_one(tmp_path) -> None:
     spec = AblationSpec("pendulum", "sac_hybrid", "leoc", 2)
     long = run_cell(spec, PLAN, tmp_path / "long")
@@ -639,6 +645,7 @@ GRID_CONFIGS = json.loads(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "cell",
     [
@@ -713,6 +720,7 @@ COMMITTED = sorted(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("published", COMMITTED, ids=[path.name for path in COMMITTED])
 def test_committed_ablation_folders_regenerate_byte_for_byte(published, tmp_path) -> None:
     """Publishing a committed ablation folder's records again (``--publish-only``) gives its

@@ -126,6 +126,7 @@ def test_a_file_that_does_not_load_is_recomputed_and_rewritten(
     assert [item.name for item in cache.iterdir()] == [path.name]  # no temporary file left
 
 
+@pytest.mark.slow
 def test_a_corrupt_file_gives_the_fresh_certificate(
     mountaincar, reference, cache, monkeypatch
 ) -> None:
@@ -224,6 +225,7 @@ def test_the_default_folder(tmp_path, monkeypatch) -> None:
     assert roa.certificate_cache_dir() == tmp_path / "mine" / roa.CERTIFICATE_FOLDER
 
 
+@pytest.mark.slow
 def test_a_saturated_lqr_is_cached_under_its_own_key_and_proved_the_same(
     mountaincar, cache, monkeypatch
 ) -> None:
@@ -273,6 +275,7 @@ def test_a_saturated_lqr_is_cached_under_its_own_key_and_proved_the_same(
     assert counted.calls == 4
 
 
+@pytest.mark.slow
 def test_a_controller_without_a_key_is_proved_at_every_call(mountaincar, cache, monkeypatch):
     """A controller certify_lqr cannot name (no controller_key) is never served from a cache:
     two calls, two proofs, nothing written."""

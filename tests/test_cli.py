@@ -356,6 +356,7 @@ def _pilco_run_folder(folder, step_rules: dict, **overrides) -> None:
     save_controller(folder, config, policy.state_dict(), None)
 
 
+@pytest.mark.slow
 def test_a_run_folder_is_simulated_on_the_plant_it_was_trained_on(tmp_path, capsys) -> None:
     """A run trained under the authors' pendulum rules (gym 0.17's integrator) is simulated on
     that plant unless told otherwise, and another variant's plant is refused; the two plants
@@ -382,6 +383,7 @@ def test_a_run_folder_is_simulated_on_the_plant_it_was_trained_on(tmp_path, caps
     assert on_leoc_plant["deviation"] != default["deviation"]
 
 
+@pytest.mark.slow
 def test_roa_certifies_a_run_on_its_own_plant_and_refuses_mixed_plants(tmp_path, capsys) -> None:
     """``leoc roa --controller RUN`` (no system: read from the run) certifies the LQR on the
     plant the run was trained on (gym 0.17's integrator for an authors' pendulum run, leoc's for
@@ -439,6 +441,7 @@ def _check_flat_top(report: dict, run_name: str) -> None:
     assert entry["certified_set_held"] == 1.0
 
 
+@pytest.mark.slow
 def test_roa_certifies_the_authors_lqr_a_td3_roa_hybrid_was_trained_with(tmp_path, capsys):
     """An authors'-variant TD3 ROA hybrid (their LQR, clip of the actuator, period 1):
     ``leoc roa --controller RUN`` certifies that LQR (P from scipy, independently), on which
@@ -462,6 +465,7 @@ def test_roa_certifies_the_authors_lqr_a_td3_roa_hybrid_was_trained_with(tmp_pat
     _check_flat_top(report, run.name)
 
 
+@pytest.mark.slow
 def test_roa_certifies_a_pilco_run_at_its_period_with_its_squash(tmp_path, capsys):
     """A leoc-variant PILCO ROA hybrid (discrete LQR designed at PILCO's period, sin squash):
     ``leoc roa --controller RUN`` certifies that closed loop at the run's period (P the DARE

@@ -91,6 +91,7 @@ def test_every_relevance_design_is_a_choice_and_names_its_run_folder(monkeypatch
         build_parser().parse_args([*base, "nonsense"])
 
 
+@pytest.mark.slow
 def test_an_roa_hybrid_from_the_command_line(tmp_path, monkeypatch, capsys) -> None:
     """`leoc train pendulum --algo ddpg --hybrid --relevance roa` trains an ROA hybrid into
     runs/pendulum/ddpg_hybrid_roa/seed0: config.json records the spec, the loaded controller
@@ -247,6 +248,7 @@ def test_a_floored_pilco_hybrid_from_the_command_line(tmp_path, capsys) -> None:
     assert json.loads(capsys.readouterr().out)["basins"][run.name]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("algo", "flags", "module_name"),
     [
@@ -291,6 +293,7 @@ def test_relevance_power_reaches_the_loaded_controller(tmp_path, capsys, algo, f
         assert (run / "controller.pt").read_bytes() == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("flags", "r_min", "power", "module_name"),
     [

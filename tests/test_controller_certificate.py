@@ -212,6 +212,7 @@ def test_roa_prove_needs_a_controller(capsys):
     assert "--prove:" in line and "--controller" in line
 
 
+@pytest.mark.slow
 def test_roa_prove_reports_a_trained_runs_region(tmp_path, capsys):
     """``leoc roa --controller RUN --prove`` on a smoke-trained DDPG hybrid: its equilibrium is
     a, and its proved set, centred there, shares the box with the LQR's."""

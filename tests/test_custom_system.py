@@ -25,6 +25,7 @@ def _load_example():
     return module
 
 
+@pytest.mark.slow
 def test_the_how_to_example_runs_end_to_end(tmp_path) -> None:
     example = _load_example()
     try:

@@ -139,6 +139,7 @@ def _randomise(actor: HybridActor, generator: torch.Generator) -> None:
         parameter.copy_(torch.randn(parameter.shape, generator=generator))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("system_name", "relevance"),
     [(name, "paper") for name in SYSTEM_NAMES] + [(name, "default") for name in SYSTEM_NAMES],
@@ -169,6 +170,7 @@ def test_identity_at_operating_point_in_physical_units(system_name, relevance):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
 @pytest.mark.parametrize("system_name", SYSTEM_NAMES)
 def test_identities_hold_in_the_model_leocs_defaults_build(algo, system_name):
@@ -445,6 +447,7 @@ def test_config_defaults_and_overrides():
     assert DDPGConfig.from_dict(pendulum.as_dict()) == pendulum
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["ddpg", "td3"])
 def test_seeded_run_repeats_exactly_and_writes_run_folder(tmp_path, algo, monkeypatch):
     temp = tmp_path / "system-temp"
@@ -498,6 +501,7 @@ def _relevance_state(actor) -> dict[str, list]:
     }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     # the default on the mountain car: its trainer's LQR certificate takes a second to prove,
     # the cart-pole's (its own: the trainer's step rules are in the certificate's key) > 10 s

@@ -43,6 +43,7 @@ def _parameters(result) -> torch.Tensor:
     return torch.nn.utils.parameters_to_vector(result.model.policy.parameters()).detach()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("algo", "system", "settings"),
     [
@@ -77,6 +78,7 @@ def test_an_interrupted_run_resumes_to_the_uninterrupted_result(
     )
 
 
+@pytest.mark.slow
 def test_a_complete_run_is_reused_and_another_budget_refused(tmp_path, capsys) -> None:
     """Rerunning a finished run trains nothing and returns it; another budget in the same
     folder is refused in one line naming the setting, and replaced only with overwrite."""
@@ -103,6 +105,7 @@ def test_a_complete_run_is_reused_and_another_budget_refused(tmp_path, capsys) -
     assert json.loads((run / "config.json").read_text())["total_steps"] == 200
 
 
+@pytest.mark.slow
 def test_a_checkpoint_from_before_the_move_to_leoc_sb3_is_set_aside(tmp_path, capsys) -> None:
     """A run interrupted before leoc.ddpg became leoc.sb3 left a checkpoint that names leoc.ddpg's
     classes; the rerun sets it aside in one line naming the cause and trains afresh, to the

@@ -37,6 +37,9 @@ from leoc.deploy import export as export_module
 from leoc.deploy import export_controller, load
 from leoc.experiments.controllers import load_trained_controller
 
+#: Slow suite: the module's fixture trains a run of every learner and kind.
+pytestmark = pytest.mark.slow
+
 #: Smoke runs of the pendulum: every learner, every relevance design, the floor r_min.
 RUNS = {
     "pilco_hybrid": ["--algo", "pilco", "--hybrid"],
@@ -222,7 +225,6 @@ def test_lqr_export_of_every_system_passes_its_check(tmp_path, system, variant):
     assert result.check.passed and result.check.max_error <= 1e-6
 
 
-@pytest.mark.slow
 def test_export_of_a_cartpole_roa_hybrid_passes_its_check(tmp_path):
     """The ROA relevance on the cart-pole's layout (a plain position, an angle through cos and
     sin), whose certificate takes minutes to prove."""

@@ -131,6 +131,7 @@ def _working_directory(path: Path) -> Iterator[None]:
 PAGES = [page for page in doc_pages() if snippets(page)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES, ids=[str(page.relative_to(DOCS)) for page in PAGES])
 def test_the_page_s_python_blocks_run(page: Path, tmp_path) -> None:
     expected = sum(snippet.skip_reason is None for snippet in snippets(page))

@@ -36,7 +36,8 @@ from leoc.systems import (
 )
 from leoc.training import TRAINING_PLANTS_FILE
 
-pytestmark = pytest.mark.usefixtures("single_thread")
+#: Slow suite: the module's fixtures train perturbed runs (about 80 s).
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("single_thread")]
 
 # the bookkeeping, not learning: small networks, a few hundred steps (an episode is 200)
 TINY = {

@@ -55,6 +55,7 @@ def _points(points: list[dict]) -> dict[tuple[str, float], dict]:
     return {(point["parameter"], point["scale"]): point for point in points}
 
 
+@pytest.mark.slow
 def test_the_smoke_robustness_points_are_the_full_sweep_s_at_its_scales() -> None:
     system, design, _ = _pendulum()
     full = EvaluationContext("pendulum", system, lqr_controller(design), 3, LEOC, "linear")
@@ -73,6 +74,7 @@ def test_the_smoke_robustness_points_are_the_full_sweep_s_at_its_scales() -> Non
     assert not all(all(p["stabilised"]) for p in reduced.values())
 
 
+@pytest.mark.slow
 def test_two_sweep_points_are_the_paper_size_and_the_lqr_s_failure_size() -> None:
     system, design, certificate = _pendulum()
     lqr = lqr_controller(design)

@@ -78,6 +78,7 @@ def _responses() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_responses_figure_reads_cleanly():
     plt = pyplot()
     figure = draw_responses(_responses(), CONTROLLER_LABELS)
@@ -223,6 +224,7 @@ FIGURES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FIGURES))
 def test_every_figure_reads_cleanly(name):
     figure = FIGURES[name]()

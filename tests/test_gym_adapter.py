@@ -195,6 +195,7 @@ def double_pendulum_state(observation: np.ndarray) -> np.ndarray:
     return np.concatenate([observation[:1], angles, observation[5:8]])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("env_id", "state_of"),
     [("InvertedPendulum-v5", None), ("InvertedDoublePendulum-v5", double_pendulum_state)],

@@ -118,6 +118,7 @@ def run_dir(tmp_path_factory, tiny_gym_settings):
     return folder
 
 
+@pytest.mark.slow
 def test_cli_simulates_a_gym_run_beside_its_lqr(run_dir, capsys):
     assert main(["simulate", str(run_dir)]) == 0
     out = capsys.readouterr().out

@@ -16,7 +16,8 @@ from leoc.experiments.gym_study import run_gym_study
 from leoc.experiments.gym_study_report import figure_name, write_study_report
 from leoc.gym_adapter import LQRPolicy, design_env_lqr, linearise_env
 
-pytestmark = pytest.mark.usefixtures("single_thread")
+#: Slow suite: the module's fixture runs two smoke studies (about 50 s).
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("single_thread")]
 
 ENV = "InvertedPendulum-v5"
 #: A start noise at which the clipped LQR holds some of the evaluation starts and drops others

@@ -105,6 +105,7 @@ def runs(tmp_path_factory, tiny_gym_settings):
     return whole, resumed
 
 
+@pytest.mark.slow
 def test_hybrid_run_is_its_lqr_at_the_operating_point(runs):
     """The trained hybrid's float64 actor at a = 0 outputs u_eq = 0 and its Jacobian there is
     W = -K of an independent design (autograd), whatever SAC learned."""
@@ -205,6 +206,7 @@ def test_cli_refuses_unknown_env_and_pilco(capsys):
     assert "operating_point: expected" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli_trains_a_gym_hybrid(tmp_path, capsys):
     pytest.importorskip("mujoco")
     out = tmp_path / "run"

@@ -98,6 +98,7 @@ def test_shell_starts_lie_in_their_shell_with_uniform_volume():
     assert shell_levels(10.0, 10.0) == [10.0, 20.0, 30.0]
 
 
+@pytest.mark.slow
 def test_a_hybrid_that_is_its_lqr_matches_every_share_but_leaves_the_flat_top():
     system, design, certificate = _pendulum()
     lqr = lqr_controller(design)

@@ -374,6 +374,7 @@ def _inside(value, mid: float, rad: float) -> bool:
     return mpmath.mpf(mid) - mpmath.mpf(rad) <= value <= mpmath.mpf(mid) + mpmath.mpf(rad)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", EXACT)
 def test_rule_encloses_exact_values_and_slopes(name):
     """At points of each box given exactly (its ends and a grid of 17), the exact value and

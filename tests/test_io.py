@@ -25,6 +25,7 @@ def test_atomic_files_get_ordinary_permissions_under_the_umask(tmp_path, umask):
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "imports", ["import gymnasium as gym, leoc", "import leoc\nimport gymnasium as gym"]
 )

@@ -44,6 +44,7 @@ def test_response_distance_closed_form():
     assert math.isinf(response_distance([0.0, 1.0], [0.0, 0.0]))  # no LQR peak to scale by
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
 def test_hybrid_whose_learned_part_is_its_lqr_keeps_it_not_by_construction(name):
     system = make_system(name)

@@ -382,6 +382,7 @@ TINY = dict(
 )
 
 
+@pytest.mark.slow
 def test_train_save_load_and_resume(tmp_path) -> None:
     from leoc.pilco.checkpoint import load_pilco_controller
     from leoc.pilco.train import train_pilco
@@ -444,6 +445,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
     assert [r["mean_return"] for r in again.curve] == [r["mean_return"] for r in resumed.curve[:2]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
 def test_pilco_hybrid_identities_hold_at_its_control_period(name) -> None:
     from leoc.control import design_lqr

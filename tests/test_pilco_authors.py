@@ -207,6 +207,7 @@ def test_policy_restart_keeps_the_lower_predicted_cost(tmp_path) -> None:
         PilcoConfig(policy_restarts=(1, -1))
 
 
+@pytest.mark.slow
 def test_lqr_method_reaches_the_hybrid_linear_part() -> None:
     from leoc.control.lqr import design_lqr
     from leoc.pilco.policy import build_policy

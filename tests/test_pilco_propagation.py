@@ -166,6 +166,7 @@ def run_case(policy) -> tuple[float, float]:
     return normalised_errors(pred, states)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make_policy", [rbf_policy, hybrid_policy])
 def test_horizon_prediction_matches_monte_carlo(make_policy) -> None:
     """Predicted means and covariances of every step within the tolerance of Monte Carlo."""

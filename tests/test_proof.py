@@ -185,6 +185,7 @@ def _first_violation(name: str, P: np.ndarray, W, b, level: float, seed: int, fl
 # The decrease fails inside the LQR's proved set, while the linearisation still contracts in
 # the V-norm (a positive level exists): the damping gain (theta_dot, observation column 2)
 # x1.5 fails near V = 9.26, the position gain (sin theta, column 1) x0.7 near V = 45.33.
+@pytest.mark.slow
 @pytest.mark.parametrize(("columns", "gain_scale"), [(slice(2, 3), 1.5), (slice(1, 2), 0.7)])
 def test_a_perturbed_k_is_proved_up_to_its_first_violation(columns, gain_scale):
     system, design, certificate = _certified("pendulum")
@@ -196,6 +197,7 @@ def test_a_perturbed_k_is_proved_up_to_its_first_violation(columns, gain_scale):
     assert PROVED_SHARE * first < proof.rho < first
 
 
+@pytest.mark.slow
 def test_a_perturbed_p_is_proved_up_to_its_first_violation():
     # theta and theta_dot coupled differently: V of the LQR fails to decrease near V = 22.02
     system, design, certificate = _certified("pendulum")
@@ -515,6 +517,7 @@ def test_the_initial_cover_and_the_bisection_tile_the_cube(size):
         assert _points_in_boxes(parent_centre[index] + offsets, children[both], halves[both]).all()
 
 
+@pytest.mark.slow
 def test_the_box_search_checks_every_box_outside_the_inner_ball():
     # Given an inner radius inside the region where a perturbed loop (damping gain x1.5) already
     # violates, the search must check the boxes that straddle the inner sphere and stop at the

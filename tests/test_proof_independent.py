@@ -544,6 +544,7 @@ def test_the_numpy_plants_step_observe_and_leave_as_leoc_does(name):
     assert leaving.any() == (name != "pendulum")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_the_numpy_policies_act_as_leoc_does(name):
     """On states over three times the operating region (where a hybrid's relevance falls), the
@@ -572,6 +573,7 @@ the decrease and one by the track, and the ROA hybrid, whose level the remainder
 box bound decide (dropping them proved too much only there)."""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FAST_CASES)
 def test_no_state_of_a_proved_set_increases_v_or_leaves(name):
     _assert_sound(name, FAST_COUNTS)

@@ -33,9 +33,17 @@ def _regenerates_byte_for_byte(published: Path, scratch: Path) -> None:
         assert (scratch / name).read_bytes() == (published / name).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_publish_copies_numbers_not_weights_and_plot_regenerates_them(tmp_path) -> None:
     source = tmp_path / "run"
-    reproduce(source, systems=["pendulum"], controllers=["linear"], jobs=1, echo=lambda _: None)
+    reproduce(
+        source,
+        profile_name="smoke",
+        systems=["pendulum"],
+        controllers=["linear"],
+        jobs=1,
+        echo=lambda _: None,
+    )
     published = tmp_path / "published"
     report = publish(source, published)
     assert report == published / "report.md"
@@ -57,6 +65,7 @@ def test_publish_refuses_a_destination_inside_the_source(tmp_path) -> None:
         publish(tmp_path, tmp_path / "inside")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("published", PUBLISHED, ids=[p.name for p in PUBLISHED])
 def test_committed_results_regenerate_byte_for_byte(published, tmp_path) -> None:
     """`leoc plot` on the committed numbers gives the committed report and CSVs exactly.

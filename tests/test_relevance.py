@@ -101,6 +101,7 @@ def test_observation_deviation_inverts_the_observation(name):
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SYSTEM_NAMES)
 def test_roa_hybrid_is_the_saturated_lqr_bit_for_bit_inside_the_flat_top(setups, name):
     system, design, certificate = setups[name]

@@ -189,6 +189,7 @@ class _StopAt(BaseCallback):
         return True
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["ddpg", "sac"])
 def test_a_run_with_the_scale_resumes_exactly_and_loads(tmp_path, algo):
     """``train_ddpg`` with the scale: interrupted after its checkpoint and rerun it ends with the

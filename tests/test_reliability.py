@@ -211,7 +211,14 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
 def finished_template(tmp_path_factory) -> Path:
     """One finished linear-only reproduce folder; each test works on its own copy."""
     out = tmp_path_factory.mktemp("finished")
-    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    reproduce(
+        out,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=lambda _: None,
+    )
     return out
 
 
@@ -221,6 +228,7 @@ def _finished_folder(template: Path, tmp_path: Path) -> Path:
     return Path(shutil.copytree(template, tmp_path / "out"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damage", ["truncate", "garble", "delete"])
 def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_path, damage, capsys):
     out = _finished_folder(finished_template, tmp_path)
@@ -241,7 +249,14 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
         assert status == 2 and len(err) == 1 and str(done) in err[0]
         assert "rerun the 'leoc reproduce' command of this folder" in err[0]
     messages: list[str] = []
-    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
+    reproduce(
+        out,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=messages.append,
+    )
     if damage != "delete":
         assert any(str(done) in m and "set aside" in m for m in messages)
         assert len(list(done.parent.glob(f"{EVALUATION_FILE}.damaged-*"))) == 1
@@ -251,15 +266,24 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
     assert again == original
 
 
+@pytest.mark.slow
 def test_a_damaged_meta_file_is_set_aside(finished_template, tmp_path):
     out = _finished_folder(finished_template, tmp_path)
     (out / META_FILE).write_text("{")
     messages: list[str] = []
-    reproduce(out, controllers=["linear"], systems=["pendulum"], jobs=1, echo=messages.append)
+    reproduce(
+        out,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=messages.append,
+    )
     assert any("set aside" in m for m in messages)
-    assert json.loads((out / META_FILE).read_text())["profile"] == "quick"
+    assert json.loads((out / META_FILE).read_text())["profile"] == "smoke"
 
 
+@pytest.mark.slow
 def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
     reproduce(
         tmp_path, "smoke", controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None

@@ -448,6 +448,7 @@ for env_id in sys.argv[1:]:
 """
 
 
+@pytest.mark.slow
 def test_envs_are_made_in_a_fresh_interpreter_through_the_leoc_prefix() -> None:
     ids = list(ENV_IDS.values())
     result = subprocess.run(

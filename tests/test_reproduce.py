@@ -33,6 +33,7 @@ from leoc.systems import make_system
 RUN_TIMEOUT_S = 300
 
 
+@pytest.mark.slow
 def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> None:
     report = reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
     text = report.read_text()
@@ -73,12 +74,13 @@ def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> 
     assert f"Machine of the last invocation: {machine['cpu']}, {os.cpu_count()} logical" in text
 
 
+@pytest.mark.slow
 def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> None:
-    reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
+    reproduce(tmp_path, profile_name="smoke", controllers=["linear"], jobs=1, echo=lambda _: None)
     done = run_dir_of(tmp_path, run_specs(get_profile("quick"), ("pendulum",), ("linear",))[0])
     stamp = (done / EVALUATION_FILE).stat().st_mtime_ns
     messages: list[str] = []
-    reproduce(tmp_path, controllers=["linear"], jobs=1, echo=messages.append)
+    reproduce(tmp_path, profile_name="smoke", controllers=["linear"], jobs=1, echo=messages.append)
     assert "3 already done, 0 to run" in messages[0]
     assert (done / EVALUATION_FILE).stat().st_mtime_ns == stamp
     (tmp_path / "responses.png").unlink()
@@ -86,17 +88,32 @@ def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> Non
     assert (tmp_path / "responses.png").is_file()
 
 
+@pytest.mark.slow
 def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -> None:
     """Rerunning a finished folder printed and reported "wall time of the last invocation:
     0 s"; the invocations that ran keep their record, and the report and the terminal give
     each and their sum."""
     from leoc.experiments.summary import summary_lines
 
-    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    reproduce(
+        tmp_path,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=lambda _: None,
+    )
     first = json.loads((tmp_path / "meta.json").read_text())
     (only,) = first["invocations"]
     assert only["wall_seconds"] > 0
-    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    reproduce(
+        tmp_path,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=lambda _: None,
+    )
     again = json.loads((tmp_path / "meta.json").read_text())
     assert again["invocations"] == first["invocations"]
     assert again["machine"] == first["machine"] and again["versions"] == first["versions"]
@@ -106,6 +123,7 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
     # a second invocation that ran something: each, and the sum
     reproduce(
         tmp_path,
+        profile_name="smoke",
         controllers=["linear"],
         systems=["pendulum", "mountaincar"],
         jobs=1,
@@ -119,6 +137,7 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
     assert f"Resumed over 2 invocations ({total:.0f} s of wall time in all)" in text
 
 
+@pytest.mark.slow
 def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monkeypatch) -> None:
     """A study resumed over several sessions: each invocation is logged (interrupted ones
     too) and the report lists them; a published folder (numbers, no models) resumes."""
@@ -126,7 +145,14 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
     from leoc.experiments.publish import publish
 
     first = tmp_path / "first"
-    reproduce(first, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
+    reproduce(
+        first,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=lambda _: None,
+    )
     (only,) = json.loads((first / "meta.json").read_text())["invocations"]
     assert (only["runs_finished"], only["interrupted"]) == (1, False)
     assert "Resumed over" not in (first / "report.md").read_text()  # one invocation: no line
@@ -138,13 +164,20 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
         patch.setattr(reproduce_module, "sweep", interrupted)
         with pytest.raises(KeyboardInterrupt):  # with a run to do (a rerun with none is no
             # invocation to log: test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time)
-            reproduce(first, controllers=["linear"], systems=["pendulum", "cartpole"], jobs=1)
+            reproduce(
+                first,
+                profile_name="smoke",
+                controllers=["linear"],
+                systems=["pendulum", "cartpole"],
+                jobs=1,
+            )
     # the published folder travels to a new machine and carries on there
     moved = tmp_path / "moved"
     publish(first, moved)
     messages: list[str] = []
     report = reproduce(
         moved,
+        profile_name="smoke",
         controllers=["linear"],
         systems=["pendulum", "mountaincar"],
         jobs=1,
@@ -224,13 +257,21 @@ def _runs_logged(out: Path) -> int:
     return invocations[-1]["runs_finished"] if invocations else 0
 
 
+@pytest.mark.slow
 def test_profile_and_option_errors(tmp_path) -> None:
     with pytest.raises(ValueError, match="profile: expected one of quick, smoke, paper"):
         get_profile("fast")
     with pytest.raises(ValueError, match="controllers: unknown"):
         run_specs(get_profile("quick"), controllers=("lqr",))
-    reproduce(tmp_path, controllers=["linear"], systems=["pendulum"], jobs=1, echo=lambda _: None)
-    with pytest.raises(ValueError, match="holds a 'quick' run"):
+    reproduce(
+        tmp_path,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["pendulum"],
+        jobs=1,
+        echo=lambda _: None,
+    )
+    with pytest.raises(ValueError, match="holds a 'smoke' run"):
         reproduce(tmp_path, profile_name="paper", controllers=["linear"], jobs=1)
 
 
@@ -421,12 +462,18 @@ def _metrics_by_definition(e: np.ndarray) -> dict[str, float]:
     }
 
 
+@pytest.mark.slow
 def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path) -> None:
     """The report's impulse and step rows of the mountain car's LQR against a simulation and
     metrics written in this test (not leoc's response_test), so a wrong impulse, step length,
     window or band in the pipeline fails here."""
     reproduce(
-        tmp_path, controllers=["linear"], systems=["mountaincar"], jobs=1, echo=lambda _: None
+        tmp_path,
+        profile_name="smoke",
+        controllers=["linear"],
+        systems=["mountaincar"],
+        jobs=1,
+        echo=lambda _: None,
     )
     results = json.loads((tmp_path / "results.json").read_text())
     records = _mountain_car_responses(make_system("mountaincar"))

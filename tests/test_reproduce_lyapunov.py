@@ -20,6 +20,9 @@ from leoc.names import (
     parse_controller,
 )
 
+#: Slow suite: the module's smoke study takes minutes.
+pytestmark = pytest.mark.slow
+
 LYAPUNOV_HYBRIDS = ("ddpg_hybrid_lyapunov", "sac_hybrid_lyapunov")
 
 

@@ -46,6 +46,7 @@ def _certificate(name: str, **system_overrides: float):
     return _cached(name, tuple(sorted(system_overrides.items())))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SYSTEM_NAMES)
 def test_every_certified_sample_converges_when_simulated(name):
     system, design, certificate = _certificate(name)

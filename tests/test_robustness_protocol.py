@@ -96,6 +96,7 @@ def test_a_two_sided_grid_holds_the_nominal_plant_exactly() -> None:
 
 
 # ---------------------------------------------------------------------------- the protocol
+@pytest.mark.slow
 def test_level_zero_of_every_category_is_the_unperturbed_hold_test() -> None:
     system, lqr = _lqr("pendulum")
     result = run_protocol(system, lqr, "lqr", levels=3, episodes=3, seed=4)
@@ -115,6 +116,7 @@ def test_level_zero_of_every_category_is_the_unperturbed_hold_test() -> None:
     assert np.all(np.abs(region) <= np.asarray(system.operating_region))
 
 
+@pytest.mark.slow
 def test_scores_counted_by_hand_with_a_controller_that_fails_and_one_that_holds() -> None:
     system, lqr = _lqr("pendulum")
     tiny = _tiny_levels("pendulum")
@@ -150,6 +152,7 @@ def test_the_score_is_the_mean_of_every_category() -> None:
     assert result.score() == pytest.approx((1.0 + 0.25 + 0.5) / 3, abs=1e-15)
 
 
+@pytest.mark.slow
 def test_one_seed_decides_everything() -> None:
     system, lqr = _lqr("pendulum")
     options = dict(levels=2, episodes=2, categories=("observation_noise", "push"))
@@ -179,14 +182,8 @@ def test_json_round_trip_and_atomic_save(tmp_path) -> None:
     assert loaded.categories[0].levels[0].held == result.categories[0].levels[0].held
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        "pendulum",
-        pytest.param("cartpole", marks=pytest.mark.slow),
-        pytest.param("mountaincar", marks=pytest.mark.slow),
-    ],
-)
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["pendulum", "cartpole", "mountaincar"])
 def test_the_table_ends_each_sweep_where_the_lqr_fails(name) -> None:
     # The documented measurement, redone: at each category's maximum level the LQR holds none
     # of the calibration's operating-region starts (Coulomb friction stops at its cap instead

@@ -69,6 +69,7 @@ def test_iqm_equals_scipy_trim_mean(size: int) -> None:
 
 
 # ------------------------------------------------------------------------- bootstrap interval
+@pytest.mark.slow
 def test_stratified_interval_equals_rliable(rliable_global_seed: None) -> None:
     library = pytest.importorskip("rliable.library")
     metrics = pytest.importorskip("rliable.metrics")
@@ -159,6 +160,7 @@ def test_probability_of_improvement_closed_forms() -> None:
     assert few.ci_low is None and few.note == f"n = 2 < {MIN_RUNS_FOR_INTERVAL}: no interval"
 
 
+@pytest.mark.slow
 def test_probability_of_improvement_equals_rliable(rliable_global_seed: None) -> None:
     library = pytest.importorskip("rliable.library")
     metrics = pytest.importorskip("rliable.metrics")
@@ -180,6 +182,7 @@ def test_probability_of_improvement_equals_rliable(rliable_global_seed: None) ->
 
 
 # ---------------------------------------------------------------------------- learning curves
+@pytest.mark.slow
 def test_curve_bands_equal_rliable_pointwise(rliable_global_seed: None) -> None:
     library = pytest.importorskip("rliable.library")
     metrics = pytest.importorskip("rliable.metrics")

@@ -106,6 +106,7 @@ def backend(request: pytest.FixtureRequest) -> str:
 
 
 # ------------------------------------------------------------------------------------- sweeps
+@pytest.mark.slow
 def test_a_sweep_writes_every_result_and_a_rerun_redoes_nothing(tmp_path, backend) -> None:
     specs = ["a", "bb", "nested/ccc"]
     result = sweep(specs, counting_runner, tmp_path, backend=backend, jobs=2, echo=quiet)
@@ -159,6 +160,7 @@ def test_a_killed_worker_costs_only_its_run_which_is_retried(tmp_path, backend) 
     assert any(f"{VICTIM}: " in m and "retrying (attempt 2 of 3)" in m for m in messages)
 
 
+@pytest.mark.slow
 def test_a_runner_error_is_reported_not_retried_and_the_rest_finish(tmp_path, backend) -> None:
     messages: list[str] = []
     specs = ["bad", "good"]
