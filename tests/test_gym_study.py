@@ -223,3 +223,18 @@ def test_the_light_names_agree_with_the_study():
     assert names.GYM_STUDY_PROFILES == tuple(STUDY_PROFILES)
     assert names.GYM_STUDY_CONTROLLERS == tuple(CONTROLLER_LABELS)
     assert names.GYM_STUDY_NOISES[0] == names.GYM_STUDY_DEFAULT_NOISE
+
+
+def test_every_seed_and_controller_meets_the_same_starts(tmp_path):
+    """Common evaluation starts: every run of a two-seed study (each controller, each training
+    seed) is evaluated from ``reset(seed=b + 20000 + j)`` with b the study's seed base, so the
+    LQR's two rows are one and the same evaluation."""
+    pytest.importorskip("mujoco")
+    data = study(tmp_path, seeds=2, steps=100, seed=7)
+    rows = data["envs"][ENV][NOISE]["controllers"]
+    starts = [run["evaluation_seeds"] for row in rows.values() for run in row["runs"]]
+    assert len(starts) == 8
+    assert all(seeds == [7 + 20_000 + j for j in range(EPISODES)] for seeds in starts)
+    first, second = rows["lqr"]["runs"]
+    assert (first["seed"], second["seed"]) == (7, 8)
+    assert first["held"] == second["held"] and first["returns"] == second["returns"]

@@ -16,12 +16,14 @@ noise (the env's own ``reset_noise_scale``, 0.5 and 0.8), each controller of
   row says "not available: the observation is not the state".
 
 **Evaluation** of each final controller (and of the LQR) on the same seeded starts: episode
-``j`` of training seed ``s`` starts from ``reset(seed=s + EVAL_SEED_OFFSET + j)`` of the env at
-that noise (:func:`evaluation_seeds`; the learning curve's starts, ``s + 10000 + k``, are
-others), and runs to the env's time limit or its termination. Per run: the **held share** (the
-episodes that reached the time limit without termination), the **final return** (their mean
-return), the **steps to 95 %**: the first step of the learning curve whose mean evaluation
-return reaches 95 % of the env's maximum return (:func:`maximum_return`: every step's reward
+``j`` of every run of a study whose seed base is ``b`` starts from
+``reset(seed=b + EVAL_SEED_OFFSET + j)`` of the env at that noise, whatever the run's training
+seed (:func:`evaluation_seeds`: common starts, so rows and seeds differ by their controllers, not
+by their starts; the learning curve's starts, ``s + 10000 + k``, are others), and runs to the
+env's time limit or its termination. Per run: the **held share** (the episodes that reached
+the time limit without termination), the **final return** (their mean return), the **steps to
+95 %**: the first step of the learning curve whose mean evaluation return reaches 95 % of the
+env's maximum return (:func:`maximum_return`: every step's reward
 at rest at the operating point, for the whole episode), "not reached" otherwise; and the
 **impulse distance**: the largest difference of the impulse response's main coordinate from the
 LQR's, in percent of the LQR's peak (:func:`~leoc.evaluation.gym_response.gym_comparison`;
@@ -82,7 +84,7 @@ STUDY_FILE = "study.json"
 RUNS_FOLDER = "runs"
 #: A run's evaluation record, in its run folder.
 RECORD_FILE = "evaluation.json"
-#: Evaluation episode ``j`` of training seed ``s`` starts from ``reset(seed=s + 20000 + j)``.
+#: Evaluation episode ``j`` of a study seeded ``b`` starts from ``reset(seed=b + 20000 + j)``.
 EVAL_SEED_OFFSET = 20_000
 #: The share of the env's maximum return that counts as learned (steps to 95 %).
 RETURN_FRACTION = 0.95
@@ -182,9 +184,10 @@ def noise_kwargs(noise: str) -> dict[str, float]:
     return {"reset_noise_scale": value}
 
 
-def evaluation_seeds(seed: int, episodes: int) -> list[int]:
-    """The reset seeds of the evaluation of training seed ``seed``: ``seed + 20000 + j``."""
-    return [int(seed) + EVAL_SEED_OFFSET + j for j in range(int(episodes))]
+def evaluation_seeds(base: int, episodes: int) -> list[int]:
+    """The reset seeds of every evaluation of a study seeded ``base`` (every training seed and
+    controller): ``base + 20000 + j``."""
+    return [int(base) + EVAL_SEED_OFFSET + j for j in range(int(episodes))]
 
 
 def held_episodes(
@@ -255,6 +258,7 @@ class _Cell(NamedTuple):
     run_dir: Path
     profile: StudyProfile
     total_steps: int
+    eval_base: int
 
 
 def _record_key(cell: _Cell) -> dict[str, Any]:
@@ -267,6 +271,7 @@ def _record_key(cell: _Cell) -> dict[str, Any]:
         "episodes": cell.profile.episodes,
         "total_steps": cell.total_steps,
         "settings": cell.profile.settings,
+        "evaluation_seeds": evaluation_seeds(cell.eval_base, cell.profile.episodes),
     }
     return json.loads(json.dumps(key))
 
@@ -274,7 +279,7 @@ def _record_key(cell: _Cell) -> dict[str, Any]:
 def _evaluate_cell(cell: _Cell, plant: GymPlant, target: float) -> dict[str, Any]:
     """Train (``train_gym``: resumes, or returns a finished run) and evaluate one run; the LQR
     is designed, not trained."""
-    seeds = evaluation_seeds(cell.seed, cell.profile.episodes)
+    seeds = evaluation_seeds(cell.eval_base, cell.profile.episodes)
     started = time.perf_counter()
     if cell.controller == "lqr":
         controller, curve, distance = lqr_controller(plant), None, 0.0
@@ -347,7 +352,15 @@ def _noise_entry(
         for seed in plan["seeds"]:
             folder = out / RUNS_FOLDER / env_id / noise / controller / f"seed{seed}"
             cell = _Cell(
-                env_id, noise, controller, seed, env_kwargs, folder, profile, plan["steps"]
+                env_id,
+                noise,
+                controller,
+                seed,
+                env_kwargs,
+                folder,
+                profile,
+                plan["steps"],
+                plan["seeds"][0],
             )
             runs.append(_run_cell(cell, plants[seed], target))
             plan["done"] += 1

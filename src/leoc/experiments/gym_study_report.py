@@ -111,8 +111,9 @@ def _header(study: Mapping[str, Any]) -> list[str]:
         f"{zoo} (`n_timesteps`): far smaller than the budget those settings were tuned for, so "
         "the learned controllers here are not the zoo's.",
         "",
-        "Held share: the share of the seeded evaluation episodes (episode j of seed s from "
-        "`reset(seed=s + 20000 + j)`, the same starts for every controller) held to the time "
+        "Held share: the share of the seeded evaluation episodes (episode j from "
+        "`reset(seed=b + 20000 + j)`, b the study's seed base: the same starts for every "
+        "controller and seed) held to the time "
         "limit without termination. Steps to 95 %: the first step of the learning curve whose "
         "mean evaluation return reaches 95 % of the maximum return (every step's reward at rest "
         "at the operating point), per seed. Final return: the evaluation episodes' mean return. "
