@@ -382,6 +382,13 @@ TINY = dict(
 )
 
 
+#: TINY with a cost wide enough that the policy optimisation moves the policy (with TINY's the
+#: predicted cost sits at its maximum, every gradient is at most about 1e-6 and L-BFGS stops
+#: after one evaluation: a loaded policy would equal the trained one trivially, both the
+#: initial draw).
+MOVING = {**TINY, "cost_width": 2.0}
+
+
 @pytest.mark.slow
 def test_train_save_load_and_resume(tmp_path) -> None:
     from leoc.pilco.checkpoint import load_pilco_controller
@@ -391,7 +398,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
 
     run = tmp_path / "run"
     first = train_pilco(
-        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=1, progress=False, **TINY
+        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=1, progress=False, **MOVING
     )
     for name in (
         "config.json",
@@ -413,13 +420,13 @@ def test_train_save_load_and_resume(tmp_path) -> None:
         "wall_seconds",
     }
     assert keys <= set(first.curve[-1])
-    assert len(first.curve[-1]["returns"]) == TINY["eval_episodes"]
+    assert len(first.curve[-1]["returns"]) == MOVING["eval_episodes"]
     assert first.curve[1]["interaction_seconds"] == pytest.approx(3 * 24 * 0.05)
     assert first.summary["model_selection"] == "final"
     # the controller carries PILCO's control period
     assert isinstance(first.policy, HeldPolicy) and first.policy.action_repeat == 2
     resumed = train_pilco(
-        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=2, progress=False, **TINY
+        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=2, progress=False, **MOVING
     )
     assert [row["iteration"] for row in resumed.curve] == [0, 1, 2]
     saved = json.loads((run / "curve.json").read_text())["curve"]
@@ -428,6 +435,8 @@ def test_train_save_load_and_resume(tmp_path) -> None:
     assert isinstance(loaded, HeldPolicy) and loaded.action_repeat == 2
     obs = torch.tensor([[0.5, 0.8, -1.0]], dtype=DTYPE)
     torch.testing.assert_close(loaded(obs), resumed.policy(obs))
+    # the second iteration moved the policy, so the loaded one is not the first one by chance
+    assert (loaded(obs) - first.policy(obs)).abs().max() > 1e-6
     # The same seed without resuming gives the same run (determinism).
     again = train_pilco(
         "pendulum",
@@ -437,7 +446,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
         iterations=1,
         progress=False,
         resume=False,
-        **TINY,
+        **MOVING,
     )
     assert [r["rollout_return"] for r in again.curve] == [
         r["rollout_return"] for r in resumed.curve[:2]
