@@ -53,6 +53,30 @@ def single_thread():
 
 
 @pytest.fixture(scope="session")
+def tiny_pilco_settings():
+    """Settings of the smallest PILCO run (``leoc.pilco.train_pilco``) that fits a GP and
+    optimises a policy in one iteration. The cost is wide enough (width 2) that the policy
+    optimisation moves every parameter from the swing-up start: with the pendulum's default
+    width the predicted cost sits at its maximum, every gradient is at most about 1e-6, L-BFGS
+    stops after one evaluation, and a saved policy equals the trained one trivially. Read-only:
+    a test changes what it needs on a copy, ``{**tiny_pilco_settings, ...}``."""
+    from types import MappingProxyType
+
+    return MappingProxyType(
+        {
+            "horizon": 4,
+            "policy_iterations": 2,
+            "num_basis": 4,
+            "episode_steps": 24,
+            "initial_rollouts": 2,
+            "gp_train_iterations": 3,
+            "eval_episodes": 2,
+            "cost_width": 2.0,
+        }
+    )
+
+
+@pytest.fixture(scope="session")
 def tiny_gym_settings() -> dict:
     """Settings of a ``leoc.sb3.train_gym`` run small enough for the test suite: tiny
     networks, 60-step episodes, two evaluation episodes, a coarse sampled region, a checkpoint

@@ -371,26 +371,8 @@ def test_saturated_linear_policy_moments_match_monte_carlo() -> None:
 
 
 # --------------------------------------------------------------------------- training loop
-TINY = dict(
-    horizon=4,
-    policy_iterations=2,
-    num_basis=4,
-    episode_steps=24,
-    initial_rollouts=2,
-    gp_train_iterations=3,
-    eval_episodes=2,
-)
-
-
-#: TINY with a cost wide enough that the policy optimisation moves the policy (with TINY's the
-#: predicted cost sits at its maximum, every gradient is at most about 1e-6 and L-BFGS stops
-#: after one evaluation: a loaded policy would equal the trained one trivially, both the
-#: initial draw).
-MOVING = {**TINY, "cost_width": 2.0}
-
-
 @pytest.mark.slow
-def test_train_save_load_and_resume(tmp_path) -> None:
+def test_train_save_load_and_resume(tmp_path, tiny_pilco_settings) -> None:
     from leoc.pilco.checkpoint import load_pilco_controller
     from leoc.pilco.train import train_pilco
     from leoc.policies import HeldPolicy
@@ -398,7 +380,13 @@ def test_train_save_load_and_resume(tmp_path) -> None:
 
     run = tmp_path / "run"
     first = train_pilco(
-        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=1, progress=False, **MOVING
+        "pendulum",
+        hybrid=True,
+        seed=3,
+        run_dir=run,
+        iterations=1,
+        progress=False,
+        **tiny_pilco_settings,
     )
     for name in (
         "config.json",
@@ -420,13 +408,19 @@ def test_train_save_load_and_resume(tmp_path) -> None:
         "wall_seconds",
     }
     assert keys <= set(first.curve[-1])
-    assert len(first.curve[-1]["returns"]) == MOVING["eval_episodes"]
+    assert len(first.curve[-1]["returns"]) == tiny_pilco_settings["eval_episodes"]
     assert first.curve[1]["interaction_seconds"] == pytest.approx(3 * 24 * 0.05)
     assert first.summary["model_selection"] == "final"
     # the controller carries PILCO's control period
     assert isinstance(first.policy, HeldPolicy) and first.policy.action_repeat == 2
     resumed = train_pilco(
-        "pendulum", hybrid=True, seed=3, run_dir=run, iterations=2, progress=False, **MOVING
+        "pendulum",
+        hybrid=True,
+        seed=3,
+        run_dir=run,
+        iterations=2,
+        progress=False,
+        **tiny_pilco_settings,
     )
     assert [row["iteration"] for row in resumed.curve] == [0, 1, 2]
     saved = json.loads((run / "curve.json").read_text())["curve"]
@@ -446,7 +440,7 @@ def test_train_save_load_and_resume(tmp_path) -> None:
         iterations=1,
         progress=False,
         resume=False,
-        **MOVING,
+        **tiny_pilco_settings,
     )
     assert [r["rollout_return"] for r in again.curve] == [
         r["rollout_return"] for r in resumed.curve[:2]

@@ -24,17 +24,6 @@ import torch
 pytestmark = pytest.mark.usefixtures("single_thread")
 
 DTYPE = torch.float64
-#: Settings of the smallest PILCO run that fits a GP and optimises a policy (one iteration).
-TINY = dict(
-    horizon=4,
-    policy_iterations=2,
-    num_basis=4,
-    episode_steps=24,
-    initial_rollouts=2,
-    gp_train_iterations=3,
-    eval_episodes=2,
-    cost_width=2.0,  # not saturated from the swing-up start: the optimisation moves every parameter
-)
 KINDS = {"baseline": None, "hybrid": True}
 SEED = 3
 #: Agreement asked of a loaded run: |loaded - reference| <= RTOL * max |reference| per array.
@@ -120,14 +109,14 @@ def _recomputed_gp(result, run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.nd
     return x.numpy(), mean.numpy(), var.numpy()
 
 
-def _reference(kind: str, run_dir: Path) -> Reference:
+def _reference(kind: str, run_dir: Path, settings) -> Reference:
     from leoc.pilco.config import PilcoConfig
     from leoc.pilco.objective import predict_policy
     from leoc.pilco.train import train_pilco
     from leoc.systems import make_system
 
     result = train_pilco(
-        "pendulum", KINDS[kind], SEED, run_dir, iterations=1, progress=False, **TINY
+        "pendulum", KINDS[kind], SEED, run_dir, iterations=1, progress=False, **settings
     )
     x, gp_mean, gp_var = _recomputed_gp(result, run_dir)
     config = PilcoConfig.from_dict(result.config)
@@ -155,12 +144,12 @@ def _reference(kind: str, run_dir: Path) -> Reference:
 
 
 @pytest.fixture(scope="module")
-def references(tmp_path_factory) -> dict[str, Reference]:
+def references(tmp_path_factory, tiny_pilco_settings) -> dict[str, Reference]:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # the module-scoped fixture runs before single_thread
     try:
         root = tmp_path_factory.mktemp("pilco_runs")
-        return {kind: _reference(kind, root / kind) for kind in KINDS}
+        return {kind: _reference(kind, root / kind, tiny_pilco_settings) for kind in KINDS}
     finally:
         torch.set_num_threads(threads)
 
@@ -202,9 +191,13 @@ def test_loaded_gp_predicts_as_the_trained_one(references, loaded, kind) -> None
 
 
 @pytest.mark.parametrize("kind", KINDS)
-def test_loaded_run_makes_the_trainers_horizon_prediction(references, loaded, kind) -> None:
+def test_loaded_run_makes_the_trainers_horizon_prediction(
+    references, loaded, kind, tiny_pilco_settings
+) -> None:
     ref = references[kind]
-    assert ref.means.shape == (TINY["horizon"] + 1, 2) and ref.costs.shape == (TINY["horizon"],)
+    assert ref.means.shape == (tiny_pilco_settings["horizon"] + 1, 2) and ref.costs.shape == (
+        tiny_pilco_settings["horizon"],
+    )
     _assert_close(loaded[kind + ".means"], ref.means, "predicted means")
     _assert_close(loaded[kind + ".covs"], ref.covs, "predicted covariances")
     _assert_close(loaded[kind + ".costs"], ref.costs, "predicted costs")
@@ -233,7 +226,7 @@ def test_training_moved_the_hybrids_lambda(references) -> None:
     assert (trained - initial.relevance_module.lambda_.detach()).abs().max() > 1e-6
 
 
-def test_loaded_run_carries_its_config_and_plant(references) -> None:
+def test_loaded_run_carries_its_config_and_plant(references, tiny_pilco_settings) -> None:
     from leoc.pilco import PilcoRun, load_pilco_run
     from leoc.pilco.config import PilcoConfig
     from leoc.pilco.gp import GPPosterior
@@ -242,7 +235,10 @@ def test_loaded_run_carries_its_config_and_plant(references) -> None:
     run = load_pilco_run(ref.run_dir)
     assert isinstance(run, PilcoRun) and isinstance(run.model, GPPosterior)
     assert run.config == PilcoConfig.from_dict(ref.result.config)
-    assert run.system.name == "pendulum" and run.system.episode_steps == TINY["episode_steps"]
+    assert (
+        run.system.name == "pendulum"
+        and run.system.episode_steps == tiny_pilco_settings["episode_steps"]
+    )
     assert run.run_dir == ref.run_dir and not run.policy.training
 
 

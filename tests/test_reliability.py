@@ -21,6 +21,18 @@ from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, reproduce
 RUN_TIMEOUT_S = 600
 INTERRUPT_DEADLINE_S = 10.0
 
+
+def _linear_smoke(out: Path, systems: list[str] | None = None, echo=lambda _: None) -> Path:
+    """Linear-only `reproduce` on the smoke profile, one job: the folder mechanics (rerun,
+    resume, damage, the invocation log) without training anything. ``echo=None`` keeps the
+    library's default printing."""
+    extra = {} if echo is None else {"echo": echo}
+    systems = systems or ["pendulum"]
+    return reproduce(
+        out, profile_name="smoke", controllers=["linear"], systems=systems, jobs=1, **extra
+    )
+
+
 BAD_ARGUMENTS = [
     (["reproduce", "--jobs", "0"], "--jobs: expected a positive integer, found 0"),
     (["reproduce", "--jobs", "-2"], "--jobs: expected a positive integer, found -2"),
@@ -211,14 +223,7 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
 def finished_template(tmp_path_factory) -> Path:
     """One finished linear-only reproduce folder; each test works on its own copy."""
     out = tmp_path_factory.mktemp("finished")
-    reproduce(
-        out,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(out)
     return out
 
 
@@ -249,14 +254,7 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
         assert status == 2 and len(err) == 1 and str(done) in err[0]
         assert "rerun the 'leoc reproduce' command of this folder" in err[0]
     messages: list[str] = []
-    reproduce(
-        out,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=messages.append,
-    )
+    _linear_smoke(out, echo=messages.append)
     if damage != "delete":
         assert any(str(done) in m and "set aside" in m for m in messages)
         assert len(list(done.parent.glob(f"{EVALUATION_FILE}.damaged-*"))) == 1
@@ -271,14 +269,7 @@ def test_a_damaged_meta_file_is_set_aside(finished_template, tmp_path):
     out = _finished_folder(finished_template, tmp_path)
     (out / META_FILE).write_text("{")
     messages: list[str] = []
-    reproduce(
-        out,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=messages.append,
-    )
+    _linear_smoke(out, echo=messages.append)
     assert any("set aside" in m for m in messages)
     assert json.loads((out / META_FILE).read_text())["profile"] == "smoke"
 

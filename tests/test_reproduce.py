@@ -33,6 +33,17 @@ from leoc.systems import make_system
 RUN_TIMEOUT_S = 300
 
 
+def _linear_smoke(out: Path, systems: list[str] | None = None, echo=lambda _: None) -> Path:
+    """Linear-only `reproduce` on the smoke profile, one job: the folder mechanics (rerun,
+    resume, damage, the invocation log) without training anything. ``echo=None`` keeps the
+    library's default printing."""
+    extra = {} if echo is None else {"echo": echo}
+    systems = systems or ["pendulum"]
+    return reproduce(
+        out, profile_name="smoke", controllers=["linear"], systems=systems, jobs=1, **extra
+    )
+
+
 @pytest.mark.slow
 def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> None:
     report = reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
@@ -95,25 +106,11 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
     each and their sum."""
     from leoc.experiments.summary import summary_lines
 
-    reproduce(
-        tmp_path,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(tmp_path)
     first = json.loads((tmp_path / "meta.json").read_text())
     (only,) = first["invocations"]
     assert only["wall_seconds"] > 0
-    reproduce(
-        tmp_path,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(tmp_path)
     again = json.loads((tmp_path / "meta.json").read_text())
     assert again["invocations"] == first["invocations"]
     assert again["machine"] == first["machine"] and again["versions"] == first["versions"]
@@ -121,14 +118,7 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
     assert f"Wall time: {wall}; summed wall time" in (tmp_path / "report.md").read_text()
     assert summary_lines(tmp_path)[0].endswith(f"; wall time {wall}.")
     # a second invocation that ran something: each, and the sum
-    reproduce(
-        tmp_path,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum", "mountaincar"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(tmp_path, systems=["pendulum", "mountaincar"])
     log = json.loads((tmp_path / "meta.json").read_text())["invocations"]
     assert [item["runs_finished"] for item in log] == [1, 1]
     total = sum(item["wall_seconds"] for item in log)
@@ -145,14 +135,7 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
     from leoc.experiments.publish import publish
 
     first = tmp_path / "first"
-    reproduce(
-        first,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(first)
     (only,) = json.loads((first / "meta.json").read_text())["invocations"]
     assert (only["runs_finished"], only["interrupted"]) == (1, False)
     assert "Resumed over" not in (first / "report.md").read_text()  # one invocation: no line
@@ -164,25 +147,12 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
         patch.setattr(reproduce_module, "sweep", interrupted)
         with pytest.raises(KeyboardInterrupt):  # with a run to do (a rerun with none is no
             # invocation to log: test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time)
-            reproduce(
-                first,
-                profile_name="smoke",
-                controllers=["linear"],
-                systems=["pendulum", "cartpole"],
-                jobs=1,
-            )
+            _linear_smoke(first, systems=["pendulum", "cartpole"], echo=None)
     # the published folder travels to a new machine and carries on there
     moved = tmp_path / "moved"
     publish(first, moved)
     messages: list[str] = []
-    report = reproduce(
-        moved,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum", "mountaincar"],
-        jobs=1,
-        echo=messages.append,
-    )
+    report = _linear_smoke(moved, systems=["pendulum", "mountaincar"], echo=messages.append)
     assert "1 already done, 1 to run" in messages[0]
     log = json.loads((moved / "meta.json").read_text())["invocations"]
     assert [(i["runs_finished"], i["interrupted"], i["ended"]) for i in log] == [
@@ -263,14 +233,7 @@ def test_profile_and_option_errors(tmp_path) -> None:
         get_profile("fast")
     with pytest.raises(ValueError, match="controllers: unknown"):
         run_specs(get_profile("quick"), controllers=("lqr",))
-    reproduce(
-        tmp_path,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["pendulum"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(tmp_path)
     with pytest.raises(ValueError, match="holds a 'smoke' run"):
         reproduce(tmp_path, profile_name="paper", controllers=["linear"], jobs=1)
 
@@ -467,14 +430,7 @@ def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path) ->
     """The report's impulse and step rows of the mountain car's LQR against a simulation and
     metrics written in this test (not leoc's response_test), so a wrong impulse, step length,
     window or band in the pipeline fails here."""
-    reproduce(
-        tmp_path,
-        profile_name="smoke",
-        controllers=["linear"],
-        systems=["mountaincar"],
-        jobs=1,
-        echo=lambda _: None,
-    )
+    _linear_smoke(tmp_path, systems=["mountaincar"])
     results = json.loads((tmp_path / "results.json").read_text())
     records = _mountain_car_responses(make_system("mountaincar"))
     for test, record in records.items():
