@@ -32,7 +32,7 @@ from leoc.systems.perturbations import (
     TorqueNoise,
     perturbation_from_dict,
 )
-from leoc.systems.rollout import simulate
+from leoc.systems.rollout import simulate, simulate_settings
 
 SYSTEMS = ("pendulum", "cartpole", "mountaincar", "acrobot")
 STEPS = 60
@@ -497,6 +497,54 @@ def test_the_env_and_simulate_run_the_same_perturbed_plant(name, repeat) -> None
     assert np.array_equal(rewards, episode.rewards)
     clean = simulate(system, controller, start[None], STEPS)
     assert not np.array_equal(states, clean.states[0, : len(states)])
+
+
+def _settings(starts: np.ndarray, plants: str) -> list[tuple[np.ndarray, tuple]]:
+    """Settings of simulate_settings' test: batches of different sizes, noises, a delay, pushes,
+    wide starts that end early; ``plants="own"`` adds friction and parameter errors (each plant
+    steps its own rows), ``"one system"`` has neither (the system's work is shared)."""
+    settings = [
+        (starts[2:3], ()),
+        (starts[1:5] * 12.0, (ObservationNoise(std=0.05, seed=7), ActionDelay(2))),
+        (starts[:3], (TorqueNoise(std=0.3, seed=8), Push(size=0.5, rate=5.0, seed=9))),
+        (starts[3:5], (ObservationNoise(std=0.01, seed=1), ActuatorGain(0.8))),
+    ]
+    if plants == "own":
+        settings[0] = (starts[:2], _everything())
+        settings.append((starts[:3], (ParameterError("gravity", 0.5), Push(0.5, 5.0, seed=9))))
+    return settings
+
+
+@pytest.mark.parametrize("name", SYSTEMS)
+@pytest.mark.parametrize("repeat", [1, 2])
+@pytest.mark.parametrize("plants", ["own", "one system"])
+def test_settings_run_together_are_each_run_alone(name, repeat, plants) -> None:
+    """simulate_settings runs each setting's episodes on its own plant exactly as simulate runs
+    them alone: batches of different sizes, their own noise and push streams, delay queues and
+    constants, episodes that end early beside ones that run on. Reference: simulate, one call
+    per setting; the only difference allowed is the controller's batched round-off."""
+    system = make_system(name)
+    system.episode_steps = STEPS
+    controller = _lqr(name, repeat)
+    settings = _settings(_starts(system, 5, seed=2), plants)
+    together = simulate_settings(system, controller, settings, STEPS)
+    assert len(together) == len(settings)
+    for (rows, perturbations), batch in zip(settings, together, strict=True):
+        alone = simulate(system, controller, rows, STEPS, perturbations=perturbations)
+        np.testing.assert_array_equal(batch.lengths, alone.lengths)
+        np.testing.assert_array_equal(batch.terminated, alone.terminated)
+        for field in ("states", "observations", "actions", "rewards"):
+            np.testing.assert_allclose(
+                getattr(batch, field), getattr(alone, field), rtol=RTOL, atol=RTOL, err_msg=field
+            )
+    if name in ("cartpole", "mountaincar"):  # they end episodes: some end, others run on
+        ended = np.concatenate([batch.terminated for batch in together])
+        assert ended.any() and not ended.all()
+
+
+def test_simulate_settings_refuses_no_settings() -> None:
+    with pytest.raises(ValueError, match=r"^settings: expected at least one"):
+        simulate_settings(make_system("pendulum"), _lqr("pendulum"), [])
 
 
 def test_the_plants_constants_decide_where_an_episode_ends() -> None:

@@ -67,7 +67,13 @@ from leoc.systems.perturbation_levels import (
     category_perturbations,
 )
 from leoc.systems.perturbations import Perturbation
-from leoc.systems.rollout import Controller, control_period, hold_step, simulate
+from leoc.systems.rollout import (
+    Controller,
+    control_period,
+    hold_step,
+    simulate,
+    simulate_settings,
+)
 
 __all__ = [
     "CALIBRATION_BISECTIONS",
@@ -457,18 +463,36 @@ def _run_category(
         )
         for kind in starts
     }
+    sweep = settings[next(iter(starts))]
+    held = _held_everywhere(system, controller, starts, settings)
     results = []
-    for index, setting in enumerate(settings[next(iter(starts))]):
-        held = {
-            kind: _held(system, controller, starts[kind], settings[kind][index]) for kind in starts
-        }
+    for index, setting in enumerate(sweep):
         records = {
             kind: [p.as_dict() for p in settings[kind][index].perturbations] for kind in starts
         }
-        results.append(LevelResult(setting.level, setting.constant, held, records))
+        level_held = {kind: held[kind, index] for kind in starts}
+        results.append(LevelResult(setting.level, setting.constant, level_held, records))
         if options.progress is not None:
-            options.progress(category, index + 1, len(settings[next(iter(starts))]))
+            options.progress(category, index + 1, len(sweep))
     return CategoryResult(category, max_levels.level(category), results)
+
+
+def _held_everywhere(
+    system: System,
+    controller: Controller,
+    starts: Mapping[str, np.ndarray],
+    settings: Mapping[str, list[Setting]],
+) -> dict[tuple[str, int], list[bool]]:
+    """:func:`_held` of every start kind at every setting of a sweep, ``{(kind, index): held}``,
+    all in one batch (:func:`~leoc.systems.rollout.simulate_settings`: one controller call per
+    decision for the whole sweep)."""
+    keys = [(kind, index) for kind in starts for index in range(len(settings[kind]))]
+    pairs = [(starts[kind], settings[kind][index].perturbations) for kind, index in keys]
+    batches = simulate_settings(system, controller, pairs)
+    return {
+        key: [hold_step(system, batch.episode(i)) is not None for i in range(len(batch.lengths))]
+        for key, batch in zip(keys, batches, strict=True)
+    }
 
 
 class _Options(NamedTuple):

@@ -62,6 +62,7 @@ __all__ = [
     "ParameterError",
     "Perturbation",
     "PerturbedPlant",
+    "PlantRows",
     "PlantStep",
     "Push",
     "TorqueNoise",
@@ -667,7 +668,10 @@ class PerturbedPlant:
     def observe(self, state: Tensor) -> Tensor:
         """What the controller sees ``(B, O)`` of the states ``(B, S)``: their observation plus
         the observation noise (a fresh draw at every call)."""
-        obs = self.system.observe(state)
+        return self.noisy(self.system.observe(state))
+
+    def noisy(self, obs: Tensor) -> Tensor:
+        """The observations ``(B, O)`` plus the observation noise (a fresh draw), if any."""
         if self._observation_noise is None:
             return obs
         return obs + self._gaussian(self._observation_noise, obs)
@@ -710,17 +714,127 @@ class PerturbedPlant:
             total = total + mask * force
         return total
 
+    def out_of_bounds(self, state: Tensor) -> Tensor:
+        """Boolean ``(B,)``: the plant's states ``(B, S)`` have left its allowed region."""
+        return self.system.out_of_bounds(state)
+
+    def step_reward(
+        self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
+    ) -> Tensor:
+        """Reward ``(B,)`` of one step of the plant (its system's
+        :meth:`~leoc.systems.base.System.step_reward`)."""
+        return self.system.step_reward(state, action, next_state, leaving, steps_left)
+
     def step(self, state: Tensor, command: Tensor) -> PlantStep:
         """One simulator step ``(B, S), (B, A)`` of the plant under the controller's command
         (clipped here to the actuator limit first; module docstring for the order). A delay's
         queue not yet filled for this batch size is filled with ``u_eq`` first (:meth:`reset`)."""
-        command = self.system.clip_action(command)
-        actuated = self._actuate(command)
+        pushed, actuated, impulse = self.inputs(state, command)
+        following = self.dynamics(pushed, actuated)
+        return PlantStep(following, self.system.clip_action(actuated), impulse)
+
+    def inputs(self, state: Tensor, command: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """What :meth:`step` gives the dynamics: the state after this step's pushes, the
+        actuator's input (delayed, scaled, noisy, before its clip) and the pushes' impulse."""
+        actuated = self._actuate(self.system.clip_action(command))
         impulse = self._impulse(state)
-        if self._pushes:
-            state = state + impulse
+        return (state + impulse if self._pushes else state), actuated, impulse
+
+    @property
+    def has_friction(self) -> bool:
+        """Whether the dynamics have friction (:meth:`dynamics` then takes the forced step)."""
+        return bool(self._friction)
+
+    def dynamics(self, state: Tensor, actuated: Tensor) -> Tensor:
+        """The system's step from ``state`` under the actuator input ``actuated`` (clipped by
+        ``step_fn``), with the friction's forces if any."""
         if self._friction:
-            following = self.system.forced_step_fn(state, actuated, self.friction_force)
+            return self.system.forced_step_fn(state, actuated, self.friction_force)
+        return self.system.step_fn(state, actuated)
+
+
+class PlantRows:
+    """Several :class:`PerturbedPlant` run as one batch of episodes: plant ``i`` owns the next
+    ``sizes[i]`` rows. Each steps, observes, ends and rewards its own rows exactly as it would
+    alone (its random streams draw for its rows only), so one controller call serves every
+    plant: what :func:`leoc.systems.rollout.simulate_settings` runs.
+
+    Parameters
+    ----------
+    plants : sequence of PerturbedPlant
+        At least one, all of one nominal system.
+    sizes : sequence of int
+        Rows per plant (positive).
+    """
+
+    def __init__(self, plants: Sequence[PerturbedPlant], sizes: Sequence[int]) -> None:
+        if not plants or len(plants) != len(sizes):
+            raise ValueError(
+                f"sizes: expected one positive row count per plant ({len(plants)}), found "
+                f"{list(sizes)}"
+            )
+        if any(int(size) < 1 for size in sizes):
+            raise ValueError(f"sizes: expected positive row counts, found {list(sizes)}")
+        self.plants = tuple(plants)
+        self.sizes = tuple(int(size) for size in sizes)
+        self.system = self.plants[0].nominal
+        # one system for every plant (no parameter errors, or the same): its observation,
+        # reward, end and (without friction) step run once on the whole batch
+        common = self.plants[0].system
+        self._common = common if all(p.system is common for p in self.plants) else None
+        self._frictionless = not any(p.has_friction for p in self.plants)
+
+    def _parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
+        if tensor.shape[0] != sum(self.sizes):
+            raise ValueError(
+                f"batch: expected {sum(self.sizes)} rows (the plants' sizes {list(self.sizes)}),"
+                f" found {tensor.shape[0]}"
+            )
+        return torch.split(tensor, self.sizes)
+
+    def reset(self, batch: int, episode_seed: int | None = None) -> None:
+        """:meth:`PerturbedPlant.reset` of each plant for its rows (``batch`` their sum)."""
+        if batch != sum(self.sizes):
+            raise ValueError(f"batch: expected {sum(self.sizes)} rows, found {batch}")
+        for plant, size in zip(self.plants, self.sizes, strict=True):
+            plant.reset(size, episode_seed)
+
+    def observe(self, state: Tensor) -> Tensor:
+        """Each plant's :meth:`PerturbedPlant.observe` of its rows, stacked."""
+        if self._common is None:
+            parts = self._parts(state)
+            return torch.cat([p.observe(x) for p, x in zip(self.plants, parts, strict=True)])
+        parts = self._parts(self._common.observe(state))
+        return torch.cat([p.noisy(obs) for p, obs in zip(self.plants, parts, strict=True)])
+
+    def out_of_bounds(self, state: Tensor) -> Tensor:
+        """Each plant's :meth:`PerturbedPlant.out_of_bounds` of its rows, stacked."""
+        if self._common is not None:
+            return self._common.out_of_bounds(state)
+        parts = self._parts(state)
+        return torch.cat([p.out_of_bounds(x) for p, x in zip(self.plants, parts, strict=True)])
+
+    def step_reward(
+        self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
+    ) -> Tensor:
+        """Each plant's :meth:`PerturbedPlant.step_reward` of its rows, stacked."""
+        if self._common is not None:
+            return self._common.step_reward(state, action, next_state, leaving, steps_left)
+        rows = zip(*(self._parts(t) for t in (state, action, next_state, leaving)), strict=True)
+        return torch.cat(
+            [p.step_reward(*row, steps_left) for p, row in zip(self.plants, rows, strict=True)]
+        )
+
+    def step(self, state: Tensor, command: Tensor) -> PlantStep:
+        """Each plant's :meth:`PerturbedPlant.step` of its rows, stacked field by field."""
+        rows = zip(self._parts(state), self._parts(command), strict=True)
+        inputs = [p.inputs(x, u) for p, (x, u) in zip(self.plants, rows, strict=True)]
+        pushed, actuated, impulse = (torch.cat(field) for field in zip(*inputs, strict=True))
+        if self._common is not None and self._frictionless:
+            following = self._common.step_fn(pushed, actuated)
         else:
-            following = self.system.step_fn(state, actuated)
+            rows = zip(self._parts(pushed), self._parts(actuated), strict=True)
+            following = torch.cat(
+                [p.dynamics(x, u) for p, (x, u) in zip(self.plants, rows, strict=True)]
+            )
         return PlantStep(following, self.system.clip_action(actuated), impulse)

@@ -16,7 +16,8 @@ from ``system``: the controller sees noisy observations, the actuator a delayed,
 noisy command, the dynamics friction, pushes or other constants. One
 :class:`~leoc.systems.perturbations.PerturbedPlant` per call runs them (the gymnasium
 environment runs the same); the recorded observations are those the controller saw, the
-recorded actions its commands, the states the plant's.
+recorded actions its commands, the states the plant's. :func:`simulate_settings` runs several
+plants in one batch, each on its own rows, with one controller call per decision for all.
 
 Termination. A start whose state leaves the allowed region (``System.out_of_bounds``) gets the
 system's ``termination_reward`` for that step (its ``out_of_bounds_reward`` for that step and
@@ -37,7 +38,7 @@ import torch
 from torch import Tensor
 
 from leoc.systems.base import DTYPE, System, check_repeat
-from leoc.systems.perturbations import Perturbation, PerturbedPlant
+from leoc.systems.perturbations import Perturbation, PerturbedPlant, PlantRows
 
 #: A controller: batched observations ``(B, D)`` to actions ``(B, A)``.
 Controller = Callable[[Tensor], Tensor]
@@ -105,6 +106,20 @@ class BatchTrajectory(NamedTuple):
     @property
     def total_rewards(self) -> np.ndarray:
         return self.rewards.sum(axis=1)
+
+    def rows(self, index: slice) -> BatchTrajectory:
+        """The episodes ``index`` (a slice of the batch) as a batch of their own."""
+        relevance = None if self.relevance is None else self.relevance[index]
+        return BatchTrajectory(
+            self.states[index],
+            self.observations[index],
+            self.actions[index],
+            self.rewards[index],
+            relevance,
+            self.terminated[index],
+            self.lengths[index],
+            self.action_repeat,
+        )
 
     def episode(self, index: int) -> Trajectory:
         """Episode ``index`` cut at its own length."""
@@ -205,7 +220,7 @@ class _Episodes:
     relevance: list[Tensor] = dataclasses.field(default_factory=list)
 
     @classmethod
-    def start(cls, plant: PerturbedPlant, state: Tensor, steps: int) -> _Episodes:
+    def start(cls, plant: PerturbedPlant | PlantRows, state: Tensor, steps: int) -> _Episodes:
         """Episodes of ``steps`` steps from ``state`` ``(B, S)``, every one alive."""
         batch = state.shape[0]
         alive = torch.ones(batch, dtype=torch.bool)
@@ -214,15 +229,19 @@ class _Episodes:
         return cls(state, alive, lengths, [state], [plant.observe(state)])
 
     def advance(
-        self, plant: PerturbedPlant, action: Tensor, relevance: Tensor, index: int, steps: int
+        self,
+        plant: PerturbedPlant | PlantRows,
+        action: Tensor,
+        relevance: Tensor,
+        index: int,
+        steps: int,
     ) -> None:
         """Simulator step ``index`` (of ``steps``) with ``action`` ``(B, A)``: a start that
         leaves the allowed region ends there (its termination reward), an ended one is frozen
         (zero action and reward, its state and observation repeated)."""
-        system = plant.system
         stepped = plant.step(self.state, action).state
-        leaving = self.alive & system.out_of_bounds(stepped)
-        reward = system.step_reward(self.state, action, stepped, leaving, steps - index - 1)
+        leaving = self.alive & plant.out_of_bounds(stepped)
+        reward = plant.step_reward(self.state, action, stepped, leaving, steps - index - 1)
         self.rewards.append(torch.where(self.alive, reward, torch.zeros_like(reward)))
         self.actions.append(torch.where(self.alive[:, None], action, torch.zeros_like(action)))
         self.relevance.append(relevance)
@@ -291,8 +310,52 @@ def simulate(
     steps = system.episode_steps if steps is None else steps
     state, offsets = _check_inputs(system, starts, steps, action_offsets)
     repeat = control_period(controller) if action_repeat is None else check_repeat(action_repeat)
-    relevance_of = relevance_function(controller)
     plant = PerturbedPlant(system, perturbations, repeat)
+    return _closed_loop(system, controller, plant, state, offsets, repeat)
+
+
+def simulate_settings(
+    system: System,
+    controller: Controller,
+    settings: Sequence[tuple[Any, Sequence[Perturbation]]],
+    steps: int | None = None,
+    action_repeat: int | None = None,
+) -> list[BatchTrajectory]:
+    """:func:`simulate` of several plants at once: ``settings`` holds ``(starts, perturbations)``
+    pairs, and setting ``i``'s episodes run on its own
+    :class:`~leoc.systems.perturbations.PerturbedPlant` (its random streams, its delay queue, its
+    constants) while one controller call per decision serves every setting
+    (:class:`~leoc.systems.perturbations.PlantRows`). Returns one :class:`BatchTrajectory` per
+    setting, what ``simulate(system, controller, starts, steps, None, action_repeat,
+    perturbations)`` gives up to the rounding of the controller's batched arithmetic, except
+    that the relevance of an episode after its end is the controller's at its frozen
+    observation (``simulate`` repeats the last one taken when every episode has ended). The
+    robustness protocol runs every level of a category this way."""
+    if not settings:
+        raise ValueError("settings: expected at least one (starts, perturbations) pair, found none")
+    steps = system.episode_steps if steps is None else steps
+    repeat = control_period(controller) if action_repeat is None else check_repeat(action_repeat)
+    parts = [_check_inputs(system, starts, steps, None) for starts, _ in settings]
+    sizes = [state.shape[0] for state, _ in parts]
+    plants = [PerturbedPlant(system, perturbations, repeat) for _, perturbations in settings]
+    state = torch.cat([state for state, _ in parts])
+    batch = _closed_loop(system, controller, PlantRows(plants, sizes), state, parts[0][1], repeat)
+    bounds = np.cumsum([0, *sizes])
+    return [batch.rows(slice(a, b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+
+
+def _closed_loop(
+    system: System,
+    controller: Controller,
+    plant: PerturbedPlant | PlantRows,
+    state: Tensor,
+    offsets: Tensor,
+    repeat: int,
+) -> BatchTrajectory:
+    """The loop of :func:`simulate` on ``plant`` from ``state`` ``(B, S)``, ``offsets``
+    ``(T, A)`` added to the held action at every step."""
+    steps = offsets.shape[0]
+    relevance_of = relevance_function(controller)
     episodes = _Episodes.start(plant, state, steps)
     batch = state.shape[0]
     decision = _Decision(
