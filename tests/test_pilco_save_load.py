@@ -226,6 +226,50 @@ def test_training_moved_the_hybrids_lambda(references) -> None:
     assert (trained - initial.relevance_module.lambda_.detach()).abs().max() > 1e-6
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_curve_records_why_the_optimisation_stopped(references, kind) -> None:
+    """An iteration's diagnostics (docs/user_guide/pilco.md, "Why a run fails") against
+    autograd on the trainer's own policy and model: the gradient's norm at the parameters kept,
+    the GP's hyperparameters, the hybrid's Lambda, a start cost no lower than the one kept."""
+    import json
+    import math
+
+    from leoc.pilco.config import PilcoConfig
+    from leoc.pilco.objective import predict_policy
+    from leoc.systems import make_system
+
+    ref = references[kind]
+    row = json.loads((ref.run_dir / "curve.json").read_text())["curve"][-1]
+    policy, model = ref.result.policy.policy, ref.result.model
+    config = PilcoConfig.from_dict(ref.result.config)
+    params = [p for p in policy.parameters() if p.requires_grad]
+    cost = predict_policy(policy, model, make_system("pendulum"), config).total_cost
+    norm = math.sqrt(sum(float(g.square().sum()) for g in torch.autograd.grad(cost, params)))
+    assert norm > 0.0
+    assert row["gradient_norm_best"] == pytest.approx(norm, rel=1e-6)
+    assert row["predicted_cost"] == pytest.approx(float(cost), rel=1e-9)
+    assert row["predicted_cost_start"] >= row["predicted_cost"]
+    assert row["failed_evaluations"] == 0
+    # the cost the iteration's training rollout realised: its observations at decisions 1..H
+    # (rows of the data after iteration 0's), the saturating cost written out here
+    saved = torch.load(ref.run_dir / "checkpoint.pt", weights_only=False)
+    first = ref.result.curve[0]["data_size"]
+    obs = np.asarray(saved["inputs"])[first + 1 : first + 1 + config.horizon, :3]
+    system = make_system("pendulum")
+    factor = np.asarray(system.cost_factor()) / config.cost_width
+    scaled = (obs - np.asarray(system.operating_obs)) @ factor.T
+    expected = np.sum(1.0 - np.exp(-0.5 * np.square(scaled).sum(axis=1)))
+    assert len(obs) == config.horizon
+    assert row["realised_cost"] == pytest.approx(expected, rel=1e-9)
+    np.testing.assert_allclose(row["gp_log_noise"], model.log_noise.numpy(), rtol=1e-12)
+    np.testing.assert_allclose(row["gp_log_lengthscales"], model.log_lengthscales.numpy())
+    if kind == "hybrid":
+        lam = policy.relevance_module.lambda_.detach().numpy()
+        np.testing.assert_allclose(row["relevance_lambda"], lam, rtol=1e-12)
+    else:
+        assert "relevance_lambda" not in row
+
+
 def test_loaded_run_carries_its_config_and_plant(references, tiny_pilco_settings) -> None:
     from leoc.pilco import PilcoRun, load_pilco_run
     from leoc.pilco.config import PilcoConfig

@@ -21,6 +21,7 @@
 from leoc.pilco.checkpoint import PilcoRun, load_pilco_controller, load_pilco_run
 from leoc.pilco.config import PilcoConfig, authors_pilco_overrides
 from leoc.pilco.cost import expected_saturating_cost, saturating_cost
+from leoc.pilco.diagnose import DIAGNOSES, Diagnosis, diagnose_curve, diagnose_run
 from leoc.pilco.gp import CholeskyError, GPPosterior, GPSettings, fit_gp, gp_predict
 from leoc.pilco.moments import (
     MomentMatch,
@@ -35,7 +36,9 @@ from leoc.pilco.propagate import SaturatedPolicy, action_moments, predict
 from leoc.pilco.train import PilcoResult, train_pilco
 
 __all__ = [
+    "DIAGNOSES",
     "CholeskyError",
+    "Diagnosis",
     "GPPosterior",
     "GPSettings",
     "MomentMatch",
@@ -45,6 +48,8 @@ __all__ = [
     "SaturatedPolicy",
     "action_moments",
     "authors_pilco_overrides",
+    "diagnose_curve",
+    "diagnose_run",
     "expected_saturating_cost",
     "fit_gp",
     "gp_moments",

@@ -110,12 +110,25 @@ class PolicyOptimisation(NamedTuple):
         Evaluations of the cost and its gradient, line searches included.
     restarts : int
         Rounds started again from the best parameters with a fresh curvature history.
+    start_cost : float
+        The predicted cost of the policy the optimisation started from (inf if it failed).
+    start_gradient_norm : float
+        The Euclidean norm of that cost's gradient over the trained parameters: near 0, a cost
+        saturated along the whole predicted trajectory gives the optimiser nothing to follow.
+    best_gradient_norm : float
+        The gradient's norm at the parameters kept (those of ``cost``).
+    failed_evaluations : int
+        Evaluations that failed (a non-finite cost or a Cholesky failure).
     """
 
     cost: float
     iterations: int
     evaluations: int
     restarts: int
+    start_cost: float = math.nan
+    start_gradient_norm: float = math.nan
+    best_gradient_norm: float = math.nan
+    failed_evaluations: int = 0
 
 
 # A restart that lowers the best cost by less than this fraction of it ends the optimisation.
@@ -138,38 +151,68 @@ def optimise_policy(
     search backs away from; the best parameters seen are restored at the end.
     """
     params = [p for p in policy.parameters() if p.requires_grad]
-    best = {"loss": math.inf, "state": None}
-    evaluations = 0
+    track = _Evaluations(policy, params)
 
     def closure() -> torch.Tensor:
-        nonlocal evaluations
-        evaluations += 1
         optimiser.zero_grad()
         try:
             loss = predict_policy(policy, model, system, config).total_cost
         except RuntimeError:  # CholeskyError or a linalg failure at extreme parameters
             loss = torch.tensor(math.inf, dtype=DTYPE)
-        if not torch.isfinite(loss):
-            for p in params:
-                p.grad = torch.zeros_like(p)
-            return torch.tensor(math.inf, dtype=DTYPE)
-        loss.backward()
-        if loss.item() < best["loss"]:
-            best["loss"] = loss.item()
-            best["state"] = {k: v.detach().clone() for k, v in policy.state_dict().items()}
-        return loss
+        return track.record(loss)
 
     iterations, rounds = 0, 0
     while iterations < config.policy_iterations:
-        before = best["loss"]
+        before = track.best_loss
         optimiser = torch.optim.LBFGS(
             params, max_iter=config.policy_iterations - iterations, line_search_fn="strong_wolfe"
         )
         optimiser.step(closure)
         rounds += 1
         iterations += max(1, optimiser.state[params[0]].get("n_iter", 0))
-        if best["state"] is not None:
-            policy.load_state_dict(best["state"])
-        if not before - best["loss"] > RESTART_MIN_IMPROVEMENT * abs(best["loss"]):
+        if track.best_state is not None:
+            policy.load_state_dict(track.best_state)
+        if not before - track.best_loss > RESTART_MIN_IMPROVEMENT * abs(track.best_loss):
             break
-    return PolicyOptimisation(best["loss"], iterations, evaluations, rounds - 1)
+    return track.outcome(iterations, rounds - 1)
+
+
+class _Evaluations:
+    """The evaluations of one :func:`optimise_policy`: each cost and gradient norm, and the best
+    parameters seen."""
+
+    def __init__(self, policy: nn.Module, params: list[torch.Tensor]) -> None:
+        self.policy, self.params = policy, params
+        self.seen: list[tuple[float, float]] = []  # (cost, gradient norm) of each evaluation
+        self.best_loss, self.best_gradient = math.inf, math.nan
+        self.best_state: dict[str, torch.Tensor] | None = None
+
+    def record(self, loss: torch.Tensor) -> torch.Tensor:
+        """The loss the line search sees: ``loss`` with its gradient, or +inf (zero gradient)
+        for a failed evaluation."""
+        if not torch.isfinite(loss):
+            for p in self.params:
+                p.grad = torch.zeros_like(p)
+            self.seen.append((math.inf, math.nan))
+            return torch.tensor(math.inf, dtype=DTYPE)
+        loss.backward()
+        grads = [p.grad for p in self.params if p.grad is not None]
+        norm = math.sqrt(sum(float(g.square().sum()) for g in grads))
+        self.seen.append((loss.item(), norm))
+        if loss.item() < self.best_loss:
+            self.best_loss, self.best_gradient = loss.item(), norm
+            self.best_state = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+        return loss
+
+    def outcome(self, iterations: int, restarts: int) -> PolicyOptimisation:
+        start_cost, start_gradient = self.seen[0] if self.seen else (math.inf, math.nan)
+        return PolicyOptimisation(
+            self.best_loss,
+            iterations,
+            len(self.seen),
+            restarts,
+            start_cost,
+            start_gradient,
+            self.best_gradient,
+            sum(cost == math.inf for cost, _ in self.seen),
+        )

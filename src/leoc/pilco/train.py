@@ -33,6 +33,7 @@ GP model + config) and ``checkpoint.pt`` (everything needed to resume, written a
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -52,8 +53,9 @@ from leoc.pilco.checkpoint import (
     save_controller,
 )
 from leoc.pilco.config import PilcoConfig
+from leoc.pilco.cost import saturating_cost
 from leoc.pilco.gp import GPPosterior, fit_gp
-from leoc.pilco.objective import PolicyOptimisation, optimise_policy
+from leoc.pilco.objective import PolicyOptimisation, cost_spec, optimise_policy
 from leoc.pilco.policy import build_policy, redraw_rbf
 from leoc.pilco.rollout import Rollout, hold_start, run_rollout
 from leoc.policies import HeldPolicy
@@ -107,6 +109,58 @@ def _log_row(
         gp_sparse=sparse,
     )
     return row
+
+
+def _diagnostics(
+    optimisation: PolicyOptimisation,
+    model: GPPosterior,
+    policy: nn.Module,
+    realised_cost: float,
+) -> dict[str, Any]:
+    """What an iteration's curve row records to tell why a run fails (docs/user_guide/pilco.md,
+    "Why a run fails"): the policy optimisation's start and gradients, the cost the training
+    rollout realised (:func:`_realised_cost`), the GP's hyperparameters and the relevance's
+    widths."""
+    hyper = model.hyper
+    return {
+        "realised_cost": realised_cost,
+        "predicted_cost_start": _plain_number(optimisation.start_cost),
+        "gradient_norm_start": _plain_number(optimisation.start_gradient_norm),
+        "gradient_norm_best": _plain_number(optimisation.best_gradient_norm),
+        "failed_evaluations": optimisation.failed_evaluations,
+        "gp_log_lengthscales": hyper.log_lengthscales.tolist(),
+        "gp_log_signal": hyper.log_signal.tolist(),
+        "gp_log_noise": hyper.log_noise.tolist(),
+        **_relevance_widths(policy),
+    }
+
+
+def _realised_cost(system: System, config: PilcoConfig, rollout: Rollout) -> float:
+    """The horizon cost a real episode incurred, in the units of PILCO's predicted cost: the
+    saturating cost (:func:`leoc.pilco.objective.cost_spec`) of the observations at decisions
+    ``1..H`` (``H = config.horizon``, a decision every ``config.action_repeat`` steps), each
+    decision the episode did not reach (it ended first) counted at the cost's maximum, 1."""
+    spec = cost_spec(system, config.cost_width, config.cost_weights)
+    observations = rollout.trajectory.observations[:: config.action_repeat][1:]
+    reached = torch.as_tensor(observations[: config.horizon], dtype=spec.target.dtype)
+    costs = saturating_cost(reached, spec.target, spec.factor)
+    return float(costs.sum()) + float(config.horizon - len(reached))
+
+
+def _plain_number(value: float) -> float | None:
+    """``value``, or None where it is not finite (JSON has no inf or NaN)."""
+    return float(value) if math.isfinite(value) else None
+
+
+def _relevance_widths(policy: nn.Module) -> dict[str, list[float]]:
+    """The hybrid's relevance widths: ``relevance_lambda`` (the paper's Lambda, per
+    observation entry) or ``relevance_width`` (the ROA relevance's); none for a baseline."""
+    for module in policy.modules():
+        if hasattr(module, "lambda_"):
+            return {"relevance_lambda": module.lambda_.detach().reshape(-1).tolist()}
+        if hasattr(module, "width") and hasattr(module, "lyapunov"):
+            return {"relevance_width": module.width.detach().reshape(-1).tolist()}
+    return {}
 
 
 def _rollout_plant(system: System, config: PilcoConfig, index: int) -> tuple[Perturbation, ...]:
@@ -205,11 +259,16 @@ def _restart_policy(
     fresh = optimise_policy(policy, model, system, config)
     if not fresh.cost < best.cost:
         policy.load_state_dict(kept)
+    kept_one = fresh if fresh.cost < best.cost else best
     return PolicyOptimisation(
         min(best.cost, fresh.cost),
         best.iterations + fresh.iterations,
         best.evaluations + fresh.evaluations,
         best.restarts + fresh.restarts + 1,
+        best.start_cost,
+        best.start_gradient_norm,
+        kept_one.best_gradient_norm,
+        best.failed_evaluations + fresh.failed_evaluations,
     )
 
 
@@ -256,6 +315,8 @@ def _iterate(
         time.perf_counter() - start_time,
         model.sparse,
     )
+    realised = _realised_cost(system, config, rollout)
+    row.update(_diagnostics(optimisation, model, policy, realised))
     new_state = RunState(
         state.iteration + 1,
         inputs,

@@ -1,0 +1,88 @@
+"""Why PILCO runs fail: train PILCO runs as ``leoc reproduce`` trains them, and classify each.
+
+For each system x PILCO controller x seed: trains the run exactly as ``leoc reproduce`` does
+under the profile (default ``paper``: its budget, leoc's defaults; the ROA hybrid on its
+certified LQR) into ``OUT/SYSTEM/CONTROLLER/seedN/train`` (resumed where a run stopped), then
+prints, per run, the diagnosis of :func:`leoc.pilco.diagnose.diagnose_run` (held, or the class
+of the failure with its evidence) and the count per class. Only the training: no evaluation,
+proof or protocol. ``--report-only`` prints the table of what ``OUT`` holds.
+
+Usage::
+
+    python benchmarks/bench_pilco_failures.py --out DIR [--systems pendulum cartpole]
+        [--controllers pilco_baseline pilco_hybrid pilco_hybrid_roa] [--seeds 0 1 2 3 4]
+        [--profile paper] [--jobs 2] [--report-only]
+
+Each run takes one torch thread; the paper profile's runs take about 1-3 minutes each on this
+project's machine (the pendulum's about 1, the cart-pole's about 3).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from leoc.pilco.diagnose import describe, diagnose_run
+
+PILCO_CONTROLLERS = ("pilco_baseline", "pilco_hybrid", "pilco_hybrid_roa")
+
+
+def _train(key: str, profile_name: str, out: str) -> str:
+    """Train the run ``key`` (SYSTEM/CONTROLLER/seedN) of the profile; its train folder."""
+    import contextlib
+
+    import torch
+
+    from leoc.experiments.profiles import get_profile, run_specs
+    from leoc.experiments.reproduce import train_controller
+
+    torch.set_num_threads(1)
+    system, controller, seed = key.split("/")
+    profile = get_profile(profile_name, seeds=int(seed.removeprefix("seed")) + 1)
+    (spec,) = [s for s in run_specs(profile, (system,), (controller,)) if s.key == key]
+    train_dir = Path(out) / key / "train"
+    train_dir.mkdir(parents=True, exist_ok=True)
+    with open(train_dir.parent / "train.log", "a", buffering=1) as log:
+        with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            train_controller(spec, profile, train_dir)
+    return str(train_dir)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", required=True, help="folder of the runs (resumed)")
+    parser.add_argument("--systems", nargs="+", default=["pendulum", "cartpole"])
+    parser.add_argument("--controllers", nargs="+", default=list(PILCO_CONTROLLERS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument("--profile", default="paper")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--report-only", action="store_true")
+    args = parser.parse_args()
+    unknown = sorted(set(args.controllers) - set(PILCO_CONTROLLERS))
+    if unknown:
+        parser.error(f"--controllers: expected some of {PILCO_CONTROLLERS}, found {unknown}")
+    keys = [
+        f"{system}/{controller}/seed{seed}"
+        for system in args.systems
+        for controller in args.controllers
+        for seed in args.seeds
+    ]
+    if not args.report_only:
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:
+            futures = {key: pool.submit(_train, key, args.profile, args.out) for key in keys}
+            for key, future in futures.items():
+                future.result()
+                print(f"trained {key}", flush=True)
+    diagnoses = {}
+    for key in keys:
+        train_dir = Path(args.out) / key / "train"
+        if (train_dir / "curve.json").is_file():
+            diagnoses[key] = diagnose_run(train_dir)
+    print(describe(diagnoses))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""Why a PILCO run failed, from what its learning curve recorded.
+
+Every PILCO iteration's curve row (``curve.json`` of the run folder) records, besides the
+evaluation, the policy optimisation's predicted horizon cost at its start and at its end, the
+gradient's norm there, its failed evaluations, the horizon cost the iteration's training
+rollout realised (the same saturating cost on the real episode), the GP's hyperparameters and
+the hybrid's relevance widths. :func:`diagnose_run` reads them and puts a run in one class:
+
+``held``
+    The last evaluation held the operating point in every episode: no failure.
+``numerical``
+    The last policy optimisation had failed evaluations (a non-finite cost or a Cholesky
+    failure), or the relevance widths left the range where ``r`` can vary (``|ln lambda|``
+    above :data:`DEGENERATE_LOG_WIDTH`: ``r`` is 1, or 0, wherever the run goes).
+``no progress``
+    The last predicted cost is at least :data:`PROGRESS_RATIO` of the first iteration's: the
+    optimisation never found a way down from where it started (the gradients at the starts,
+    in the evidence, tell a flat cost, saturated along the whole prediction, from a local
+    minimum).
+``model bias``
+    The rollouts realised more cost than the model predicted, by more than
+    :data:`BIAS_SHARE` of the horizon on average over the last :data:`RECENT` iterations: the
+    policy is good for the model and not for the plant.
+``partial``
+    Some evaluation episodes held, not all.
+``local optimum``
+    Everything else: the predicted cost went down and the rollouts realised about what was
+    predicted, but the policy settled on a behaviour that does not hold.
+
+The classes are checked in this order; the thresholds are choices (stated with each constant),
+so :func:`describe` prints the evidence next to the class.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, NamedTuple
+
+__all__ = [
+    "BIAS_SHARE",
+    "DEGENERATE_LOG_WIDTH",
+    "DIAGNOSES",
+    "PROGRESS_RATIO",
+    "RECENT",
+    "Diagnosis",
+    "describe",
+    "diagnose_curve",
+    "diagnose_run",
+]
+
+#: The classes, in the order they are checked.
+DIAGNOSES = ("held", "numerical", "no progress", "model bias", "partial", "local optimum")
+#: ``no progress``: the last predicted cost is at least this share of the first iteration's
+#: (a tenth off the start is within what a redrawn start distribution moves it).
+PROGRESS_RATIO = 0.9
+#: ``model bias``: mean (realised - predicted) cost over the last iterations above this share
+#: of the horizon (a fifth: eight of the pendulum's 40 decisions at the full cost).
+BIAS_SHARE = 0.2
+#: Iterations averaged for ``model bias``.
+RECENT = 3
+#: ``numerical``: a relevance width with ``|ln lambda|`` above this (e^20 = 4.9e8) makes
+#: ``r`` constant on any state the run visits.
+DEGENERATE_LOG_WIDTH = 20.0
+
+
+class Diagnosis(NamedTuple):
+    """The class of one run (module docstring) and the evidence it was read from.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`DIAGNOSES`.
+    held_fraction : float
+        The last evaluation's share of held episodes.
+    evidence : dict
+        ``horizon``; ``predicted`` and ``realised`` (per iteration from 1); ``start_gradient``
+        (the gradient's norm where each optimisation started); ``failed_evaluations`` (per
+        iteration); ``max_abs_log_width`` (the relevance's widths, None for a baseline).
+    """
+
+    kind: str
+    held_fraction: float
+    evidence: dict[str, Any]
+
+
+def _widths(row: Mapping[str, Any]) -> float | None:
+    widths = row.get("relevance_lambda") or row.get("relevance_width")
+    if not widths:
+        return None
+    return max(abs(math.log(w)) if w > 0 else math.inf for w in widths)
+
+
+def diagnose_curve(rows: list[Mapping[str, Any]], horizon: int) -> Diagnosis:
+    """The diagnosis of a run's curve rows (``curve.json``'s ``curve``, iteration 0 first) at
+    prediction horizon ``horizon``.
+
+    Raises
+    ------
+    ValueError
+        No iteration after the random rollouts, or rows without the diagnostics (a run trained
+        before they were recorded).
+    """
+    iterations = [row for row in rows if row.get("iteration", 0) >= 1]
+    if not iterations:
+        raise ValueError("rows: expected at least one PILCO iteration, found none")
+    if "realised_cost" not in iterations[-1]:
+        raise ValueError(
+            "rows: expected each iteration's diagnostics (realised_cost, gradient norms), "
+            "found a curve recorded without them (an older leoc): train the run again"
+        )
+    last = iterations[-1]
+    predicted = [row["predicted_cost"] for row in iterations]
+    realised = [row["realised_cost"] for row in iterations]
+    evidence = {
+        "horizon": int(horizon),
+        "predicted": predicted,
+        "realised": realised,
+        "start_gradient": [row["gradient_norm_start"] for row in iterations],
+        "failed_evaluations": [row["failed_evaluations"] for row in iterations],
+        "max_abs_log_width": _widths(last),
+    }
+    held = float(last["held_fraction"])
+    return Diagnosis(_kind(held, evidence), held, evidence)
+
+
+def _kind(held: float, evidence: Mapping[str, Any]) -> str:
+    """The first class of :data:`DIAGNOSES` whose test the evidence passes."""
+    predicted, realised = evidence["predicted"], evidence["realised"]
+    width = evidence["max_abs_log_width"]
+    if held >= 1.0:
+        return "held"
+    if predicted[-1] is None or evidence["failed_evaluations"][-1] > 0:
+        return "numerical"
+    if width is not None and width > DEGENERATE_LOG_WIDTH:
+        return "numerical"
+    if predicted[-1] >= PROGRESS_RATIO * predicted[0]:
+        return "no progress"
+    recent = list(zip(realised, predicted, strict=True))[-RECENT:]
+    gap = sum(r - p for r, p in recent) / len(recent)
+    if gap > BIAS_SHARE * evidence["horizon"]:
+        return "model bias"
+    return "partial" if held > 0.0 else "local optimum"
+
+
+def diagnose_run(train_dir: str | Path) -> Diagnosis:
+    """The diagnosis of the PILCO run in ``train_dir`` (its ``curve.json`` and
+    ``config.json``)."""
+    folder = Path(train_dir)
+    try:
+        rows = json.loads((folder / "curve.json").read_text(encoding="utf-8"))["curve"]
+        horizon = json.loads((folder / "config.json").read_text(encoding="utf-8"))["horizon"]
+    except (OSError, ValueError, KeyError) as error:
+        raise ValueError(
+            f"train_dir: expected a PILCO run folder with curve.json and config.json, found "
+            f"{folder} ({type(error).__name__}: {error})"
+        ) from None
+    return diagnose_curve(rows, horizon)
+
+
+def _cell(values: list[Any], digits: int = 1) -> str:
+    shown = [f"{v:.{digits}f}" if isinstance(v, float) else str(v) for v in values]
+    return " ".join(shown)
+
+
+def describe(diagnoses: Mapping[str, Diagnosis]) -> str:
+    """A markdown table of ``{run: diagnosis}`` (run, class, held, predicted and realised cost
+    per iteration, gradient norm at the first and last optimisation's start, the widths' largest
+    ``|ln lambda|``) and the count per class."""
+    lines = [
+        "| run | class | held | predicted cost | realised cost | start gradient | max |ln w| |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for run, found in diagnoses.items():
+        ev = found.evidence
+        gradients = [ev["start_gradient"][0], ev["start_gradient"][-1]]
+        width = "-" if ev["max_abs_log_width"] is None else f"{ev['max_abs_log_width']:.2f}"
+        lines.append(
+            f"| {run} | {found.kind} | {found.held_fraction:.0%} | {_cell(ev['predicted'])} | "
+            f"{_cell(ev['realised'])} | {_cell(gradients, 2)} | {width} |"
+        )
+    counts = Counter(found.kind for found in diagnoses.values())
+    summary = ", ".join(f"{kind} {counts[kind]}" for kind in DIAGNOSES if counts[kind])
+    return "\n".join([*lines, "", f"{len(diagnoses)} runs: {summary or 'none'}"])

@@ -1,0 +1,96 @@
+"""leoc.pilco.diagnose: each class of failure from curves written by hand to its definition
+(the module docstring), the order the classes are checked in, and the errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from leoc.pilco.diagnose import (
+    BIAS_SHARE,
+    DEGENERATE_LOG_WIDTH,
+    PROGRESS_RATIO,
+    describe,
+    diagnose_curve,
+    diagnose_run,
+)
+
+HORIZON = 40
+
+
+def _row(iteration, predicted, realised, held=0.0, failed=0, widths=None, gradient=0.5):
+    row = {
+        "iteration": iteration,
+        "held_fraction": held,
+        "predicted_cost": predicted,
+        "realised_cost": realised,
+        "gradient_norm_start": gradient,
+        "failed_evaluations": failed,
+    }
+    if widths is not None:
+        row["relevance_lambda"] = widths
+    return row
+
+
+def _curve(predicted, realised, **last):
+    """Iteration 0 (random rollouts, no optimisation) then one row per predicted cost; ``last``
+    overrides the last row's fields."""
+    rows = [{"iteration": 0, "held_fraction": 0.0}]
+    rows += [_row(i + 1, p, r) for i, (p, r) in enumerate(zip(predicted, realised, strict=True))]
+    rows[-1].update(last)
+    return rows
+
+
+def test_each_class_from_its_definition() -> None:
+    down, agreeing = [30.0, 20.0, 12.0, 10.0], [31.0, 22.0, 13.0, 11.0]
+    assert diagnose_curve(_curve(down, agreeing, held_fraction=1.0), HORIZON).kind == "held"
+    assert diagnose_curve(_curve(down, agreeing), HORIZON).kind == "local optimum"
+    assert diagnose_curve(_curve(down, agreeing, held_fraction=0.4), HORIZON).kind == "partial"
+    # the last cost at PROGRESS_RATIO of the first: no progress; just below: progress
+    flat = [30.0, 29.0, 28.0, PROGRESS_RATIO * 30.0]
+    assert diagnose_curve(_curve(flat, flat), HORIZON).kind == "no progress"
+    flat[-1] = PROGRESS_RATIO * 30.0 - 0.01
+    assert diagnose_curve(_curve(flat, flat), HORIZON).kind == "local optimum"
+    # realised above predicted by BIAS_SHARE of the horizon on average over the last three
+    gap = BIAS_SHARE * HORIZON
+    above = [p + gap + 0.01 for p in down]
+    assert diagnose_curve(_curve(down, above), HORIZON).kind == "model bias"
+    above[-1] -= 0.06  # the mean gap now just below the share
+    assert diagnose_curve(_curve(down, above), HORIZON).kind == "local optimum"
+
+
+def test_numerical_failures_come_first() -> None:
+    down, agreeing = [30.0, 20.0, 12.0], [31.0, 22.0, 13.0]
+    assert diagnose_curve(_curve(down, agreeing, failed_evaluations=2), HORIZON).kind == (
+        "numerical"
+    )
+    assert diagnose_curve(_curve(down, agreeing, predicted_cost=None), HORIZON).kind == (
+        "numerical"
+    )
+    wide = [1.0, 1.0, float(2.0 * 10**9)]  # ln(2e9) = 21.4 > DEGENERATE_LOG_WIDTH
+    found = diagnose_curve(_curve(down, agreeing, relevance_lambda=wide), HORIZON)
+    assert found.kind == "numerical" and found.evidence["max_abs_log_width"] > DEGENERATE_LOG_WIDTH
+    # a held run is held whatever its optimisation met on the way
+    held = _curve(down, agreeing, failed_evaluations=2, held_fraction=1.0)
+    assert diagnose_curve(held, HORIZON).kind == "held"
+
+
+def test_run_folders_and_the_table(tmp_path) -> None:
+    (tmp_path / "curve.json").write_text(json.dumps({"curve": _curve([30.0, 29.5], [30.0, 30.0])}))
+    (tmp_path / "config.json").write_text(json.dumps({"horizon": HORIZON}))
+    found = diagnose_run(tmp_path)
+    assert found.kind == "no progress" and found.evidence["predicted"] == [30.0, 29.5]
+    table = describe({"pendulum/pilco_baseline/seed2": found})
+    assert "| pendulum/pilco_baseline/seed2 | no progress | 0% | 30.0 29.5 |" in table
+    assert table.endswith("1 runs: no progress 1")
+
+
+def test_errors_name_what_is_missing(tmp_path) -> None:
+    with pytest.raises(ValueError, match=r"^train_dir: expected a PILCO run folder"):
+        diagnose_run(tmp_path)
+    with pytest.raises(ValueError, match=r"^rows: expected at least one PILCO iteration"):
+        diagnose_curve([{"iteration": 0, "held_fraction": 0.0}], HORIZON)
+    old = [{"iteration": 0}, {"iteration": 1, "held_fraction": 0.0, "predicted_cost": 3.0}]
+    with pytest.raises(ValueError, match=r"^rows: expected each iteration's diagnostics"):
+        diagnose_curve(old, HORIZON)
