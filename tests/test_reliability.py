@@ -161,6 +161,11 @@ def _alive_in_group(group: int) -> list[int]:
     return alive
 
 
+#: The tests that compare with one uninterrupted study run on one worker (pytest-xdist's
+#: ``--dist loadgroup``, in pyproject.toml's addopts), so the study runs once, not per worker.
+UNINTERRUPTED_GROUP = "uninterrupted-smoke-study"
+
+
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> dict[str, dict]:
     out = tmp_path_factory.mktemp("uninterrupted")
@@ -169,6 +174,7 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group(UNINTERRUPTED_GROUP)
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 @pytest.mark.parametrize(
     "signum",
@@ -286,6 +292,7 @@ def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group(UNINTERRUPTED_GROUP)
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
     tmp_path, uninterrupted
