@@ -11,7 +11,7 @@ Usage::
 
     python benchmarks/bench_pilco_failures.py --out DIR [--systems pendulum cartpole]
         [--controllers pilco_baseline pilco_hybrid pilco_hybrid_roa] [--seeds 0 1 2 3 4]
-        [--profile paper] [--jobs 2] [--report-only]
+        [--profile paper] [--jobs 2] [--report-only] [--runs SYSTEM/CONTROLLER/seedN ...]
 
 Each run takes one torch thread; the paper profile's runs take about 1-3 minutes each on this
 project's machine (the pendulum's about 1, the cart-pole's about 3).
@@ -59,16 +59,27 @@ def main() -> None:
     parser.add_argument("--profile", default="paper")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--report-only", action="store_true")
+    parser.add_argument(
+        "--runs", nargs="+", default=None, help="SYSTEM/CONTROLLER/seedN keys, in this order"
+    )
     args = parser.parse_args()
-    unknown = sorted(set(args.controllers) - set(PILCO_CONTROLLERS))
-    if unknown:
-        parser.error(f"--controllers: expected some of {PILCO_CONTROLLERS}, found {unknown}")
-    keys = [
+    keys = args.runs or [
         f"{system}/{controller}/seed{seed}"
         for system in args.systems
         for controller in args.controllers
         for seed in args.seeds
     ]
+    unknown = sorted(
+        {key.split("/")[1] for key in keys if key.count("/") == 2} - set(PILCO_CONTROLLERS)
+    )
+    malformed = [
+        key for key in keys if key.count("/") != 2 or not key.split("/")[2].startswith("seed")
+    ]
+    if unknown or malformed:
+        parser.error(
+            f"--controllers/--runs: expected SYSTEM/CONTROLLER/seedN with CONTROLLER one of "
+            f"{PILCO_CONTROLLERS}, found {unknown + malformed}"
+        )
     if not args.report_only:
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:

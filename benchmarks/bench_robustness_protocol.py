@@ -14,10 +14,12 @@ Usage::
 The defaults are the ``quick`` profile's budget; the ``paper`` profile's is
 ``--levels 21 --episodes 5``.
 
-Measured on this project's 2-core machine (2026-11-28, beside a one-core background job), the
-smoke budget (3 levels, 1 episode): a trained smoke SAC hybrid of the mountain car 16.6 s one
-setting at a time, 7.2 s batched; its LQR 9.2 s and 6.9 s (under the profiler). The quick budget
-on a smoke DDPG hybrid of the pendulum: 38-40 s and 17 s. The same episodes held in every case.
+Measured on this project's 2-core machine (2026-11-28, beside niced background jobs), the
+defaults (5 levels x 2 episodes), one at a time -> batched: pendulum LQR 14.8 -> 6.3 s (2.35x),
+seeded hybrid 31.8 -> 10.6 s (3.00x); cart-pole 12.2 -> 5.5 s (2.20x), 21.8 -> 9.3 s (2.34x);
+mountain car 13.6 -> 6.3 s (2.15x), 29.5 -> 9.8 s (3.01x). The same episodes held in every case.
+At the paper's budget (21 x 5) the LQR: 57.4 -> 18.3 s, 46.8 -> 19.7 s, 61.9 -> 19.8 s
+(docs/user_guide/robustness_protocol.md).
 """
 
 from __future__ import annotations

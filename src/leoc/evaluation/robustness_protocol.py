@@ -483,16 +483,19 @@ def _held_everywhere(
     starts: Mapping[str, np.ndarray],
     settings: Mapping[str, list[Setting]],
 ) -> dict[tuple[str, int], list[bool]]:
-    """:func:`_held` of every start kind at every setting of a sweep, ``{(kind, index): held}``,
-    all in one batch (:func:`~leoc.systems.rollout.simulate_settings`: one controller call per
-    decision for the whole sweep)."""
-    keys = [(kind, index) for kind in starts for index in range(len(settings[kind]))]
-    pairs = [(starts[kind], settings[kind][index].perturbations) for kind, index in keys]
-    batches = simulate_settings(system, controller, pairs)
-    return {
-        key: [hold_step(system, batch.episode(i)) is not None for i in range(len(batch.lengths))]
-        for key, batch in zip(keys, batches, strict=True)
-    }
+    """:func:`_held` of every start kind at every setting of a sweep, ``{(kind, index): held}``:
+    one batch per start kind (:func:`~leoc.systems.rollout.simulate_settings`: one controller
+    call per decision for the whole sweep). Not one batch for both: a batch steps until its
+    last episode ends, and the swing-up starts often end early (the cart-pole's LQR leaves the
+    track within 18 steps), which made the cart-pole's protocol 31.5 s in one batch against
+    15.2 + 1.7 s in two."""
+    held = {}
+    for kind, rows in starts.items():
+        pairs = [(rows, setting.perturbations) for setting in settings[kind]]
+        for index, batch in enumerate(simulate_settings(system, controller, pairs)):
+            episodes = range(len(batch.lengths))
+            held[kind, index] = [hold_step(system, batch.episode(i)) is not None for i in episodes]
+    return held
 
 
 class _Options(NamedTuple):
