@@ -2,9 +2,9 @@
 
 For each system given: the protocol (:func:`leoc.evaluation.robustness_protocol.run_protocol`)
 of its LQR and of the paper-relevance hybrid of that LQR with a seeded, untrained 400x300 actor
-(leoc's DDPG/TD3 size), at the levels and episodes asked, run as leoc runs it (every level and
-start kind of a category in one batch, :func:`leoc.systems.rollout.simulate_settings`) and as
-it ran before (one :func:`~leoc.systems.rollout.simulate` per level and start kind), with the
+(leoc's DDPG/TD3 size), at the levels and episodes asked, run as leoc runs it (every setting of
+every category in one batch per start kind, :func:`leoc.systems.rollout.simulate_settings`) and
+as it ran before (one :func:`~leoc.systems.rollout.simulate` per level and start kind), with the
 speed-up and whether the two held the same episodes. One torch thread.
 
 Usage::
@@ -14,12 +14,13 @@ Usage::
 The defaults are the ``quick`` profile's budget; the ``paper`` profile's is
 ``--levels 21 --episodes 5``.
 
-Measured on this project's 2-core machine (2026-11-28, beside niced background jobs), the
-defaults (5 levels x 2 episodes), one at a time -> batched: pendulum LQR 14.8 -> 6.3 s (2.35x),
-seeded hybrid 31.8 -> 10.6 s (3.00x); cart-pole 12.2 -> 5.5 s (2.20x), 21.8 -> 9.3 s (2.34x);
-mountain car 13.6 -> 6.3 s (2.15x), 29.5 -> 9.8 s (3.01x). The same episodes held in every case.
-At the paper's budget (21 x 5) the LQR: 57.4 -> 18.3 s, 46.8 -> 19.7 s, 61.9 -> 19.8 s
-(docs/user_guide/robustness_protocol.md).
+Measured on this project's 2-core machine (2026-11-29, beside niced background jobs), the
+defaults (5 levels x 2 episodes), one at a time -> batched: pendulum LQR 14.3 -> 5.8 s (2.45x),
+seeded hybrid 29.7 -> 6.6 s (4.48x); cart-pole 10.9 -> 5.7 s (1.92x), 21.3 -> 8.9 s (2.39x);
+mountain car 13.4 -> 5.5 s (2.44x), 26.0 -> 6.8 s (3.83x). The same episodes held in every case.
+Batched by category instead (the previous way, 2026-11-28's commit be653e6) the hybrids took 10.0,
+8.5 and 10.2 s; at the paper's budget (21 x 5) the two batchings measured the same within the
+machine's noise (docs/user_guide/robustness_protocol.md).
 """
 
 from __future__ import annotations
@@ -40,12 +41,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_controller_proof import seeded_hybrid  # noqa: E402
 
 
-def _one_at_a_time(system, controller, starts, settings):
+def _one_at_a_time(system, controller, starts, settings, progress=None):
     """The protocol's held episodes, one simulate per level and start kind (before batching)."""
     return {
-        (kind, index): protocol._held(system, controller, starts[kind], settings[kind][index])
+        kind: [
+            protocol._held(system, controller, starts[kind], setting) for setting in settings[kind]
+        ]
         for kind in starts
-        for index in range(len(settings[kind]))
     }
 
 

@@ -502,7 +502,10 @@ def test_the_env_and_simulate_run_the_same_perturbed_plant(name, repeat) -> None
 def _settings(starts: np.ndarray, plants: str) -> list[tuple[np.ndarray, tuple]]:
     """Settings of simulate_settings' test: batches of different sizes, noises, a delay, pushes,
     wide starts that end early; ``plants="own"`` adds friction and parameter errors (each plant
-    steps its own rows), ``"one system"`` has neither (the system's work is shared)."""
+    steps its own rows; one with friction alone sits between frictionless ones on the nominal
+    system: their observation is shared, not their step), ``"errors"`` adds parameter errors
+    without friction (a plant on its own system first: the nominal ones must not take its
+    step), ``"one system"`` has neither (the system's work is shared)."""
     settings = [
         (starts[2:3], ()),
         (starts[1:5] * 12.0, (ObservationNoise(std=0.05, seed=7), ActionDelay(2))),
@@ -511,13 +514,17 @@ def _settings(starts: np.ndarray, plants: str) -> list[tuple[np.ndarray, tuple]]
     ]
     if plants == "own":
         settings[0] = (starts[:2], _everything())
+        settings.insert(2, (starts[1:4] * 3.0, (Friction(viscous=0.05, coulomb=0.02),)))
         settings.append((starts[:3], (ParameterError("gravity", 0.5), Push(0.5, 5.0, seed=9))))
+    if plants == "errors":
+        settings.insert(0, (starts[:3], (ParameterError("gravity", 0.5),)))
+        settings.append((starts[1:3], (ParameterError("gravity", 1.5), ActionDelay(1))))
     return settings
 
 
 @pytest.mark.parametrize("name", SYSTEMS)
 @pytest.mark.parametrize("repeat", [1, 2])
-@pytest.mark.parametrize("plants", ["own", "one system"])
+@pytest.mark.parametrize("plants", ["own", "errors", "one system"])
 def test_settings_run_together_are_each_run_alone(name, repeat, plants) -> None:
     """simulate_settings runs each setting's episodes on its own plant exactly as simulate runs
     them alone: batches of different sizes, their own noise and push streams, delay queues and

@@ -64,3 +64,29 @@ def test_the_starts_are_seeded_and_inside_the_operating_region():
     assert np.all(np.abs(starts) <= np.asarray(system.operating_region))
     with pytest.raises(ValueError, match="episodes: expected a positive integer, found 0"):
         robustness_starts(system, seed=0, episodes=0)
+
+
+@pytest.mark.parametrize("name", SYSTEM_NAMES)
+def test_each_scale_s_episodes_are_the_scaled_system_simulated_alone(name):
+    """The sweep runs every scale in one batch (a parameter error per scale); reference: each
+    scaled system built with ``with_params`` and simulated alone, its returns and held starts.
+    A controller at period 2 on wide starts, so that some scales fail and some hold."""
+    system = make_system(name)
+    controller = lqr_controller(design_lqr(system, action_repeat=2))
+    scales = (0.5, 1.0, 3.0)
+    points = robustness_sweep(system, controller, seed=4, episodes=5, scales=scales)
+    starts = robustness_starts(system, 4, 5)
+    expected = []
+    for parameter, scale in itertools.product(("mass", "gravity"), scales):
+        scaled = system.with_params(**{parameter: scale})
+        batch = simulate(scaled, controller, starts)
+        held = [
+            scaled.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i])) is not None
+            for i in range(len(starts))
+        ]
+        expected.append((parameter, scale, batch.total_rewards, held))
+    assert [(p.parameter, p.scale) for p in points] == [e[:2] for e in expected]
+    for point, (_, _, returns, held) in zip(points, expected, strict=True):
+        np.testing.assert_allclose(point.returns, returns, rtol=1e-9, atol=1e-9)
+        assert point.stabilised == held
+    assert len({p.fraction_stabilised for p in points}) > 1

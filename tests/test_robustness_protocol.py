@@ -222,7 +222,7 @@ def test_cli_json_scores_and_output_file(tmp_path, capsys) -> None:
     assert main(argv) == 0
     captured = capsys.readouterr()
     printed = json.loads(captured.out)
-    assert "push" in captured.err  # progress goes to stderr
+    assert "swing_up starts (2/2" in captured.err  # progress goes to stderr
     (label,) = printed["results"]
     result = ProtocolResult.from_dict(printed["results"][label])
     assert [c.name for c in result.categories] == ["action_delay", "push"]

@@ -201,16 +201,16 @@ def _max_levels(system, args: argparse.Namespace):
 
 
 def _progress(label: str):
-    """A progress callback printing each finished category of ``label`` on stderr."""
+    """A progress callback printing each finished start kind of ``label`` on stderr (every
+    category's settings run as one batch per start kind)."""
     import time
 
     started = [time.perf_counter()]
 
-    def report(category: str, done: int, total: int) -> None:
-        if done == total:
-            seconds = time.perf_counter() - started[0]
-            print(f"  {label}: {category} ({total} settings, {seconds:.1f} s)", file=sys.stderr)
-            started[0] = time.perf_counter()
+    def report(kind: str, done: int, total: int) -> None:
+        seconds = time.perf_counter() - started[0]
+        print(f"  {label}: {kind} starts ({done}/{total}, {seconds:.1f} s)", file=sys.stderr)
+        started[0] = time.perf_counter()
 
     return report
 

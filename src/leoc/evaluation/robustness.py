@@ -24,7 +24,8 @@ import numpy as np
 
 from leoc.evaluation.rollout import Controller, response_test, rollout
 from leoc.systems.base import System
-from leoc.systems.rollout import simulate
+from leoc.systems.perturbations import ParameterError
+from leoc.systems.rollout import simulate_settings
 
 SCALE_FACTORS = tuple(np.round(np.arange(0.5, 5.01, 0.5), 2).tolist())
 """The robustness sweep's factors on the mass and on g: 0.5, 1.0, ..., 5.0 (paper figure 8)."""
@@ -110,26 +111,24 @@ def robustness_sweep(
         What is scaled and by how much (``System.with_params``).
     """
     starts = robustness_starts(system, seed, episodes)
+    grid = [(parameter, float(scale)) for parameter in parameters for scale in scales]
+    # every scale's episodes in one batch, each on its scaled plant (one controller call per
+    # decision for all; what simulate on each scaled system gives)
+    settings = [(starts, (ParameterError(parameter, scale),)) for parameter, scale in grid]
+    batches = simulate_settings(system, controller, settings)
     points = []
-    for parameter in parameters:
-        for scale in scales:
-            scaled = system.with_params(**{parameter: float(scale)})
-            batch = simulate(scaled, controller, starts)
-            stabilised = [
-                scaled.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i]))
-                is not None
-                for i in range(len(starts))
-            ]
-            impulse = response_test(scaled, controller, "impulse").metrics
-            points.append(
-                RobustnessPoint(
-                    parameter,
-                    float(scale),
-                    batch.total_rewards.tolist(),
-                    stabilised,
-                    impulse._asdict(),
-                )
+    for (parameter, scale), batch in zip(grid, batches, strict=True):
+        scaled = system.with_params(**{parameter: scale})
+        stabilised = [
+            scaled.hold_step(batch.states[i, 1:], terminated=bool(batch.terminated[i])) is not None
+            for i in range(len(starts))
+        ]
+        impulse = response_test(scaled, controller, "impulse").metrics
+        points.append(
+            RobustnessPoint(
+                parameter, scale, batch.total_rewards.tolist(), stabilised, impulse._asdict()
             )
+        )
     return points
 
 

@@ -68,6 +68,7 @@ from leoc.systems.perturbation_levels import (
 )
 from leoc.systems.perturbations import Perturbation
 from leoc.systems.rollout import (
+    BatchTrajectory,
     Controller,
     control_period,
     hold_step,
@@ -437,43 +438,53 @@ def _held(
     system: System, controller: Controller, starts: np.ndarray, setting: Setting
 ) -> list[bool]:
     """Whether each episode from ``starts`` passes the hold test on the perturbed plant."""
-    batch = simulate(system, controller, starts, perturbations=setting.perturbations)
-    return [hold_step(system, batch.episode(i)) is not None for i in range(len(starts))]
+    return _held_episodes(
+        system, simulate(system, controller, starts, perturbations=setting.perturbations)
+    )
 
 
-def _run_category(
+def _held_episodes(system: System, batch: BatchTrajectory) -> list[bool]:
+    """Whether each episode of ``batch`` passes the hold test."""
+    return [hold_step(system, batch.episode(i)) is not None for i in range(len(batch.lengths))]
+
+
+def _category_sweeps(
     system: System,
     controller: Controller,
     category: str,
     max_levels: MaxLevels,
     starts: Mapping[str, np.ndarray],
     options: _Options,
-) -> CategoryResult:
-    """The sweep of one category: every setting from every start kind."""
-    repeat = control_period(controller)
+) -> dict[str, list[Setting]]:
+    """The settings of one category's sweep per start kind (the kinds differ in the random
+    perturbations' seeds only)."""
     key = CATEGORY_NAMES.index(category) + 1
-    settings = {
+    return {
         kind: category_settings(
             system,
             category,
             max_levels,
             options.levels,
             _derived_seed(options.seed, key, PROTOCOL_START_KINDS.index(kind)),
-            repeat,
+            control_period(controller),
         )
         for kind in starts
     }
-    sweep = settings[next(iter(starts))]
-    held = _held_everywhere(system, controller, starts, settings)
+
+
+def _category_result(
+    category: str,
+    max_levels: MaxLevels,
+    sweeps: Mapping[str, list[Setting]],
+    held: Mapping[str, list[list[bool]]],
+) -> CategoryResult:
+    """One category's result from its settings and, per start kind, each setting's episodes."""
+    kinds = list(sweeps)
     results = []
-    for index, setting in enumerate(sweep):
-        records = {
-            kind: [p.as_dict() for p in settings[kind][index].perturbations] for kind in starts
-        }
-        level_held = {kind: held[kind, index] for kind in starts}
+    for index, setting in enumerate(sweeps[kinds[0]]):
+        records = {kind: [p.as_dict() for p in sweeps[kind][index].perturbations] for kind in kinds}
+        level_held = {kind: held[kind][index] for kind in kinds}
         results.append(LevelResult(setting.level, setting.constant, level_held, records))
-        if options.progress is not None:
-            options.progress(category, index + 1, len(sweep))
     return CategoryResult(category, max_levels.level(category), results)
 
 
@@ -482,20 +493,44 @@ def _held_everywhere(
     controller: Controller,
     starts: Mapping[str, np.ndarray],
     settings: Mapping[str, list[Setting]],
-) -> dict[tuple[str, int], list[bool]]:
-    """:func:`_held` of every start kind at every setting of a sweep, ``{(kind, index): held}``:
-    one batch per start kind (:func:`~leoc.systems.rollout.simulate_settings`: one controller
-    call per decision for the whole sweep). Not one batch for both: a batch steps until its
-    last episode ends, and the swing-up starts often end early (the cart-pole's LQR leaves the
-    track within 18 steps), which made the cart-pole's protocol 31.5 s in one batch against
-    15.2 + 1.7 s in two."""
+    progress: Callable[[str, int, int], None] | None = None,
+) -> dict[str, list[list[bool]]]:
+    """:func:`_held` of every start kind at each of its settings, ``{kind: [held, ...]}``: one
+    batch per start kind (:func:`~leoc.systems.rollout.simulate_settings`: one controller
+    call per decision for every category's sweep). Not one batch for both: a batch steps until
+    its last episode ends, and the swing-up starts often end early (the cart-pole's LQR leaves
+    the track within 18 steps), which made the cart-pole's protocol 31.5 s in one batch against
+    15.2 + 1.7 s in two. ``progress`` is called after each kind's batch with (kind, kinds
+    done, kinds)."""
     held = {}
-    for kind, rows in starts.items():
+    for index, (kind, rows) in enumerate(starts.items()):
         pairs = [(rows, setting.perturbations) for setting in settings[kind]]
-        for index, batch in enumerate(simulate_settings(system, controller, pairs)):
-            episodes = range(len(batch.lengths))
-            held[kind, index] = [hold_step(system, batch.episode(i)) is not None for i in episodes]
+        batches = simulate_settings(system, controller, pairs)
+        held[kind] = [_held_episodes(system, batch) for batch in batches]
+        if progress is not None:
+            progress(kind, index + 1, len(starts))
     return held
+
+
+def _run_sweeps(
+    system: System,
+    controller: Controller,
+    starts: Mapping[str, np.ndarray],
+    sweeps: Mapping[str, Mapping[str, list[Setting]]],
+    max_levels: MaxLevels,
+    progress: Callable[[str, int, int], None] | None,
+) -> list[CategoryResult]:
+    """Every category's result, ``sweeps`` (``{category: {kind: settings}}``) run as one
+    batch per start kind."""
+    every_setting = {kind: [s for sweep in sweeps.values() for s in sweep[kind]] for kind in starts}
+    held = _held_everywhere(system, controller, starts, every_setting, progress)
+    results, done = [], 0
+    for category, sweep in sweeps.items():
+        count = len(sweep[next(iter(starts))])
+        part = {kind: held[kind][done : done + count] for kind in starts}
+        results.append(_category_result(category, max_levels, sweep, part))
+        done += count
+    return results
 
 
 class _Options(NamedTuple):
@@ -503,7 +538,6 @@ class _Options(NamedTuple):
 
     levels: int
     seed: int
-    progress: Callable[[str, int, int], None] | None
 
 
 def _chosen(categories: Sequence[str], start_kinds: Sequence[str]) -> list[str]:
@@ -553,7 +587,8 @@ def run_protocol(
     start_kinds : sequence of str
         Some of :data:`PROTOCOL_START_KINDS`.
     progress : callable, optional
-        Called with (category, settings done, settings in the category) after each setting.
+        Called with (start kind, kinds done, kinds) after each start kind's episodes (every
+        category's settings run as one batch per start kind).
 
     Returns
     -------
@@ -563,9 +598,10 @@ def run_protocol(
     limits = max_levels_for(system) if max_levels is None else max_levels
     every = protocol_starts(system, episodes, seed)
     starts = {kind: every[kind] for kind in PROTOCOL_START_KINDS if kind in start_kinds}
-    options = _Options(levels, seed, progress)
+    options = _Options(levels, seed)
     level_grid(chosen[0], 1.0, levels)  # checks ``levels`` before anything runs
-    results = [_run_category(system, controller, c, limits, starts, options) for c in chosen]
+    sweeps = {c: _category_sweeps(system, controller, c, limits, starts, options) for c in chosen}
+    results = _run_sweeps(system, controller, starts, sweeps, limits, progress)
     return ProtocolResult(
         system.name,
         label,

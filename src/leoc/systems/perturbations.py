@@ -778,11 +778,7 @@ class PlantRows:
         self.plants = tuple(plants)
         self.sizes = tuple(int(size) for size in sizes)
         self.system = self.plants[0].nominal
-        # one system for every plant (no parameter errors, or the same): its observation,
-        # reward, end and (without friction) step run once on the whole batch
-        common = self.plants[0].system
-        self._common = common if all(p.system is common for p in self.plants) else None
-        self._frictionless = not any(p.has_friction for p in self.plants)
+        self._runs = _plant_runs(self.plants, self.sizes)
 
     def _parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
         if tensor.shape[0] != sum(self.sizes):
@@ -792,6 +788,11 @@ class PlantRows:
             )
         return torch.split(tensor, self.sizes)
 
+    def _run_parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
+        """``tensor``'s rows split by run (see :func:`_plant_runs`)."""
+        self._parts(tensor)  # checks the row count
+        return torch.split(tensor, [run.rows for run in self._runs])
+
     def reset(self, batch: int, episode_seed: int | None = None) -> None:
         """:meth:`PerturbedPlant.reset` of each plant for its rows (``batch`` their sum)."""
         if batch != sum(self.sizes):
@@ -800,41 +801,70 @@ class PlantRows:
             plant.reset(size, episode_seed)
 
     def observe(self, state: Tensor) -> Tensor:
-        """Each plant's :meth:`PerturbedPlant.observe` of its rows, stacked."""
-        if self._common is None:
-            parts = self._parts(state)
-            return torch.cat([p.observe(x) for p, x in zip(self.plants, parts, strict=True)])
-        parts = self._parts(self._common.observe(state))
-        return torch.cat([p.noisy(obs) for p, obs in zip(self.plants, parts, strict=True)])
+        """Each plant's :meth:`PerturbedPlant.observe` of its rows, stacked (one observation
+        per run, each plant's noise on its rows)."""
+        observed = []
+        for run, rows in zip(self._runs, self._run_parts(state), strict=True):
+            parts = torch.split(run.system.observe(rows), run.sizes)
+            observed.extend(p.noisy(obs) for p, obs in zip(run.plants, parts, strict=True))
+        return torch.cat(observed)
 
     def out_of_bounds(self, state: Tensor) -> Tensor:
         """Each plant's :meth:`PerturbedPlant.out_of_bounds` of its rows, stacked."""
-        if self._common is not None:
-            return self._common.out_of_bounds(state)
-        parts = self._parts(state)
-        return torch.cat([p.out_of_bounds(x) for p, x in zip(self.plants, parts, strict=True)])
+        parts = zip(self._runs, self._run_parts(state), strict=True)
+        return torch.cat([run.system.out_of_bounds(rows) for run, rows in parts])
 
     def step_reward(
         self, state: Tensor, action: Tensor, next_state: Tensor, leaving: Tensor, steps_left: Any
     ) -> Tensor:
         """Each plant's :meth:`PerturbedPlant.step_reward` of its rows, stacked."""
-        if self._common is not None:
-            return self._common.step_reward(state, action, next_state, leaving, steps_left)
-        rows = zip(*(self._parts(t) for t in (state, action, next_state, leaving)), strict=True)
-        return torch.cat(
-            [p.step_reward(*row, steps_left) for p, row in zip(self.plants, rows, strict=True)]
-        )
+        split = (self._run_parts(t) for t in (state, action, next_state, leaving))
+        rows = zip(self._runs, *split, strict=True)
+        return torch.cat([run.system.step_reward(*row, steps_left) for run, *row in rows])
 
     def step(self, state: Tensor, command: Tensor) -> PlantStep:
-        """Each plant's :meth:`PerturbedPlant.step` of its rows, stacked field by field."""
+        """Each plant's :meth:`PerturbedPlant.step` of its rows, stacked field by field (one
+        step per run without friction)."""
         rows = zip(self._parts(state), self._parts(command), strict=True)
         inputs = [p.inputs(x, u) for p, (x, u) in zip(self.plants, rows, strict=True)]
         pushed, actuated, impulse = (torch.cat(field) for field in zip(*inputs, strict=True))
-        if self._common is not None and self._frictionless:
-            following = self._common.step_fn(pushed, actuated)
+        following = []
+        split = zip(self._runs, self._run_parts(pushed), self._run_parts(actuated), strict=True)
+        for run, x, u in split:
+            if run.frictionless:
+                following.append(run.system.step_fn(x, u))
+            else:
+                split_x, split_u = torch.split(x, run.sizes), torch.split(u, run.sizes)
+                parts = zip(run.plants, split_x, split_u, strict=True)
+                following.extend(p.dynamics(*part) for p, *part in parts)
+        return PlantStep(torch.cat(following), self.system.clip_action(actuated), impulse)
+
+
+class _PlantRun(NamedTuple):
+    """Consecutive plants of a :class:`PlantRows` that share one system object."""
+
+    plants: tuple[PerturbedPlant, ...]
+    sizes: tuple[int, ...]
+    system: System
+    frictionless: bool
+
+    @property
+    def rows(self) -> int:
+        return sum(self.sizes)
+
+
+def _plant_runs(plants: Sequence[PerturbedPlant], sizes: Sequence[int]) -> tuple[_PlantRun, ...]:
+    """The plants cut into runs of consecutive plants sharing one system: a run's observation,
+    end test, reward and (without friction) step are one call on its rows. Plants without
+    parameter errors share the nominal system: placed side by side, as a sweep of several
+    categories places them, they cost one call per step, not one per plant."""
+    runs: list[_PlantRun] = []
+    for plant, size in zip(plants, sizes, strict=True):
+        if runs and runs[-1].system is plant.system:
+            last = runs.pop()
+            frictionless = last.frictionless and not plant.has_friction
+            plant_rows = (last.plants + (plant,), last.sizes + (size,))
+            runs.append(_PlantRun(*plant_rows, last.system, frictionless))
         else:
-            rows = zip(self._parts(pushed), self._parts(actuated), strict=True)
-            following = torch.cat(
-                [p.dynamics(x, u) for p, (x, u) in zip(self.plants, rows, strict=True)]
-            )
-        return PlantStep(following, self.system.clip_action(actuated), impulse)
+            runs.append(_PlantRun((plant,), (size,), plant.system, not plant.has_friction))
+    return tuple(runs)
