@@ -53,6 +53,23 @@ def single_thread():
 
 
 @pytest.fixture(scope="session")
+def linear_smoke():
+    """``linear_smoke(out, systems=None, echo=quiet)``: a linear-only ``reproduce`` on the
+    smoke profile, one job (the study folder's mechanics: rerun, resume, damage, the invocation
+    log, without training anything); ``echo=None`` keeps the library's default printing."""
+    from leoc.experiments.reproduce import reproduce
+
+    def run(out, systems=None, echo=lambda _: None):
+        extra = {} if echo is None else {"echo": echo}
+        systems = systems or ["pendulum"]
+        return reproduce(
+            out, profile_name="smoke", controllers=["linear"], systems=systems, jobs=1, **extra
+        )
+
+    return run
+
+
+@pytest.fixture(scope="session")
 def tiny_pilco_settings():
     """Settings of the smallest PILCO run (``leoc.pilco.train_pilco``) that fits a GP and
     optimises a policy in one iteration. The cost is wide enough (width 2) that the policy

@@ -22,17 +22,6 @@ RUN_TIMEOUT_S = 600
 INTERRUPT_DEADLINE_S = 10.0
 
 
-def _linear_smoke(out: Path, systems: list[str] | None = None, echo=lambda _: None) -> Path:
-    """Linear-only `reproduce` on the smoke profile, one job: the folder mechanics (rerun,
-    resume, damage, the invocation log) without training anything. ``echo=None`` keeps the
-    library's default printing."""
-    extra = {} if echo is None else {"echo": echo}
-    systems = systems or ["pendulum"]
-    return reproduce(
-        out, profile_name="smoke", controllers=["linear"], systems=systems, jobs=1, **extra
-    )
-
-
 BAD_ARGUMENTS = [
     (["reproduce", "--jobs", "0"], "--jobs: expected a positive integer, found 0"),
     (["reproduce", "--jobs", "-2"], "--jobs: expected a positive integer, found -2"),
@@ -161,20 +150,29 @@ def _alive_in_group(group: int) -> list[int]:
     return alive
 
 
-#: The tests that compare with one uninterrupted study run on one worker (pytest-xdist's
-#: ``--dist loadgroup``, in pyproject.toml's addopts), so the study runs once, not per worker.
-UNINTERRUPTED_GROUP = "uninterrupted-smoke-study"
-
-
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def uninterrupted(tmp_path_factory) -> dict[str, dict]:
-    out = tmp_path_factory.mktemp("uninterrupted")
-    subprocess.run(_smoke_command(out), check=True, capture_output=True, timeout=RUN_TIMEOUT_S)
-    return _numbers(out)
+    """The uninterrupted smoke study's numbers, computed once per test session: under
+    pytest-xdist every worker's fixture takes one file lock in the session's shared temporary
+    folder, the first computes and saves the numbers, the others wait and read them."""
+    import fcntl
+
+    base = tmp_path_factory.getbasetemp()
+    # under xdist each worker's folder sits in the session's (the shared one); alone, the
+    # session's own folder (its parent outlives the session)
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    saved = shared / "uninterrupted-numbers.json"
+    with open(shared / "uninterrupted.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not saved.exists():
+            out = shared / "uninterrupted"
+            command = _smoke_command(out)
+            subprocess.run(command, check=True, capture_output=True, timeout=RUN_TIMEOUT_S)
+            saved.write_text(json.dumps(_numbers(out)))
+        return json.loads(saved.read_text())
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group(UNINTERRUPTED_GROUP)
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 @pytest.mark.parametrize(
     "signum",
@@ -226,10 +224,10 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
 
 
 @pytest.fixture(scope="module")
-def finished_template(tmp_path_factory) -> Path:
+def finished_template(tmp_path_factory, linear_smoke) -> Path:
     """One finished linear-only reproduce folder; each test works on its own copy."""
     out = tmp_path_factory.mktemp("finished")
-    _linear_smoke(out)
+    linear_smoke(out)
     return out
 
 
@@ -241,7 +239,9 @@ def _finished_folder(template: Path, tmp_path: Path) -> Path:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("damage", ["truncate", "garble", "delete"])
-def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_path, damage, capsys):
+def test_a_damaged_evaluation_is_set_aside_and_redone(
+    finished_template, tmp_path, damage, capsys, linear_smoke
+):
     out = _finished_folder(finished_template, tmp_path)
     done = next(out.glob(f"runs/*/*/*/{EVALUATION_FILE}"))
     original = json.loads(done.read_text())
@@ -260,7 +260,7 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
         assert status == 2 and len(err) == 1 and str(done) in err[0]
         assert "rerun the 'leoc reproduce' command of this folder" in err[0]
     messages: list[str] = []
-    _linear_smoke(out, echo=messages.append)
+    linear_smoke(out, echo=messages.append)
     if damage != "delete":
         assert any(str(done) in m and "set aside" in m for m in messages)
         assert len(list(done.parent.glob(f"{EVALUATION_FILE}.damaged-*"))) == 1
@@ -271,11 +271,11 @@ def test_a_damaged_evaluation_is_set_aside_and_redone(finished_template, tmp_pat
 
 
 @pytest.mark.slow
-def test_a_damaged_meta_file_is_set_aside(finished_template, tmp_path):
+def test_a_damaged_meta_file_is_set_aside(finished_template, tmp_path, linear_smoke):
     out = _finished_folder(finished_template, tmp_path)
     (out / META_FILE).write_text("{")
     messages: list[str] = []
-    _linear_smoke(out, echo=messages.append)
+    linear_smoke(out, echo=messages.append)
     assert any("set aside" in m for m in messages)
     assert json.loads((out / META_FILE).read_text())["profile"] == "smoke"
 
@@ -292,7 +292,6 @@ def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group(UNINTERRUPTED_GROUP)
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
     tmp_path, uninterrupted

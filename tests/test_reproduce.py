@@ -33,17 +33,6 @@ from leoc.systems import make_system
 RUN_TIMEOUT_S = 300
 
 
-def _linear_smoke(out: Path, systems: list[str] | None = None, echo=lambda _: None) -> Path:
-    """Linear-only `reproduce` on the smoke profile, one job: the folder mechanics (rerun,
-    resume, damage, the invocation log) without training anything. ``echo=None`` keeps the
-    library's default printing."""
-    extra = {} if echo is None else {"echo": echo}
-    systems = systems or ["pendulum"]
-    return reproduce(
-        out, profile_name="smoke", controllers=["linear"], systems=systems, jobs=1, **extra
-    )
-
-
 @pytest.mark.slow
 def test_linear_only_reproduce_writes_numbers_matching_the_library(tmp_path) -> None:
     report = reproduce(tmp_path, controllers=["linear"], jobs=1, echo=lambda _: None)
@@ -100,17 +89,19 @@ def test_rerun_skips_finished_runs_and_plot_regenerates(tmp_path, capsys) -> Non
 
 
 @pytest.mark.slow
-def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -> None:
+def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(
+    tmp_path, linear_smoke
+) -> None:
     """Rerunning a finished folder printed and reported "wall time of the last invocation:
     0 s"; the invocations that ran keep their record, and the report and the terminal give
     each and their sum."""
     from leoc.experiments.summary import summary_lines
 
-    _linear_smoke(tmp_path)
+    linear_smoke(tmp_path)
     first = json.loads((tmp_path / "meta.json").read_text())
     (only,) = first["invocations"]
     assert only["wall_seconds"] > 0
-    _linear_smoke(tmp_path)
+    linear_smoke(tmp_path)
     again = json.loads((tmp_path / "meta.json").read_text())
     assert again["invocations"] == first["invocations"]
     assert again["machine"] == first["machine"] and again["versions"] == first["versions"]
@@ -118,7 +109,7 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
     assert f"Wall time: {wall}; summed wall time" in (tmp_path / "report.md").read_text()
     assert summary_lines(tmp_path)[0].endswith(f"; wall time {wall}.")
     # a second invocation that ran something: each, and the sum
-    _linear_smoke(tmp_path, systems=["pendulum", "mountaincar"])
+    linear_smoke(tmp_path, systems=["pendulum", "mountaincar"])
     log = json.loads((tmp_path / "meta.json").read_text())["invocations"]
     assert [item["runs_finished"] for item in log] == [1, 1]
     total = sum(item["wall_seconds"] for item in log)
@@ -128,14 +119,16 @@ def test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time(tmp_path) -
 
 
 @pytest.mark.slow
-def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monkeypatch) -> None:
+def test_a_folder_resumed_over_invocations_and_machines_logs_each(
+    tmp_path, monkeypatch, linear_smoke
+) -> None:
     """A study resumed over several sessions: each invocation is logged (interrupted ones
     too) and the report lists them; a published folder (numbers, no models) resumes."""
     import leoc.experiments.reproduce as reproduce_module
     from leoc.experiments.publish import publish
 
     first = tmp_path / "first"
-    _linear_smoke(first)
+    linear_smoke(first)
     (only,) = json.loads((first / "meta.json").read_text())["invocations"]
     assert (only["runs_finished"], only["interrupted"]) == (1, False)
     assert "Resumed over" not in (first / "report.md").read_text()  # one invocation: no line
@@ -147,12 +140,12 @@ def test_a_folder_resumed_over_invocations_and_machines_logs_each(tmp_path, monk
         patch.setattr(reproduce_module, "sweep", interrupted)
         with pytest.raises(KeyboardInterrupt):  # with a run to do (a rerun with none is no
             # invocation to log: test_a_rerun_that_runs_nothing_keeps_every_invocations_wall_time)
-            _linear_smoke(first, systems=["pendulum", "cartpole"], echo=None)
+            linear_smoke(first, systems=["pendulum", "cartpole"], echo=None)
     # the published folder travels to a new machine and carries on there
     moved = tmp_path / "moved"
     publish(first, moved)
     messages: list[str] = []
-    report = _linear_smoke(moved, systems=["pendulum", "mountaincar"], echo=messages.append)
+    report = linear_smoke(moved, systems=["pendulum", "mountaincar"], echo=messages.append)
     assert "1 already done, 1 to run" in messages[0]
     log = json.loads((moved / "meta.json").read_text())["invocations"]
     assert [(i["runs_finished"], i["interrupted"], i["ended"]) for i in log] == [
@@ -228,12 +221,12 @@ def _runs_logged(out: Path) -> int:
 
 
 @pytest.mark.slow
-def test_profile_and_option_errors(tmp_path) -> None:
+def test_profile_and_option_errors(tmp_path, linear_smoke) -> None:
     with pytest.raises(ValueError, match="profile: expected one of quick, smoke, paper"):
         get_profile("fast")
     with pytest.raises(ValueError, match="controllers: unknown"):
         run_specs(get_profile("quick"), controllers=("lqr",))
-    _linear_smoke(tmp_path)
+    linear_smoke(tmp_path)
     with pytest.raises(ValueError, match="holds a 'smoke' run"):
         reproduce(tmp_path, profile_name="paper", controllers=["linear"], jobs=1)
 
@@ -426,11 +419,11 @@ def _metrics_by_definition(e: np.ndarray) -> dict[str, float]:
 
 
 @pytest.mark.slow
-def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path) -> None:
+def test_reproduce_linear_responses_match_an_independent_simulation(tmp_path, linear_smoke) -> None:
     """The report's impulse and step rows of the mountain car's LQR against a simulation and
     metrics written in this test (not leoc's response_test), so a wrong impulse, step length,
     window or band in the pipeline fails here."""
-    _linear_smoke(tmp_path, systems=["mountaincar"])
+    linear_smoke(tmp_path, systems=["mountaincar"])
     results = json.loads((tmp_path / "results.json").read_text())
     records = _mountain_car_responses(make_system("mountaincar"))
     for test, record in records.items():
