@@ -10,6 +10,7 @@ import pytest
 from leoc.pilco.diagnose import (
     BIAS_SHARE,
     DEGENERATE_LOG_WIDTH,
+    FLAT_GRADIENT,
     PROGRESS_RATIO,
     describe,
     diagnose_curve,
@@ -49,9 +50,18 @@ def test_each_class_from_its_definition() -> None:
     assert diagnose_curve(_curve(down, agreeing, held_fraction=0.4), HORIZON).kind == "partial"
     # the last cost at PROGRESS_RATIO of the first: no progress; just below: progress
     flat = [30.0, 29.0, 28.0, PROGRESS_RATIO * 30.0]
-    assert diagnose_curve(_curve(flat, flat), HORIZON).kind == "no progress"
+    assert diagnose_curve(_curve(flat, flat), HORIZON).kind == "stalled"  # gradients of 0.5
     flat[-1] = PROGRESS_RATIO * 30.0 - 0.01
     assert diagnose_curve(_curve(flat, flat), HORIZON).kind == "local optimum"
+    # no progress with every start's gradient below FLAT_GRADIENT: a flat cost; one start on
+    # a slope (the first one here) makes it a stall
+    flat[-1] = PROGRESS_RATIO * 30.0
+    rows = _curve(flat, flat)
+    for row in rows[1:]:
+        row["gradient_norm_start"] = 0.99 * FLAT_GRADIENT
+    assert diagnose_curve(rows, HORIZON).kind == "flat cost"
+    rows[1]["gradient_norm_start"] = FLAT_GRADIENT
+    assert diagnose_curve(rows, HORIZON).kind == "stalled"
     # realised above predicted by BIAS_SHARE of the horizon on average over the last three
     gap = BIAS_SHARE * HORIZON
     above = [p + gap + 0.01 for p in down]
@@ -80,10 +90,10 @@ def test_run_folders_and_the_table(tmp_path) -> None:
     (tmp_path / "curve.json").write_text(json.dumps({"curve": _curve([30.0, 29.5], [30.0, 30.0])}))
     (tmp_path / "config.json").write_text(json.dumps({"horizon": HORIZON}))
     found = diagnose_run(tmp_path)
-    assert found.kind == "no progress" and found.evidence["predicted"] == [30.0, 29.5]
+    assert found.kind == "stalled" and found.evidence["predicted"] == [30.0, 29.5]
     table = describe({"pendulum/pilco_baseline/seed2": found})
-    assert "| pendulum/pilco_baseline/seed2 | no progress | 0% | 30.0 29.5 |" in table
-    assert table.endswith("1 runs: no progress 1")
+    assert "| pendulum/pilco_baseline/seed2 | stalled | 0% | 30.0 29.5 |" in table
+    assert table.endswith("1 runs: stalled 1")
 
 
 def test_errors_name_what_is_missing(tmp_path) -> None:

@@ -12,11 +12,16 @@ the hybrid's relevance widths. :func:`diagnose_run` reads them and puts a run in
     The last policy optimisation had failed evaluations (a non-finite cost or a Cholesky
     failure), or the relevance widths left the range where ``r`` can vary (``|ln lambda|``
     above :data:`DEGENERATE_LOG_WIDTH`: ``r`` is 1, or 0, wherever the run goes).
-``no progress``
-    The last predicted cost is at least :data:`PROGRESS_RATIO` of the first iteration's: the
-    optimisation never found a way down from where it started (the gradients at the starts,
-    in the evidence, tell a flat cost, saturated along the whole prediction, from a local
-    minimum).
+``flat cost``
+    The last predicted cost is at least :data:`PROGRESS_RATIO` of the first iteration's, and
+    the gradient was below :data:`FLAT_GRADIENT` where every optimisation started: the
+    saturating cost is flat around the policies tried (the predicted states are far from the
+    target along the whole horizon), so no descent method can leave them.
+``stalled``
+    No progress either (the same test on the predicted cost), but some optimisation started
+    on a gradient of :data:`FLAT_GRADIENT` or more: the optimiser stopped before the slope
+    ran out (a line search that failed, an iteration budget spent, failed evaluations on the
+    way).
 ``model bias``
     The rollouts realised more cost than the model predicted, by more than
     :data:`BIAS_SHARE` of the horizon on average over the last :data:`RECENT` iterations: the
@@ -44,6 +49,7 @@ __all__ = [
     "BIAS_SHARE",
     "DEGENERATE_LOG_WIDTH",
     "DIAGNOSES",
+    "FLAT_GRADIENT",
     "PROGRESS_RATIO",
     "RECENT",
     "Diagnosis",
@@ -53,10 +59,22 @@ __all__ = [
 ]
 
 #: The classes, in the order they are checked.
-DIAGNOSES = ("held", "numerical", "no progress", "model bias", "partial", "local optimum")
-#: ``no progress``: the last predicted cost is at least this share of the first iteration's
-#: (a tenth off the start is within what a redrawn start distribution moves it).
+DIAGNOSES = (
+    "held",
+    "numerical",
+    "flat cost",
+    "stalled",
+    "model bias",
+    "partial",
+    "local optimum",
+)
+#: ``flat cost`` and ``stalled``: the last predicted cost is at least this share of the first
+#: iteration's (a tenth off the start is within what a redrawn start distribution moves it).
 PROGRESS_RATIO = 0.9
+#: ``flat cost``: the gradient's norm at every optimisation's start below this (the failed
+#: pendulum runs measured so far stalled on norms of 1.8 to 22; a cost saturated along the
+#: whole prediction has a gradient orders of magnitude below 1e-3).
+FLAT_GRADIENT = 1e-3
 #: ``model bias``: mean (realised - predicted) cost over the last iterations above this share
 #: of the horizon (a fifth: eight of the pendulum's 40 decisions at the full cost).
 BIAS_SHARE = 0.2
@@ -138,7 +156,8 @@ def _kind(held: float, evidence: Mapping[str, Any]) -> str:
     if width is not None and width > DEGENERATE_LOG_WIDTH:
         return "numerical"
     if predicted[-1] >= PROGRESS_RATIO * predicted[0]:
-        return "no progress"
+        flat = all(g is not None and g < FLAT_GRADIENT for g in evidence["start_gradient"])
+        return "flat cost" if flat else "stalled"
     recent = list(zip(realised, predicted, strict=True))[-RECENT:]
     gap = sum(r - p for r, p in recent) / len(recent)
     if gap > BIAS_SHARE * evidence["horizon"]:

@@ -257,11 +257,11 @@ def _restart_policy(
     kept = {k: v.detach().clone() for k, v in policy.state_dict().items()}
     redraw_rbf(policy, system, config, generator, observations)
     fresh = optimise_policy(policy, model, system, config)
-    if not fresh.cost < best.cost:
+    kept_one = fresh if fresh.cost < best.cost else best  # a NaN cost never wins
+    if kept_one is best:
         policy.load_state_dict(kept)
-    kept_one = fresh if fresh.cost < best.cost else best
     return PolicyOptimisation(
-        min(best.cost, fresh.cost),
+        kept_one.cost,
         best.iterations + fresh.iterations,
         best.evaluations + fresh.evaluations,
         best.restarts + fresh.restarts + 1,
