@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -50,6 +54,70 @@ def single_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+class SmokeStudy:
+    """One smoke study several slow tests compare with: ``leoc reproduce --profile smoke`` of
+    the pendulum's LQR, DDPG hybrid and PILCO hybrid on two jobs (:meth:`command`), the
+    evaluations' numbers without wall times (:meth:`numbers`), and that study run once, without
+    interruption, on the local backend (:meth:`uninterrupted`)."""
+
+    controllers = ("linear", "ddpg_hybrid", "pilco_hybrid")
+    timeout_s = 600
+
+    def __init__(self, shared: Path) -> None:
+        self.shared = shared
+
+    def command(self, out: Path) -> list[str]:
+        """The study's ``leoc reproduce`` command line writing to ``out``."""
+        options = ["--profile", "smoke", "--systems", "pendulum", "--jobs", "2"]
+        controllers = ["--controllers", *self.controllers]
+        return [sys.executable, "-m", "leoc.cli", "reproduce", *options, *controllers] + [
+            "--out",
+            str(out),
+        ]
+
+    @staticmethod
+    def numbers(out: Path) -> dict[str, dict]:
+        """Every run's evaluation in ``out`` without its wall times (the only fields allowed to
+        differ between two runs of the study), by path relative to ``out``."""
+        found = {}
+        for path in sorted(out.glob("runs/*/*/*/evaluation.json")):
+            data = json.loads(path.read_text())
+            for key in ("wall_seconds", "train_wall_seconds"):
+                data.pop(key, None)
+            if isinstance(data.get("proved_region"), dict):
+                data["proved_region"].pop("seconds", None)  # the proof's wall time
+            found[str(path.relative_to(out))] = data
+        return found
+
+    def uninterrupted(self) -> dict[str, dict]:
+        """The numbers of the study run once per test session: under pytest-xdist the first
+        worker to take the file lock in the session's shared temporary folder runs it and
+        saves them, the others wait and read them."""
+        import fcntl
+
+        saved = self.shared / "smoke-study-numbers.json"
+        with open(self.shared / "smoke-study.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not saved.exists():
+                out = self.shared / "smoke-study"
+                run = subprocess.run(
+                    self.command(out), capture_output=True, text=True, timeout=self.timeout_s
+                )
+                assert run.returncode == 0, run.stderr
+                assert json.loads((out / "meta.json").read_text())["backend"] == "local"
+                saved.write_text(json.dumps(self.numbers(out)))
+            return json.loads(saved.read_text())
+
+
+@pytest.fixture(scope="session")
+def smoke_study(tmp_path_factory) -> SmokeStudy:
+    """The :class:`SmokeStudy` of this test session."""
+    base = tmp_path_factory.getbasetemp()
+    # under xdist each worker's folder sits in the session's (shared by the workers); alone,
+    # the session's own folder (its parent outlives the session)
+    return SmokeStudy(base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base)
 
 
 @pytest.fixture(scope="session")

@@ -9,7 +9,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -81,40 +80,6 @@ def _as_a_terminal_job() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def _smoke_command(out: Path) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        "leoc.cli",
-        "reproduce",
-        "--profile",
-        "smoke",
-        "--systems",
-        "pendulum",
-        "--controllers",
-        "linear",
-        "ddpg_hybrid",
-        "pilco_hybrid",
-        "--jobs",
-        "2",
-        "--out",
-        str(out),
-    ]
-
-
-def _numbers(out: Path) -> dict[str, dict]:
-    """Every run's evaluation without its wall times (the only fields allowed to differ)."""
-    found = {}
-    for path in sorted(out.glob(f"runs/*/*/*/{EVALUATION_FILE}")):
-        data = json.loads(path.read_text())
-        for key in ("wall_seconds", "train_wall_seconds"):
-            data.pop(key, None)
-        if isinstance(data.get("proved_region"), dict):
-            data["proved_region"].pop("seconds", None)  # the proof's wall time
-        found[str(path.relative_to(out))] = data
-    return found
-
-
 def _differences(expected, found, path: str = "") -> list[str]:
     """The paths where two JSON values differ, with both values (what a failure shows)."""
     if isinstance(expected, dict) and isinstance(found, dict):
@@ -150,26 +115,10 @@ def _alive_in_group(group: int) -> list[int]:
     return alive
 
 
-@pytest.fixture(scope="session")
-def uninterrupted(tmp_path_factory) -> dict[str, dict]:
-    """The uninterrupted smoke study's numbers, computed once per test session: under
-    pytest-xdist every worker's fixture takes one file lock in the session's shared temporary
-    folder, the first computes and saves the numbers, the others wait and read them."""
-    import fcntl
-
-    base = tmp_path_factory.getbasetemp()
-    # under xdist each worker's folder sits in the session's (the shared one); alone, the
-    # session's own folder (its parent outlives the session)
-    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-    saved = shared / "uninterrupted-numbers.json"
-    with open(shared / "uninterrupted.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not saved.exists():
-            out = shared / "uninterrupted"
-            command = _smoke_command(out)
-            subprocess.run(command, check=True, capture_output=True, timeout=RUN_TIMEOUT_S)
-            saved.write_text(json.dumps(_numbers(out)))
-        return json.loads(saved.read_text())
+@pytest.fixture
+def uninterrupted(smoke_study) -> dict[str, dict]:
+    """The smoke study's numbers, run once per session without interruption."""
+    return smoke_study.uninterrupted()
 
 
 @pytest.mark.slow
@@ -179,8 +128,10 @@ def uninterrupted(tmp_path_factory) -> dict[str, dict]:
     # SIGTERM takes the same path after its handler; both share the uninterrupted study
     [signal.SIGINT, signal.SIGTERM],
 )
-def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, uninterrupted, signum):
-    command = _smoke_command(tmp_path)
+def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(
+    tmp_path, uninterrupted, smoke_study, signum
+):
+    command = smoke_study.command(tmp_path)
     process = subprocess.Popen(
         command,
         stdout=subprocess.PIPE,
@@ -216,7 +167,7 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(tmp_path, unin
     assert (stopped["ended"], stopped["interrupted"]) == ("interrupted", True)
     rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert rerun.returncode == 0, rerun.stderr
-    resumed = _numbers(tmp_path)
+    resumed = smoke_study.numbers(tmp_path)
     assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]
     assert [
         item["ended"] for item in json.loads((tmp_path / "meta.json").read_text())["invocations"]
@@ -294,11 +245,11 @@ def test_rerun_with_other_seeds_reports_exactly_its_runs(tmp_path):
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table from /proc")
 def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
-    tmp_path, uninterrupted
+    tmp_path, uninterrupted, smoke_study
 ):
     import random
 
-    command = _smoke_command(tmp_path)
+    command = smoke_study.command(tmp_path)
     chooser = random.Random(0)  # the kill times are seeded too
     for attempt in range(3):
         process = subprocess.Popen(
@@ -313,5 +264,5 @@ def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
             json.loads(path.read_text())  # whatever finished is whole
     rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert rerun.returncode == 0, rerun.stderr
-    resumed = _numbers(tmp_path)
+    resumed = smoke_study.numbers(tmp_path)
     assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]

@@ -32,6 +32,7 @@ import functools
 import math
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import textwrap
@@ -39,7 +40,7 @@ import time
 import traceback
 import uuid
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
@@ -255,6 +256,41 @@ def _die_with_the_driver() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
 
 
+@contextlib.contextmanager
+def _interrupts_ignored_by_new_workers() -> Iterator[None]:
+    """Start worker processes with Ctrl-C ignored (POSIX, from the driver's main thread): a
+    spawned child inherits an ignored SIGINT across exec, so a Ctrl-C that reaches the process
+    group while it still starts (importing torch takes seconds) cannot end it with a traceback
+    of its own; it takes Ctrl-C back once it runs (:func:`_take_interrupts_back`: one held by
+    an inherited mask then ends it quietly, else the driver, which got the Ctrl-C, stops it).
+    The driver's own Ctrl-C is held meanwhile (blocked: on Linux a blocked signal stays
+    pending even while ignored) and arrives as the block is lifted."""
+    import signal
+    import threading
+
+    if not hasattr(signal, "pthread_sigmask") or (
+        threading.current_thread() is not threading.main_thread()
+    ):
+        yield
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler if previous is None else previous)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def _take_interrupts_back() -> None:
+    """Ctrl-C in a worker that started with it ignored (and, where the signal mask is
+    inherited, blocked: :func:`_interrupts_ignored_by_new_workers`) raises KeyboardInterrupt
+    again; one that came while it started, held by the mask, arrives now."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def _local_worker(runner: Runner, out_dir: Path, connection: Any) -> None:
     """Body of a local worker process: receive specs, run each, send back its outcome.
 
@@ -263,6 +299,7 @@ def _local_worker(runner: Runner, out_dir: Path, connection: Any) -> None:
     """
     _die_with_the_driver()
     try:
+        _take_interrupts_back()
         while True:
             try:
                 spec = connection.recv()
@@ -305,7 +342,14 @@ class _LocalBackend:
         process = self._context.Process(
             target=_local_worker, args=(self._runner, self._out_dir, child_end)
         )
-        process.start()
+        try:
+            with _interrupts_ignored_by_new_workers():
+                process.start()
+        except BaseException:  # the driver's own Ctrl-C, held during the start: no orphan
+            if process.pid is not None:
+                process.kill()
+                process.join()
+            raise
         child_end.close()  # the child holds the only other end: its death reads as end of file
         return connection, process
 
