@@ -15,19 +15,21 @@ Usage::
 
     python benchmarks/bench_pilco_cost_noise.py RUN_DIR ... [--gp noise_floor=1e-2 ...]
 
-Measured on this project's 2-core machine (2026-11-29, the runs of ``bench_pilco_failures.py``
-at the paper profile, commit be653e6): the noise grows with the pair weights, and the line
-search stalls where it is large. Pendulum baseline seed 2 (stalled: L-BFGS stopped after 3-10 of
-its 75 iterations at every iteration from the second, start gradients 1.8-22): noise 1.3 on a
-cost of 31.9, pair weights 1.2e13; pendulum ROA hybrid seed 3 (stalled, 40% held; L-BFGS stopped
-after 2-5 iterations from its 6th): 0.14, 6.3e13; the pendulum baselines that held (seeds 0, 1):
-2.2e-5 and 2.8e-4, 1.7e11 and 6.5e12; the cart-pole baselines (local optima; seed 3's L-BFGS
-stopped after 3-4 iterations from its 6th): 7.7e-4 and 2.2e-3, 2.0e11 and 3.2e10. The cart-pole
-hybrids (seed 3 stalled, seed 1 unfinished at 8 of 10 iterations): 7e-8 and 2e-8, 1.1e8 and
-2.1e8: their cost is smooth, and they spent the whole L-BFGS budget at every iteration, a
-different failure. Refitting seed 2's last GP on its data: default settings 6.2e-2,
-``noise_floor=1e-3`` 3.0e-2, ``noise_floor=1e-2`` 2.4e-3, ``max_snr=100`` 1.0e-3 (one run, one
-refit each: an indication, not a rate).
+Measured on this project's 2-core machine (2026-11-29, the runs of ``bench_pilco_failures.py`` at
+the paper profile, commit be653e6): the noise grows with the pair weights, and it is large where the
+line search stalls (whether it causes the stall is not established: see the end). Pendulum baseline
+seed 2 (stalled: L-BFGS stopped after 3-10 of its 75 iterations at every iteration from the second,
+start gradients 1.8-22): noise 1.3 on a cost of 31.9, pair weights 1.2e13; pendulum ROA hybrid seed
+3 (stalled, 40% held; L-BFGS stopped after 2-5 iterations from its 6th): 0.14, 6.3e13; the pendulum
+baselines that held (seeds 0, 1): 2.2e-5 and 2.8e-4, 1.7e11 and 6.5e12; the cart-pole baselines
+(local optima; seed 3's L-BFGS stopped after 3-4 iterations from its 6th): 7.7e-4 and 2.2e-3, 2.0e11
+and 3.2e10. The cart-pole hybrids (seed 3 stalled, seed 1 unfinished at 8 of 10 iterations): 7e-8
+and 2e-8, 1.1e8 and 2.1e8: their cost is smooth, and they spent the whole L-BFGS budget at every
+iteration, a different failure. Refitting seed 2's last GP on its data: default settings 6.2e-2,
+``noise_floor=1e-3`` 3.0e-2, ``noise_floor=1e-2`` 2.4e-3, ``max_snr=100`` 1.0e-3 (one run, one refit
+each: an indication, not a rate). Seed 2 trained again with ``gp_noise_floor`` 1e-2 ended on a noise
+of 4.4e-3 (pair weights 9.0e10) and still stalled: its L-BFGS stopped after 2-10 iterations from the
+third iteration on, held 0%.
 """
 
 from __future__ import annotations
