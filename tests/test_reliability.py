@@ -17,7 +17,6 @@ import pytest
 from leoc.cli import main
 from leoc.experiments.reproduce import EVALUATION_FILE, META_FILE, reproduce
 
-RUN_TIMEOUT_S = 600
 INTERRUPT_DEADLINE_S = 10.0
 
 
@@ -140,7 +139,7 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(
         text=True,
         preexec_fn=_as_a_terminal_job,
     )
-    deadline = time.monotonic() + RUN_TIMEOUT_S
+    deadline = time.monotonic() + smoke_study.timeout_s
     # wait until the workers run (their logs appear), then interrupt as a terminal would:
     # SIGINT to the whole process group, SIGTERM to the main process only
     while not list(tmp_path.glob("runs/*/*/*/train.log")):
@@ -165,7 +164,7 @@ def test_one_signal_stops_reproduce_cleanly_and_a_rerun_completes(
     # exception, not KeyboardInterrupt)
     (stopped,) = json.loads((tmp_path / "meta.json").read_text())["invocations"]
     assert (stopped["ended"], stopped["interrupted"]) == ("interrupted", True)
-    rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=smoke_study.timeout_s)
     assert rerun.returncode == 0, rerun.stderr
     resumed = smoke_study.numbers(tmp_path)
     assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]
@@ -262,7 +261,7 @@ def test_sigkill_of_the_main_process_at_random_points_never_corrupts_results(
         assert _alive_in_group(process.pid) == [], attempt  # workers die with their driver
         for path in tmp_path.glob(f"runs/*/*/*/{EVALUATION_FILE}"):
             json.loads(path.read_text())  # whatever finished is whole
-    rerun = subprocess.run(command, capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=smoke_study.timeout_s)
     assert rerun.returncode == 0, rerun.stderr
     resumed = smoke_study.numbers(tmp_path)
     assert resumed == uninterrupted, _differences(uninterrupted, resumed)[:20]

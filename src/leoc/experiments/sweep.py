@@ -250,7 +250,6 @@ def _die_with_the_driver() -> None:
     if not sys.platform.startswith("linux"):
         return
     import ctypes
-    import signal
 
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
@@ -265,7 +264,6 @@ def _interrupts_ignored_by_new_workers() -> Iterator[None]:
     an inherited mask then ends it quietly, else the driver, which got the Ctrl-C, stops it).
     The driver's own Ctrl-C is held meanwhile (blocked: on Linux a blocked signal stays
     pending even while ignored) and arrives as the block is lifted."""
-    import signal
     import threading
 
     if not hasattr(signal, "pthread_sigmask") or (

@@ -780,17 +780,21 @@ class PlantRows:
         self.system = self.plants[0].nominal
         self._runs = _plant_runs(self.plants, self.sizes)
 
-    def _parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
+    def _check_rows(self, tensor: Tensor) -> None:
         if tensor.shape[0] != sum(self.sizes):
             raise ValueError(
                 f"batch: expected {sum(self.sizes)} rows (the plants' sizes {list(self.sizes)}),"
                 f" found {tensor.shape[0]}"
             )
+
+    def _parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
+        """``tensor``'s rows split by plant."""
+        self._check_rows(tensor)
         return torch.split(tensor, self.sizes)
 
     def _run_parts(self, tensor: Tensor) -> tuple[Tensor, ...]:
         """``tensor``'s rows split by run (see :func:`_plant_runs`)."""
-        self._parts(tensor)  # checks the row count
+        self._check_rows(tensor)
         return torch.split(tensor, [run.rows for run in self._runs])
 
     def reset(self, batch: int, episode_seed: int | None = None) -> None:
