@@ -548,14 +548,19 @@ def write_tables(
         CONTROLLER_LABELS,
         figure_caption(rates),
     )
-    from leoc.experiments.relevance_report import write_relevance_report
+    from leoc.experiments.relevance_report import PILCO_FOLDER as PILCO
+    from leoc.experiments.relevance_report import pilco_relevance_records, write_relevance_report
 
-    write_relevance_report(out, records, command)
+    write_relevance_report(out, [*records, *pilco_relevance_records(out / PILCO)], command)
     return markdown
 
 
 def _copy_records(source: Path, target: Path) -> None:
-    """The plan, each run's record and small log, from ``source`` into ``target``."""
+    """The plan, each run's record and small log, and the PILCO hybrids' relevance records,
+    from ``source`` into ``target``."""
+    from leoc.experiments.relevance_report import PILCO_FOLDER, pilco_relevance_records
+
+    pilco_relevance_records(source / PILCO_FOLDER, write_to=target / PILCO_FOLDER)
     if (source / PLAN_FILE).is_file():
         write_text_atomic(target / PLAN_FILE, (source / PLAN_FILE).read_text())
     for path in sorted(source.glob(f"runs/*/*/*/seed*/{RESULT_FILE}")):
@@ -570,8 +575,9 @@ def _copy_records(source: Path, target: Path) -> None:
 def publish_ablation(
     source: str | Path, dest: str | Path | None = None, every: int = DEFAULT_TABLE_EVERY
 ) -> Path:
-    """Publish an ablation folder: its records copied to ``dest`` (unless it is ``source``,
-    or None), and the tables and figure written there from them.
+    """Publish an ablation folder: its records (and the relevance records of the PILCO hybrids
+    in its ``pilco`` folder) copied to ``dest`` (unless it is ``source``, or None), and the
+    tables and figure written there from them.
 
     Parameters
     ----------

@@ -16,6 +16,16 @@ x setting:
 * the learned :math:`\Lambda` (median over seeds, per observation entry; the Lyapunov
   relevance's single scale).
 
+PILCO is not trained by the ablation harness (its budget is iterations of rollouts, not
+environment steps with evaluations between): its hybrids come from a ``leoc reproduce`` folder
+placed at ``OUT/pilco`` (:data:`PILCO_FOLDER`). :func:`pilco_relevance_records` reads each
+PILCO hybrid run there into a record of the same columns: (a) is the run's final controller
+holding every one of ``leoc reproduce``'s swing-up episodes (the trainer's evaluation starts,
+``seed + 10000 + k``; PILCO's model selection is ``"final"``, so they choose nothing), the first
+hold is the first iteration whose evaluation held in every episode (interaction seconds), and
+the setting is the :data:`~leoc.experiments.ablation.RELEVANCE_SETTINGS` entry whose
+:class:`~leoc.policies.HybridSpec` the run trained (``custom`` if none).
+
 The figure puts one point per run: the impulse distance (log scale) against the time to first
 hold (runs that never held on the top edge), so the trade-off between keeping the LQR and
 learning the swing-up shows as a cloud per setting.
@@ -31,14 +41,22 @@ from pathlib import Path
 from typing import Any
 
 from leoc.evaluation.lqr_agreement import KEEP_TOLERANCE_PCT
-from leoc.experiments.ablation import ALL_SETTINGS, GRID_CONTROLLERS, SETTING_LABELS, run_outcome
+from leoc.experiments.ablation import (
+    ALL_SETTINGS,
+    GRID_CONTROLLERS,
+    PAPER_RELEVANCE_BASE,
+    RELEVANCE_SETTINGS,
+    SETTING_LABELS,
+    run_outcome,
+)
 from leoc.experiments.markdown import markdown_table
 from leoc.experiments.profiles import CONTROLLER_LABELS
-from leoc.io import write_csv_atomic, write_text_atomic
+from leoc.io import read_json_object, write_csv_atomic, write_json_atomic, write_text_atomic
 
 __all__ = [
     "RELEVANCE_FIGURE",
     "first_hold_seconds",
+    "pilco_relevance_records",
     "relevance_cells",
     "relevance_markdown",
     "write_relevance_report",
@@ -50,6 +68,13 @@ RELEVANCE_CSV = "relevance.csv"
 """One row per cell (:data:`CSV_COLUMNS`)."""
 RELEVANCE_FIGURE = "relevance_tradeoff.png"
 """The trade-off figure (``plot_relevance_tradeoff``)."""
+PILCO_FOLDER = "pilco"
+"""The ``leoc reproduce`` folder of an ablation folder that holds its PILCO hybrid runs."""
+PILCO_RECORD = "relevance.json"
+"""A PILCO run's record (:func:`pilco_relevance_records`), beside its ``evaluation.json``;
+what a published folder keeps of the run."""
+CUSTOM_SETTING = "custom"
+"""The setting of a PILCO run whose hybrid matches no relevance setting."""
 CSV_COLUMNS = (
     "system",
     "controller",
@@ -78,12 +103,21 @@ def _dt(system: str) -> float:
 
 def first_hold_seconds(record: Mapping[str, Any]) -> float | None:
     """Interaction seconds to the first evaluation whose held-out episodes all held; None if
-    none did."""
+    none did (a PILCO record carries it as ``first_hold_s``)."""
+    if "first_hold_s" in record:
+        return record["first_hold_s"]
     for row in record["evaluations"]:
         hold = row["test_hold_steps"]
         if hold and all(step is not None for step in hold):
             return float(row["steps"]) * _dt(str(record["system"]))
     return None
+
+
+def _success(record: Mapping[str, Any]) -> bool:
+    """The run's (a): a PILCO record's own ``success``, else the ablation's success test."""
+    if "success" in record:
+        return bool(record["success"])
+    return run_outcome(record, int(record["budget"])).success
 
 
 def _median(values: Iterable[float | None]) -> float | None:
@@ -103,7 +137,7 @@ def _cell(key: tuple[str, str, str], records: Sequence[Mapping[str, Any]]) -> di
     agreements = [r["lqr_agreement"] for r in records]
     impulse = [a["impulse"] for a in agreements]
     distances = [p["distance_pct"] for p in impulse]
-    success = sum(run_outcome(r, int(r["budget"])).success for r in records)
+    success = sum(_success(r) for r in records)
     return {
         "system": key[0],
         "controller": key[1],
@@ -121,6 +155,69 @@ def _cell(key: tuple[str, str, str], records: Sequence[Mapping[str, Any]]) -> di
         "median_step_distance_pct": _median(a["step"]["distance_pct"] for a in agreements),
         "median_lambda": _lambda_median(agreements),
     }
+
+
+def relevance_setting(hybrid: Mapping[str, Any]) -> str:
+    """The :data:`~leoc.experiments.ablation.RELEVANCE_SETTINGS` entry that trains the hybrid
+    ``hybrid`` (a :meth:`~leoc.policies.HybridSpec.to_dict`): leoc's default spec with the
+    setting's fields; :data:`CUSTOM_SETTING` if none does."""
+    from leoc.policies.spec import HybridSpec
+
+    default = HybridSpec().to_dict()
+    for name, (_, fields) in RELEVANCE_SETTINGS.items():
+        if {**default, **PAPER_RELEVANCE_BASE, **fields} == dict(hybrid):
+            return name
+    return CUSTOM_SETTING
+
+
+def _pilco_record(run: Path, echo: Any) -> dict[str, Any] | None:
+    """The record of the PILCO hybrid run folder ``run`` of a ``leoc reproduce`` folder (its
+    ``evaluation.json`` and ``train/config.json``); None when it is unfinished or not a
+    hybrid with an LQR comparison."""
+    evaluation = read_json_object(run / "evaluation.json", echo, "evaluation")
+    config = read_json_object(run / "train" / "config.json", echo, "PILCO config")
+    if not evaluation or not config or not evaluation.get("lqr_agreement"):
+        return None
+    curve = evaluation["curve"]
+    first = next(
+        (s for s, held in zip(curve["seconds"], curve["held_fraction"], strict=True) if held >= 1),
+        None,
+    )
+    spec = evaluation["spec"]
+    return {
+        "system": spec["system"],
+        "controller": spec["controller"],
+        "setting": relevance_setting(config["hybrid"]),
+        "seed": int(spec["seed"]),
+        "key": f"{spec['system']}/{spec['controller']}/seed{spec['seed']}",
+        "iterations": int(config["iterations"]),
+        "success": all(step is not None for step in evaluation["swing_up"]["hold_steps"]),
+        "first_hold_s": None if first is None else float(first),
+        "hybrid": config["hybrid"],
+        "lqr_agreement": evaluation["lqr_agreement"],
+        "versions": evaluation.get("versions", {}),
+    }
+
+
+def pilco_relevance_records(
+    folder: str | Path, echo: Any = print, write_to: str | Path | None = None
+) -> list[dict[str, Any]]:
+    """The PILCO hybrid runs of a ``leoc reproduce`` folder (module docstring), as relevance
+    records: each run's :data:`PILCO_RECORD` where it has one (a published folder), else read
+    from its evaluation. ``write_to``: a folder where each record is written as
+    ``runs/SYSTEM/CONTROLLER/seedN/relevance.json`` (publishing)."""
+    records = []
+    for run in sorted(Path(folder).glob("runs/*/pilco_hybrid*/seed*")):
+        record = read_json_object(run / PILCO_RECORD, echo, "PILCO relevance record")
+        record = record or _pilco_record(run, echo)
+        if record is None:
+            continue
+        records.append(record)
+        if write_to is not None:
+            target = Path(write_to) / run.relative_to(folder)
+            target.mkdir(parents=True, exist_ok=True)
+            write_json_atomic(target / PILCO_RECORD, record, indent=1)
+    return records
 
 
 def relevance_cells(records: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -194,9 +291,19 @@ DEFINITIONS = (
 )
 
 
+PILCO_DEFINITIONS = (
+    "PILCO hybrids come from `leoc reproduce` (folder `pilco/`, the paper profile's "
+    "iterations): (a) is the final controller holding every one of its swing-up evaluation "
+    "episodes (none of them used for training or selection), and the first hold is the first "
+    "iteration whose evaluation held in every episode, in interaction seconds."
+)
+
+
 def relevance_markdown(cells: Sequence[Mapping[str, Any]], command: str | None = None) -> str:
     """The ``relevance.md`` text of :func:`relevance_cells`."""
     lines = ["# Does the learned hybrid keep its LQR?", "", DEFINITIONS, ""]
+    if any(str(cell["controller"]).startswith("pilco") for cell in cells):
+        lines += [PILCO_DEFINITIONS, ""]
     if command:
         lines += [f"Command: `{command}`", ""]
     for system in dict.fromkeys(cell["system"] for cell in cells):
