@@ -56,7 +56,8 @@ def add_parser(commands: Any) -> None:
         "alone, SAC alone with rl-baselines3-zoo's MuJoCo settings, the SAC hybrid with the "
         "paper's relevance, the SAC hybrid with the ROA relevance where the observation is the "
         "state) and seed: train into --out/runs/ENV/NOISE/CONTROLLER/seedK, evaluate on the same "
-        "seeded starts, and write study.json, README.md and a learning-curve figure per env. "
+        "seeded starts (skipping starts that end at the first step whatever the action), "
+        "and write study.json, README.md and a learning-curve figure per env. "
         "Rerunning the same command resumes; finished runs are not retrained.",
     )
     study.add_argument("--out", required=True, help="study folder")

@@ -15,12 +15,18 @@ noise (the env's own ``reset_noise_scale``, 0.5 and 0.8), each controller of
   (:func:`~leoc.sb3.sample_region`), only where the observation is the state; elsewhere its
   row says "not available: the observation is not the state".
 
-**Evaluation** of each final controller (and of the LQR) on the same seeded starts: episode
-``j`` of every run of a study whose seed base is ``b`` starts from
+**Evaluation** of each final controller (and of the LQR) on the same seeded starts: the
+episodes of every run of a study whose seed base is ``b`` start from
 ``reset(seed=b + EVAL_SEED_OFFSET + j)`` of the env at that noise, whatever the run's training
 seed (:func:`evaluation_seeds`: common starts, so rows and seeds differ by their controllers, not
-by their starts; the learning curve's starts, ``s + 10000 + k``, are others), and runs to the
-env's time limit or its termination. Per run: the **held share** (the episodes that reached
+by their starts; the learning curve's starts, ``s + 10000 + k``, are others), for the first
+``episodes`` values of ``j`` whose start is *recoverable* (:func:`recoverable_seeds`), and run to
+the env's time limit or its termination. A start is unrecoverable when the env terminates at
+its first step under each of the operating action and the action space's two extreme corners:
+at wide start noise ``InvertedPendulum-v5`` resets the pole beyond its 0.2 rad termination
+angle on about half the seeds (14 of 30 at ``reset_noise_scale`` 0.5), and such an episode ends
+at step 1 whatever the controller does, so it tells the controllers apart on nothing. The study
+records how many seeds it skipped per noise. Per run: the **held share** (the episodes that reached
 the time limit without termination), the **final return** (their mean return), the **steps to
 95 %**: the first step of the learning curve whose mean evaluation return reaches 95 % of the
 env's maximum return (:func:`maximum_return`: every step's reward
@@ -72,6 +78,7 @@ __all__ = [
     "StudyProfile",
     "evaluation_seeds",
     "held_episodes",
+    "recoverable_seeds",
     "maximum_return",
     "noise_kwargs",
     "run_gym_study",
@@ -86,6 +93,8 @@ RUNS_FOLDER = "runs"
 RECORD_FILE = "evaluation.json"
 #: Evaluation episode ``j`` of a study seeded ``b`` starts from ``reset(seed=b + 20000 + j)``.
 EVAL_SEED_OFFSET = 20_000
+#: :func:`recoverable_seeds` gives up after this many candidate seeds per wanted start.
+MAX_SEEDS_PER_START = 20
 #: The share of the env's maximum return that counts as learned (steps to 95 %).
 RETURN_FRACTION = 0.95
 #: Environment steps of rl-baselines3-zoo's MuJoCo SAC runs (``n_timesteps``).
@@ -190,6 +199,49 @@ def evaluation_seeds(base: int, episodes: int) -> list[int]:
     return [int(base) + EVAL_SEED_OFFSET + j for j in range(int(episodes))]
 
 
+def _ends_at_once(env: Any, seed: int, actions: Sequence[np.ndarray]) -> bool:
+    """Whether the env, reset with ``seed``, terminates at its first step under every one of
+    ``actions``."""
+    for action in actions:
+        env.reset(seed=int(seed))
+        if not env.step(action)[2]:
+            return False
+    return True
+
+
+def recoverable_seeds(
+    env_id: str, env_kwargs: Mapping[str, Any], action: Any, base: int, episodes: int
+) -> tuple[list[int], list[int]]:
+    """The evaluation seeds of a study seeded ``base`` (module docstring): the first
+    ``episodes`` of :func:`evaluation_seeds`' sequence ``base + 20000 + j`` whose start is
+    recoverable, i.e. the env does not terminate at its first step under at least one of the
+    operating ``action`` and the action space's ``low`` and ``high`` corners; and the seeds
+    skipped on the way.
+
+    Raises
+    ------
+    RuntimeError
+        When :data:`MAX_SEEDS_PER_START` ``* episodes`` candidates give fewer recoverable
+        starts (a start noise so wide that the env has almost no recoverable start).
+    """
+    env = make_gym_env(env_id, env_kwargs)
+    space = env.action_space
+    actions = [np.asarray(action, dtype=space.dtype), space.low, space.high]
+    kept: list[int] = []
+    skipped: list[int] = []
+    for seed in evaluation_seeds(base, MAX_SEEDS_PER_START * int(episodes)):
+        if len(kept) == int(episodes):
+            break
+        (skipped if _ends_at_once(env, seed, actions) else kept).append(seed)
+    env.close()
+    if len(kept) < int(episodes):
+        raise RuntimeError(
+            f"{env_id} at {dict(env_kwargs)}: only {len(kept)} recoverable starts in "
+            f"{len(kept) + len(skipped)} seeds, expected {episodes}"
+        )
+    return kept, skipped
+
+
 def held_episodes(
     env_id: str,
     env_kwargs: Mapping[str, Any],
@@ -258,7 +310,7 @@ class _Cell(NamedTuple):
     run_dir: Path
     profile: StudyProfile
     total_steps: int
-    eval_base: int
+    eval_seeds: tuple[int, ...]
 
 
 def _record_key(cell: _Cell) -> dict[str, Any]:
@@ -271,7 +323,7 @@ def _record_key(cell: _Cell) -> dict[str, Any]:
         "episodes": cell.profile.episodes,
         "total_steps": cell.total_steps,
         "settings": cell.profile.settings,
-        "evaluation_seeds": evaluation_seeds(cell.eval_base, cell.profile.episodes),
+        "evaluation_seeds": list(cell.eval_seeds),
     }
     return json.loads(json.dumps(key))
 
@@ -279,7 +331,7 @@ def _record_key(cell: _Cell) -> dict[str, Any]:
 def _evaluate_cell(cell: _Cell, plant: GymPlant, target: float) -> dict[str, Any]:
     """Train (``train_gym``: resumes, or returns a finished run) and evaluate one run; the LQR
     is designed, not trained."""
-    seeds = evaluation_seeds(cell.eval_base, cell.profile.episodes)
+    seeds = list(cell.eval_seeds)
     started = time.perf_counter()
     if cell.controller == "lqr":
         controller, curve, distance = lqr_controller(plant), None, 0.0
@@ -335,9 +387,13 @@ def _noise_entry(
     scale = float(getattr(env.unwrapped, "_reset_noise_scale", float("nan")))
     plants = {seed: gym_plant(env, env_id, seed=seed) for seed in plan["seeds"]}
     env.close()
-    target = maximum_return(plants[plan["seeds"][0]], env_kwargs)
+    first = plants[plan["seeds"][0]]
+    target = maximum_return(first, env_kwargs)
+    args = (env_id, env_kwargs, first.action, plan["seeds"][0], profile.episodes)
+    seeds, skipped = recoverable_seeds(*args)
     entry: dict[str, Any] = {"reset_noise_scale": scale, "env_kwargs": env_kwargs}
-    entry.update(maximum_return=target, controllers={})
+    entry.update(maximum_return=target, evaluation_seeds=seeds, skipped_seeds=skipped)
+    entry["controllers"] = {}
     for controller in GYM_STUDY_CONTROLLERS:
         if controller == "sac_hybrid_roa" and not plants[plan["seeds"][0]].observation_is_state:
             reason = "not available: the observation is not the state"
@@ -360,7 +416,7 @@ def _noise_entry(
                 folder,
                 profile,
                 plan["steps"],
-                plan["seeds"][0],
+                tuple(seeds),
             )
             runs.append(_run_cell(cell, plants[seed], target))
             plan["done"] += 1

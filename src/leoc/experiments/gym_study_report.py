@@ -64,6 +64,16 @@ def _distance(runs: Sequence[Mapping[str, Any]], controller: str) -> str:
     return text + (f" ({missing} terminated unlike the LQR)" if missing else "")
 
 
+def _starts(entry: Mapping[str, Any]) -> str:
+    """How many evaluation starts were kept and skipped at one noise."""
+    kept, skipped = entry.get("evaluation_seeds", []), entry.get("skipped_seeds", [])
+    tried = len(kept) + len(skipped)
+    return (
+        f"Evaluation starts: {len(kept)} recoverable of the first {tried} seeds "
+        f"({len(skipped)} skipped: they end at the first step whatever the action)."
+    )
+
+
 def _table(entry: Mapping[str, Any]) -> list[str]:
     """The table of one env at one noise: a row per controller."""
     rows = []
@@ -111,14 +121,17 @@ def _header(study: Mapping[str, Any]) -> list[str]:
         f"{zoo} (`n_timesteps`): far smaller than the budget those settings were tuned for, so "
         "the learned controllers here are not the zoo's.",
         "",
-        "Held share: the share of the seeded evaluation episodes (episode j from "
-        "`reset(seed=b + 20000 + j)`, b the study's seed base: the same starts for every "
-        "controller and seed) held to the time "
+        "Held share: the share of the seeded evaluation episodes (from "
+        "`reset(seed=b + 20000 + j)`, b the study's seed base, for the first values of j whose "
+        "start is recoverable: the same starts for every controller and seed) held to the time "
         "limit without termination. Steps to 95 %: the first step of the learning curve whose "
         "mean evaluation return reaches 95 % of the maximum return (every step's reward at rest "
         "at the operating point), per seed. Final return: the evaluation episodes' mean return. "
         "Impulse distance: the largest difference of the impulse response's main coordinate from "
-        "the LQR's, in percent of the LQR's peak, mean over seeds.",
+        "the LQR's, in percent of the LQR's peak, mean over seeds. A start is unrecoverable, "
+        "and skipped, when the env terminates at its first step under each of the operating "
+        "action and the two extreme actions (the pole starts past the termination angle): "
+        "such an episode ends at step 1 whatever the controller does.",
         "",
     ]
 
@@ -133,6 +146,8 @@ def study_markdown(study: Mapping[str, Any]) -> str:
             lines += [
                 f"### start noise {noise} (reset_noise_scale {scale:g}; maximum return "
                 f"{entry['maximum_return']:.6g})",
+                "",
+                _starts(entry),
                 "",
                 *_table(entry),
                 "",
