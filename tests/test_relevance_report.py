@@ -111,60 +111,87 @@ def test_relevance_setting_names_the_spec_a_pilco_run_trained():
     assert relevance_setting({**default, "lambda_init": 10.0}) == CUSTOM_SETTING
 
 
-def _pilco_run(folder, seed, held, swing_up_holds, distance, hybrid=None):
-    """A ``leoc reproduce`` PILCO hybrid run folder: curve held fractions per iteration at
-    30, 40, ... interaction seconds, the swing-up test's hold steps, the impulse distance."""
-    run = folder / "runs" / "cartpole" / "pilco_hybrid" / f"seed{seed}"
-    (run / "train").mkdir(parents=True)
-    config = {"iterations": len(held) - 1, "hybrid": hybrid or HybridSpec().to_dict()}
-    (run / "train" / "config.json").write_text(json.dumps(config))
+def _pilco_run(folder, seed, held, distance, hybrid=None, iterations=None):
+    """A PILCO hybrid run folder ``cartpole/pilco_hybrid/seedN/train``: curve held fractions per
+    iteration at 3, 7, 11, ... interaction seconds; its impulse distance, for the stand-in
+    LQR comparison ``_agreement`` (monkeypatched: the saved controller is an empty file)."""
+    train = folder / "cartpole" / "pilco_hybrid" / f"seed{seed}" / "train"
+    train.mkdir(parents=True)
+    iterations = len(held) - 1 if iterations is None else iterations
+    config = {"system": "cartpole", "seed": seed, "iterations": iterations}
+    config["hybrid"] = hybrid or HybridSpec().to_dict()
+    (train / "config.json").write_text(json.dumps(config))
+    rows = [
+        {"iteration": k, "interaction_seconds": 3.0 + 4.0 * k, "held_fraction": fraction}
+        for k, fraction in enumerate(held)
+    ]
+    (train / "curve.json").write_text(json.dumps({"curve": rows, "summary": {}}))
+    (train / "controller.pt").write_bytes(b"")
     impulse = {"distance_pct": distance, "keeps_lqr": distance <= 2.0, "min_relevance": 0.99}
-    evaluation = {
-        "spec": {"system": "cartpole", "controller": "pilco_hybrid", "seed": seed},
-        "curve": {
-            "seconds": [30.0 + 10.0 * k for k in range(len(held))],
-            "held_fraction": held,
-        },
-        "swing_up": {"hold_steps": swing_up_holds},
-        "lqr_agreement": {
-            "impulse": {**impulse, "by_construction": False},
-            "step": {"distance_pct": distance},
-            "relevance": {"kind": "FlooredRelevance", "lambda": [1.0, 2.0]},
-        },
+    DISTANCES[str(train)] = {
+        "impulse": {**impulse, "by_construction": False},
+        "step": {"distance_pct": distance},
+        "relevance": {"kind": "FlooredRelevance", "lambda": [1.0, 2.0]},
     }
-    (run / "evaluation.json").write_text(json.dumps(evaluation))
 
 
-def test_pilco_runs_of_a_reproduce_folder_become_relevance_cells(tmp_path):
-    folder = tmp_path / "reproduce"
-    _pilco_run(folder, 0, [0.0, 0.8, 1.0, 1.0], [5, 6, 7], 0.5)  # first hold at 50 s
-    _pilco_run(folder, 1, [0.0, 1.0, 0.6, 0.8], [5, None, 7], 3.0)  # held at 40 s, then fails
-    _pilco_run(folder, 2, [0.0, 0.0, 0.0, 0.4], [None, None, None], 1.0)  # never holds
+DISTANCES: dict = {}
+
+
+@pytest.fixture
+def stand_in_agreement(monkeypatch):
+    from leoc.experiments import relevance_report
+
+    monkeypatch.setattr(relevance_report, "_agreement", lambda train: DISTANCES[str(train)])
+
+
+def test_pilco_run_folders_become_relevance_cells(tmp_path, stand_in_agreement):
+    folder = tmp_path / "pilco"
+    _pilco_run(folder, 0, [0.0, 0.8, 1.0, 1.0], 0.5)  # first hold at iteration 2: 11 s
+    _pilco_run(folder, 1, [0.0, 1.0, 0.6, 0.8], 3.0)  # held at 7 s, then fails
+    _pilco_run(folder, 2, [0.0, 0.0, 0.0, 0.4], 1.0)  # never holds
+    _pilco_run(folder, 3, [0.0, 1.0, 1.0], 1.0, iterations=3)  # unfinished: left out
     records = pilco_relevance_records(folder)
-    assert [r["first_hold_s"] for r in records] == [50.0, 40.0, None]
+    assert [r["first_hold_s"] for r in records] == [11.0, 7.0, None]
     assert [r["success"] for r in records] == [True, False, False]
     (cell,) = relevance_cells(records)
     assert (cell["controller"], cell["setting"]) == ("pilco_hybrid", "relevance_power_2_floor_0.5")
     assert (cell["seeds"], cell["success"], cell["ever_held"], cell["keeps_lqr"]) == (3, 1, 2, 2)
-    assert cell["median_first_hold_s"] == pytest.approx(45.0)
+    assert cell["median_first_hold_s"] == pytest.approx(9.0)
     assert cell["median_distance_pct"] == pytest.approx(1.0)
 
 
-def test_publishing_keeps_the_pilco_records_and_their_rows(tmp_path):
+def test_publishing_keeps_the_pilco_records_and_their_rows(tmp_path, stand_in_agreement):
     source = tmp_path / "ablation"
     record = _records()[0]
     run = source / "runs" / "pendulum" / "ddpg_hybrid" / "defaults" / "seed0"
     run.mkdir(parents=True)
     (run / "result.json").write_text(json.dumps({**record, "wall_seconds": 1.0}))
-    _pilco_run(source / PILCO_FOLDER, 0, [0.0, 1.0], [5], 0.5)
+    _pilco_run(source / PILCO_FOLDER, 0, [0.0, 1.0], 0.5)
     paper = {**HybridSpec().to_dict(), "r_min": None, "relevance_power": 1.0}
-    _pilco_run(source / PILCO_FOLDER, 1, [0.0, 0.0], [None], 40.0, paper)
+    _pilco_run(source / PILCO_FOLDER, 1, [0.0, 0.0], 40.0, paper)
     dest = tmp_path / "published"
     publish_ablation(source, dest)
     kept = sorted((dest / PILCO_FOLDER).rglob("relevance.json"))
-    assert len(kept) == 2 and not list((dest / PILCO_FOLDER).rglob("evaluation.json"))
+    assert len(kept) == 2 and not list((dest / PILCO_FOLDER).rglob("controller.pt"))
     text = (dest / "relevance.md").read_text()
     assert "| PILCO hybrid | the paper's r = (1 + d)^-2" in text
     assert "| PILCO hybrid | r = (1 + d^2)^-2, Lambda floored" in text
     publish_ablation(dest)  # the published folder regenerates its table from its records
     assert (dest / "relevance.md").read_text() == text
+
+
+def test_a_trained_pilco_hybrid_is_compared_with_its_lqr(tmp_path, tiny_pilco_settings):
+    """A real (tiny) PILCO hybrid run: its record's comparison is its saved controller's against
+    the LQR, and (a) and the first hold follow its curve."""
+    from leoc.pilco import train_pilco
+
+    train = tmp_path / "pilco" / "pendulum" / "pilco_hybrid" / "seed0" / "train"
+    options = {"run_dir": train, "iterations": 1, "progress": False}
+    train_pilco("pendulum", HybridSpec(), 0, **options, **tiny_pilco_settings)
+    (record,) = pilco_relevance_records(tmp_path / "pilco")
+    curve = json.loads((train / "curve.json").read_text())["curve"]
+    assert record["success"] == (curve[-1]["held_fraction"] >= 1.0)
+    impulse = record["lqr_agreement"]["impulse"]
+    assert 0.0 < impulse["min_relevance"] < 1.0 and not impulse["by_construction"]
+    assert record["setting"] == "relevance_power_2_floor_0.5"

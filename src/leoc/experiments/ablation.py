@@ -104,9 +104,10 @@ Folder layout::
     OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/train/   train_ddpg's run folder
     OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/train.log   the run's progress lines
     OUT/runs/SYSTEM/CONTROLLER/SETTING/seedN/result.json written last, atomically: done
-    OUT/pilco/                                        optional: a ``leoc reproduce`` folder
-                                                      whose PILCO hybrids join the relevance
-                                                      table (leoc.experiments.relevance_report)
+    OUT/pilco/                                        optional: PILCO hybrid run folders
+                                                      (SYSTEM/CONTROLLER/seedN/train) that join
+                                                      the relevance table
+                                                      (leoc.experiments.relevance_report)
 
 The sweep (:func:`leoc.experiments.sweep.sweep`) skips a run whose ``result.json`` exists, so
 an interrupted grid continues where it stopped, locally or on a Ray cluster.

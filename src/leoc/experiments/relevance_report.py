@@ -17,13 +17,17 @@ x setting:
   relevance's single scale).
 
 PILCO is not trained by the ablation harness (its budget is iterations of rollouts, not
-environment steps with evaluations between): its hybrids come from a ``leoc reproduce`` folder
-placed at ``OUT/pilco`` (:data:`PILCO_FOLDER`). :func:`pilco_relevance_records` reads each
-PILCO hybrid run there into a record of the same columns: (a) is the run's final controller
-holding every one of ``leoc reproduce``'s swing-up episodes (the trainer's evaluation starts,
-``seed + 10000 + k``; PILCO's model selection is ``"final"``, so they choose nothing), the first
-hold is the first iteration whose evaluation held in every episode (interaction seconds), and
-the setting is the :data:`~leoc.experiments.ablation.RELEVANCE_SETTINGS` entry whose
+environment steps with evaluations between): its hybrids are PILCO run folders under
+``OUT/pilco`` (:data:`PILCO_FOLDER`; ``SYSTEM/CONTROLLER/seedN/train`` as
+``benchmarks/bench_pilco_failures.py`` trains them, exactly as ``leoc reproduce`` does, or a
+``leoc reproduce`` folder's ``runs/...``). :func:`pilco_relevance_records` reads each PILCO
+hybrid run there into a record of the same columns: (a) is the run's final controller holding
+every one of its evaluation episodes after the last iteration (the trainer's evaluation starts,
+``seed + 10000 + k``, the starts of ``leoc reproduce``'s swing-up test; PILCO's model selection
+is ``"final"``, so they choose nothing), the first hold is the first iteration whose evaluation
+held in every episode (interaction seconds), the LQR comparison is the ablation's (the saved
+controller against the LQR at its control period), and the setting is the
+:data:`~leoc.experiments.ablation.RELEVANCE_SETTINGS` entry whose
 :class:`~leoc.policies.HybridSpec` the run trained (``custom`` if none).
 
 The figure puts one point per run: the impulse distance (log scale) against the time to first
@@ -170,51 +174,64 @@ def relevance_setting(hybrid: Mapping[str, Any]) -> str:
     return CUSTOM_SETTING
 
 
+def _agreement(train: Path) -> dict[str, Any]:
+    """:func:`~leoc.evaluation.lqr_agreement.lqr_agreement` of the controller a PILCO run folder
+    saved, on its system, against the LQR designed for its control period (as the ablation's
+    :func:`~leoc.experiments.ablation.delivered_lqr_agreement`)."""
+    from leoc.evaluation.lqr_agreement import lqr_agreement
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.systems import make_system
+
+    config = read_json_object(train / "config.json", print, "PILCO config") or {}
+    return lqr_agreement(make_system(str(config["system"])), load_trained_controller(train))
+
+
 def _pilco_record(run: Path, echo: Any) -> dict[str, Any] | None:
-    """The record of the PILCO hybrid run folder ``run`` of a ``leoc reproduce`` folder (its
-    ``evaluation.json`` and ``train/config.json``); None when it is unfinished or not a
-    hybrid with an LQR comparison."""
-    evaluation = read_json_object(run / "evaluation.json", echo, "evaluation")
-    config = read_json_object(run / "train" / "config.json", echo, "PILCO config")
-    if not evaluation or not config or not evaluation.get("lqr_agreement"):
+    """The record of the PILCO hybrid run ``run`` (``.../CONTROLLER/seedN``, its run folder in
+    ``run/train``); None when it is unfinished (fewer curve rows than its iterations + 1)."""
+    train = run / "train"
+    config = read_json_object(train / "config.json", echo, "PILCO config")
+    curve = read_json_object(train / "curve.json", echo, "PILCO curve")
+    if not config or not curve or not config.get("hybrid"):
         return None
-    curve = evaluation["curve"]
-    first = next(
-        (s for s, held in zip(curve["seconds"], curve["held_fraction"], strict=True) if held >= 1),
-        None,
-    )
-    spec = evaluation["spec"]
+    rows = curve["curve"]
+    if len(rows) < int(config["iterations"]) + 1 or not (train / "controller.pt").is_file():
+        return None
+    held = [row for row in rows if row["held_fraction"] >= 1.0]
     return {
-        "system": spec["system"],
-        "controller": spec["controller"],
+        "system": config["system"],
+        "controller": run.parent.name,
         "setting": relevance_setting(config["hybrid"]),
-        "seed": int(spec["seed"]),
-        "key": f"{spec['system']}/{spec['controller']}/seed{spec['seed']}",
+        "seed": int(config["seed"]),
+        "key": f"{config['system']}/{run.parent.name}/seed{config['seed']}",
         "iterations": int(config["iterations"]),
-        "success": all(step is not None for step in evaluation["swing_up"]["hold_steps"]),
-        "first_hold_s": None if first is None else float(first),
+        "success": rows[-1]["held_fraction"] >= 1.0,
+        "first_hold_s": float(held[0]["interaction_seconds"]) if held else None,
         "hybrid": config["hybrid"],
-        "lqr_agreement": evaluation["lqr_agreement"],
-        "versions": evaluation.get("versions", {}),
+        "lqr_agreement": _agreement(train),
     }
 
 
 def pilco_relevance_records(
     folder: str | Path, echo: Any = print, write_to: str | Path | None = None
 ) -> list[dict[str, Any]]:
-    """The PILCO hybrid runs of a ``leoc reproduce`` folder (module docstring), as relevance
-    records: each run's :data:`PILCO_RECORD` where it has one (a published folder), else read
-    from its evaluation. ``write_to``: a folder where each record is written as
-    ``runs/SYSTEM/CONTROLLER/seedN/relevance.json`` (publishing)."""
+    """The PILCO hybrid runs under ``folder`` (``.../pilco_hybrid*/seedN/train``, as ``leoc
+    reproduce`` or ``benchmarks/bench_pilco_failures.py`` lay them out), as relevance records
+    (module docstring): each run's :data:`PILCO_RECORD` where it has one (a published folder),
+    else read from its run folder. ``write_to``: a folder where each record is written at the
+    run's relative path (publishing)."""
+    root = Path(folder)
+    runs = {path.parent for path in root.glob(f"**/seed*/{PILCO_RECORD}")}
+    runs |= {path.parent for path in root.glob("**/seed*/train")}
     records = []
-    for run in sorted(Path(folder).glob("runs/*/pilco_hybrid*/seed*")):
+    for run in sorted(r for r in runs if r.parent.name.startswith("pilco_hybrid")):
         record = read_json_object(run / PILCO_RECORD, echo, "PILCO relevance record")
         record = record or _pilco_record(run, echo)
         if record is None:
             continue
         records.append(record)
         if write_to is not None:
-            target = Path(write_to) / run.relative_to(folder)
+            target = Path(write_to) / run.relative_to(root)
             target.mkdir(parents=True, exist_ok=True)
             write_json_atomic(target / PILCO_RECORD, record, indent=1)
     return records
@@ -292,10 +309,11 @@ DEFINITIONS = (
 
 
 PILCO_DEFINITIONS = (
-    "PILCO hybrids come from `leoc reproduce` (folder `pilco/`, the paper profile's "
-    "iterations): (a) is the final controller holding every one of its swing-up evaluation "
-    "episodes (none of them used for training or selection), and the first hold is the first "
-    "iteration whose evaluation held in every episode, in interaction seconds."
+    "PILCO hybrids (folder `pilco/`, trained as `leoc reproduce --profile paper` trains them): "
+    "(a) is the final controller holding every one of its evaluation episodes after the last "
+    "iteration (the starts of `leoc reproduce`'s swing-up test; none used for training or "
+    "selection), and the first hold is the first iteration whose evaluation held in every "
+    "episode, in interaction seconds."
 )
 
 
