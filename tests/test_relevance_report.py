@@ -114,7 +114,8 @@ def test_relevance_setting_names_the_spec_a_pilco_run_trained():
 def _pilco_run(folder, seed, held, distance, hybrid=None, iterations=None):
     """A PILCO hybrid run folder ``cartpole/pilco_hybrid/seedN/train``: curve held fractions per
     iteration at 3, 7, 11, ... interaction seconds; its impulse distance, for the stand-in
-    LQR comparison ``_agreement`` (monkeypatched: the saved controller is an empty file)."""
+    LQR comparison ``delivered_lqr_agreement`` (monkeypatched: the saved controller is an
+    empty file)."""
     train = folder / "cartpole" / "pilco_hybrid" / f"seed{seed}" / "train"
     train.mkdir(parents=True)
     iterations = len(held) - 1 if iterations is None else iterations
@@ -142,7 +143,11 @@ DISTANCES: dict = {}
 def stand_in_agreement(monkeypatch):
     from leoc.experiments import relevance_report
 
-    monkeypatch.setattr(relevance_report, "_agreement", lambda train: DISTANCES[str(train)])
+    def stand_in(run, system, hybrid):
+        assert hybrid and system.name == "cartpole"
+        return DISTANCES[str(run / "train")]
+
+    monkeypatch.setattr(relevance_report, "delivered_lqr_agreement", stand_in)
 
 
 def test_pilco_run_folders_become_relevance_cells(tmp_path, stand_in_agreement):

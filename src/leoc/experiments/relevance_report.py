@@ -51,6 +51,8 @@ from leoc.experiments.ablation import (
     PAPER_RELEVANCE_BASE,
     RELEVANCE_SETTINGS,
     SETTING_LABELS,
+    TRAIN_DIR,
+    delivered_lqr_agreement,
     run_outcome,
 )
 from leoc.experiments.markdown import markdown_table
@@ -174,22 +176,12 @@ def relevance_setting(hybrid: Mapping[str, Any]) -> str:
     return CUSTOM_SETTING
 
 
-def _agreement(train: Path) -> dict[str, Any]:
-    """:func:`~leoc.evaluation.lqr_agreement.lqr_agreement` of the controller a PILCO run folder
-    saved, on its system, against the LQR designed for its control period (as the ablation's
-    :func:`~leoc.experiments.ablation.delivered_lqr_agreement`)."""
-    from leoc.evaluation.lqr_agreement import lqr_agreement
-    from leoc.experiments.controllers import load_trained_controller
-    from leoc.systems import make_system
-
-    config = read_json_object(train / "config.json", print, "PILCO config") or {}
-    return lqr_agreement(make_system(str(config["system"])), load_trained_controller(train))
-
-
 def _pilco_record(run: Path, echo: Any) -> dict[str, Any] | None:
     """The record of the PILCO hybrid run ``run`` (``.../CONTROLLER/seedN``, its run folder in
     ``run/train``); None when it is unfinished (fewer curve rows than its iterations + 1)."""
-    train = run / "train"
+    from leoc.systems import make_system
+
+    train = run / TRAIN_DIR
     config = read_json_object(train / "config.json", echo, "PILCO config")
     curve = read_json_object(train / "curve.json", echo, "PILCO curve")
     if not config or not curve or not config.get("hybrid"):
@@ -208,7 +200,7 @@ def _pilco_record(run: Path, echo: Any) -> dict[str, Any] | None:
         "success": rows[-1]["held_fraction"] >= 1.0,
         "first_hold_s": float(held[0]["interaction_seconds"]) if held else None,
         "hybrid": config["hybrid"],
-        "lqr_agreement": _agreement(train),
+        "lqr_agreement": delivered_lqr_agreement(run, make_system(str(config["system"])), True),
     }
 
 
