@@ -12,6 +12,11 @@ Usage::
     python benchmarks/bench_pilco_failures.py --out DIR [--systems pendulum cartpole]
         [--controllers pilco_baseline pilco_hybrid pilco_hybrid_roa] [--seeds 0 1 2 3 4]
         [--profile paper] [--jobs 2] [--report-only] [--runs SYSTEM/CONTROLLER/seedN ...]
+        [--pilco-overrides '{"gp_max_snr": 100.0}']
+
+``--pilco-overrides``: PILCO settings (:class:`~leoc.pilco.config.PilcoConfig` fields, JSON) laid
+over the profile's own ``pilco_overrides``, for A/B studies of one learner choice: train each arm
+into its own ``--out``.
 
 Each run takes one torch thread; the paper profile's runs take about 1-3 minutes each on this
 project's machine (the pendulum's about 1, the cart-pole's about 3).
@@ -20,6 +25,8 @@ project's machine (the pendulum's about 1, the cart-pole's about 3).
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -29,8 +36,9 @@ from leoc.pilco.diagnose import describe, diagnose_run
 PILCO_CONTROLLERS = ("pilco_baseline", "pilco_hybrid", "pilco_hybrid_roa")
 
 
-def _train(key: str, profile_name: str, out: str) -> str:
-    """Train the run ``key`` (SYSTEM/CONTROLLER/seedN) of the profile; its train folder."""
+def _train(key: str, profile_name: str, out: str, overrides: dict | None = None) -> str:
+    """Train the run ``key`` (SYSTEM/CONTROLLER/seedN) of the profile, with ``overrides`` laid
+    over its PILCO overrides; its train folder."""
     import contextlib
 
     import torch
@@ -41,6 +49,9 @@ def _train(key: str, profile_name: str, out: str) -> str:
     torch.set_num_threads(1)
     system, controller, seed = key.split("/")
     profile = get_profile(profile_name, seeds=int(seed.removeprefix("seed")) + 1)
+    if overrides:
+        merged = {**profile.pilco_overrides, **overrides}
+        profile = dataclasses.replace(profile, pilco_overrides=merged)
     (spec,) = [s for s in run_specs(profile, (system,), (controller,)) if s.key == key]
     train_dir = Path(out) / key / "train"
     train_dir.mkdir(parents=True, exist_ok=True)
@@ -48,6 +59,25 @@ def _train(key: str, profile_name: str, out: str) -> str:
         with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
             train_controller(spec, profile, train_dir)
     return str(train_dir)
+
+
+def _overrides(parser: argparse.ArgumentParser, text: str | None) -> dict | None:
+    """``--pilco-overrides`` as a dict of PilcoConfig fields (a clear error otherwise)."""
+    if text is None:
+        return None
+    from leoc.pilco.config import PilcoConfig
+
+    try:
+        overrides = json.loads(text)
+    except ValueError as error:
+        parser.error(f"--pilco-overrides: expected a JSON object, found {text!r} ({error})")
+    if not isinstance(overrides, dict):
+        parser.error(f"--pilco-overrides: expected a JSON object, found {text!r}")
+    try:
+        PilcoConfig.for_system("pendulum", **overrides)
+    except (TypeError, ValueError) as error:
+        parser.error(f"--pilco-overrides: expected PILCO settings, found {text!r} ({error})")
+    return overrides
 
 
 def main() -> None:
@@ -62,7 +92,11 @@ def main() -> None:
     parser.add_argument(
         "--runs", nargs="+", default=None, help="SYSTEM/CONTROLLER/seedN keys, in this order"
     )
+    parser.add_argument(
+        "--pilco-overrides", default=None, help="JSON object of PILCO settings (module doc)"
+    )
     args = parser.parse_args()
+    overrides = _overrides(parser, args.pilco_overrides)
     keys = args.runs or [
         f"{system}/{controller}/seed{seed}"
         for system in args.systems
@@ -83,7 +117,9 @@ def main() -> None:
     if not args.report_only:
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:
-            futures = {key: pool.submit(_train, key, args.profile, args.out) for key in keys}
+            futures = {
+                key: pool.submit(_train, key, args.profile, args.out, overrides) for key in keys
+            }
             for key, future in futures.items():
                 future.result()
                 print(f"trained {key}", flush=True)
