@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -104,3 +105,20 @@ def test_errors_name_what_is_missing(tmp_path) -> None:
     old = [{"iteration": 0}, {"iteration": 1, "held_fraction": 0.0, "predicted_cost": 3.0}]
     with pytest.raises(ValueError, match=r"^rows: expected each iteration's diagnostics"):
         diagnose_curve(old, HORIZON)
+
+
+GP_SNR_STUDY = (
+    Path(__file__).resolve().parents[1] / "results" / "pilco-reliability" / "gp-max-snr-ab"
+)
+
+
+@pytest.mark.parametrize("arm", ["default", "gp_max_snr_100"])
+def test_the_published_snr_study_prints_what_its_records_hold(arm) -> None:
+    """results/pilco-reliability/gp-max-snr-ab/README.md shows, per arm, the table that
+    diagnose_run and describe make of the run records published beside it (so a change of a
+    class's definition, or a hand edit of the README, cannot leave the published table stale)."""
+    folder = GP_SNR_STUDY / arm
+    runs = sorted(folder.glob("*/*/seed*/train"))  # seeds 0-9: text order is seed order
+    assert len(runs) == 10
+    table = describe({str(r.parent.relative_to(folder)): diagnose_run(r) for r in runs})
+    assert table in (GP_SNR_STUDY / "README.md").read_text(encoding="utf-8")
