@@ -11,6 +11,7 @@ import pytest
 from leoc.pilco.diagnose import (
     BIAS_SHARE,
     DEGENERATE_LOG_WIDTH,
+    EARLY_STOP_SHARE,
     FLAT_GRADIENT,
     PROGRESS_RATIO,
     describe,
@@ -69,6 +70,26 @@ def test_each_class_from_its_definition() -> None:
     assert diagnose_curve(_curve(down, above), HORIZON).kind == "model bias"
     above[-1] -= 0.06  # the mean gap now just below the share
     assert diagnose_curve(_curve(down, above), HORIZON).kind == "local optimum"
+
+
+def test_a_stall_stops_early_and_a_slow_descent_spends_its_budget() -> None:
+    """No progress on a slope: ``stalled`` when L-BFGS stopped before its budget in at least
+    EARLY_STOP_SHARE of the optimisations after the first, ``slow descent`` otherwise; the
+    first optimisation (random policy, flat cost) does not count."""
+    flat = [30.0, 29.5, 29.0, 28.5, 28.0]  # 28 / 30 > PROGRESS_RATIO: no progress
+    rows = _curve(flat, flat)
+    early = int(EARLY_STOP_SHARE * 4)  # of the 4 optimisations after the first
+    for row, count in zip(rows[1:], [3] + [5] * early + [75] * (4 - early), strict=True):
+        row["lbfgs_iterations"] = count
+    found = diagnose_curve(rows, HORIZON, policy_iterations=75)
+    assert found.kind == "stalled" and found.evidence["lbfgs_iterations"][0] == 3
+    rows[1 + early]["lbfgs_iterations"] = 75  # one early stop fewer: below the share
+    assert diagnose_curve(rows, HORIZON, policy_iterations=75).kind == "slow descent"
+    rows[1]["lbfgs_iterations"] = 75  # the first optimisation's count changes nothing
+    assert diagnose_curve(rows, HORIZON, policy_iterations=75).kind == "slow descent"
+    assert diagnose_curve(rows, HORIZON).kind == "stalled"  # budget unknown: the old class
+    table = describe({"run": diagnose_curve(rows, HORIZON, policy_iterations=75)})
+    assert "| 0.50 0.50 | 75 5 75 75 75 | - |" in table
 
 
 def test_numerical_failures_come_first() -> None:

@@ -19,9 +19,15 @@ the hybrid's relevance widths. :func:`diagnose_run` reads them and puts a run in
     target along the whole horizon), so no descent method can leave them.
 ``stalled``
     No progress either (the same test on the predicted cost), but some optimisation started
-    on a gradient of :data:`FLAT_GRADIENT` or more: the optimiser stopped before the slope
-    ran out (a line search that failed, an iteration budget spent, failed evaluations on the
-    way).
+    on a gradient of :data:`FLAT_GRADIENT` or more, and L-BFGS stopped before its iteration
+    budget in at least :data:`EARLY_STOP_SHARE` of the optimisations after the first: the
+    optimiser gave up before the slope ran out (a line search that found no decrease, failed
+    evaluations on the way). Also the class when the curve or the config does not say how
+    many iterations L-BFGS ran or was allowed.
+``slow descent``
+    No progress by the same test, a slope, and L-BFGS spent its whole budget in more than
+    the rest of those optimisations: the optimiser kept going and the cost fell less than the
+    test asks (a budget too small for the landscape, or a shallow one).
 ``model bias``
     The rollouts realised more cost than the model predicted, by more than
     :data:`BIAS_SHARE` of the horizon on average over the last :data:`RECENT` iterations: the
@@ -51,6 +57,7 @@ __all__ = [
     "DIAGNOSES",
     "FLAT_GRADIENT",
     "PROGRESS_RATIO",
+    "EARLY_STOP_SHARE",
     "RECENT",
     "Diagnosis",
     "describe",
@@ -64,6 +71,7 @@ DIAGNOSES = (
     "numerical",
     "flat cost",
     "stalled",
+    "slow descent",
     "model bias",
     "partial",
     "local optimum",
@@ -75,6 +83,10 @@ PROGRESS_RATIO = 0.9
 #: pendulum runs measured so far stalled on norms of 1.8 to 22; a cost saturated along the
 #: whole prediction has a gradient orders of magnitude below 1e-3).
 FLAT_GRADIENT = 1e-3
+#: ``stalled`` against ``slow descent``: the share of the optimisations after the first (whose
+#: random policy starts on a flat cost, where L-BFGS's restarts are the rule) that stopped
+#: before the iteration budget. The stalled pendulum runs measured stopped early in 9 of 9.
+EARLY_STOP_SHARE = 0.5
 #: ``model bias``: mean (realised - predicted) cost over the last iterations above this share
 #: of the horizon (a fifth: eight of the pendulum's 40 decisions at the full cost).
 BIAS_SHARE = 0.2
@@ -97,7 +109,9 @@ class Diagnosis(NamedTuple):
     evidence : dict
         ``horizon``; ``predicted`` and ``realised`` (per iteration from 1); ``start_gradient``
         (the gradient's norm where each optimisation started); ``failed_evaluations`` (per
-        iteration); ``max_abs_log_width`` (the relevance's widths, None for a baseline).
+        iteration); ``max_abs_log_width`` (the relevance's widths, None for a baseline);
+        ``lbfgs_iterations`` (per iteration, None where not recorded) and
+        ``policy_iterations`` (L-BFGS's budget, None if unknown).
     """
 
     kind: str
@@ -112,9 +126,12 @@ def _widths(row: Mapping[str, Any]) -> float | None:
     return max(abs(math.log(w)) if w > 0 else math.inf for w in widths)
 
 
-def diagnose_curve(rows: list[Mapping[str, Any]], horizon: int) -> Diagnosis:
+def diagnose_curve(
+    rows: list[Mapping[str, Any]], horizon: int, policy_iterations: int | None = None
+) -> Diagnosis:
     """The diagnosis of a run's curve rows (``curve.json``'s ``curve``, iteration 0 first) at
-    prediction horizon ``horizon``.
+    prediction horizon ``horizon``, with L-BFGS's iteration budget ``policy_iterations`` (None:
+    unknown; ``stalled`` and ``slow descent`` are then not told apart).
 
     Raises
     ------
@@ -140,9 +157,20 @@ def diagnose_curve(rows: list[Mapping[str, Any]], horizon: int) -> Diagnosis:
         "start_gradient": [row["gradient_norm_start"] for row in iterations],
         "failed_evaluations": [row["failed_evaluations"] for row in iterations],
         "max_abs_log_width": _widths(last),
+        "lbfgs_iterations": [row.get("lbfgs_iterations") for row in iterations],
+        "policy_iterations": policy_iterations,
     }
     held = float(last["held_fraction"])
     return Diagnosis(_kind(held, evidence), held, evidence)
+
+
+def _stall_kind(evidence: Mapping[str, Any]) -> str:
+    """``stalled`` or ``slow descent`` (module docstring) from the L-BFGS iteration counts."""
+    budget, counts = evidence["policy_iterations"], evidence["lbfgs_iterations"][1:]
+    if budget is None or not counts or any(c is None for c in counts):
+        return "stalled"
+    early = sum(c < budget for c in counts)
+    return "stalled" if early >= EARLY_STOP_SHARE * len(counts) else "slow descent"
 
 
 def _kind(held: float, evidence: Mapping[str, Any]) -> str:
@@ -157,7 +185,7 @@ def _kind(held: float, evidence: Mapping[str, Any]) -> str:
         return "numerical"
     if predicted[-1] >= PROGRESS_RATIO * predicted[0]:
         flat = all(g is not None and g < FLAT_GRADIENT for g in evidence["start_gradient"])
-        return "flat cost" if flat else "stalled"
+        return "flat cost" if flat else _stall_kind(evidence)
     recent = list(zip(realised, predicted, strict=True))[-RECENT:]
     gap = sum(r - p for r, p in recent) / len(recent)
     if gap > BIAS_SHARE * evidence["horizon"]:
@@ -171,13 +199,14 @@ def diagnose_run(train_dir: str | Path) -> Diagnosis:
     folder = Path(train_dir)
     try:
         rows = json.loads((folder / "curve.json").read_text(encoding="utf-8"))["curve"]
-        horizon = json.loads((folder / "config.json").read_text(encoding="utf-8"))["horizon"]
+        config = json.loads((folder / "config.json").read_text(encoding="utf-8"))
+        horizon = config["horizon"]
     except (OSError, ValueError, KeyError) as error:
         raise ValueError(
             f"train_dir: expected a PILCO run folder with curve.json and config.json, found "
             f"{folder} ({type(error).__name__}: {error})"
         ) from None
-    return diagnose_curve(rows, horizon)
+    return diagnose_curve(rows, horizon, config.get("policy_iterations"))
 
 
 def _cell(values: list[Any], digits: int = 1) -> str:
@@ -187,19 +216,22 @@ def _cell(values: list[Any], digits: int = 1) -> str:
 
 def describe(diagnoses: Mapping[str, Diagnosis]) -> str:
     """A markdown table of ``{run: diagnosis}`` (run, class, held, predicted and realised cost
-    per iteration, gradient norm at the first and last optimisation's start, the widths' largest
-    ``|ln lambda|``) and the count per class."""
+    per iteration, gradient norm at the first and last optimisation's start, L-BFGS's
+    iterations per optimisation (``-`` where not recorded), the widths' largest ``|ln
+    lambda|``) and the count per class."""
     lines = [
-        "| run | class | held | predicted cost | realised cost | start gradient | max |ln w| |",
-        "|---|---|---|---|---|---|---|",
+        "| run | class | held | predicted cost | realised cost | start gradient "
+        "| L-BFGS iterations | max |ln w| |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for run, found in diagnoses.items():
         ev = found.evidence
         gradients = [ev["start_gradient"][0], ev["start_gradient"][-1]]
         width = "-" if ev["max_abs_log_width"] is None else f"{ev['max_abs_log_width']:.2f}"
+        lbfgs = _cell(["-" if n is None else n for n in ev.get("lbfgs_iterations", [])])
         lines.append(
             f"| {run} | {found.kind} | {found.held_fraction:.0%} | {_cell(ev['predicted'])} | "
-            f"{_cell(ev['realised'])} | {_cell(gradients, 2)} | {width} |"
+            f"{_cell(ev['realised'])} | {_cell(gradients, 2)} | {lbfgs or '-'} | {width} |"
         )
     counts = Counter(found.kind for found in diagnoses.values())
     summary = ", ".join(f"{kind} {counts[kind]}" for kind in DIAGNOSES if counts[kind])
