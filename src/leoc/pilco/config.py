@@ -256,7 +256,7 @@ class PilcoConfig:
         """Inverse of :meth:`to_dict` (a config saved before :class:`~leoc.policies.HybridSpec`,
         with ``hybrid`` a bool and the hybrid's fields beside it, is read into its spec)."""
         data = legacy_hybrid_config(data)
-        data["gp"] = GPSettings(**data["gp"])
+        data["gp"] = GPSettings.from_dict(data["gp"])
         return cls(**data)
 
 

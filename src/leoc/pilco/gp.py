@@ -37,7 +37,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import torch
@@ -50,6 +50,9 @@ DTYPE = torch.float64
 LOG_2PI = math.log(2.0 * math.pi)
 # The smallest spread used to scale initial length-scales (a constant input column).
 MIN_INPUT_STD = 1e-3
+#: FITC's jitter on the inducing inputs' Gram matrix, a fraction of the signal variance
+#: (:attr:`GPSettings.inducing_jitter`'s default).
+INDUCING_JITTER = 1e-6
 
 
 @dataclasses.dataclass
@@ -75,6 +78,15 @@ class GPSettings:
     fixed_noise_var : float or None
         If set, every output's noise variance is this value (absolute, in squared target units)
         and is not fitted (``noise_floor`` is then unused); None: fitted above the floor.
+    inducing_jitter : float
+        FITC only: ``K_mm + inducing_jitter * alpha^2 I`` in the fit and the posterior, a fixed
+        jitter that bounds the condition number of the inducing inputs' Gram matrix near
+        ``1 / inducing_jitter`` (GPflow adds an absolute 1e-6 for the same reason). Without it
+        (0, leoc before this setting; the Cholesky then adds jitter only when it fails), 200
+        inducing inputs closer than a length-scale made ``Xi`` reach 1e12 on the pendulum, and
+        PILCO's predicted horizon cost moved by 1.6 (of 32) for a 1e-8 step of the policy's
+        parameters: the cancellation in the GP's variance made the cost noise that L-BFGS
+        stalls on. At 1e-6 that noise fell below 1e-5 (``benchmarks/bench_pilco_noise.py``).
     """
 
     max_full_points: int = 300
@@ -85,8 +97,25 @@ class GPSettings:
     penalty_power: int = 30
     noise_floor: float = 1e-4
     fixed_noise_var: float | None = None
+    inducing_jitter: float = INDUCING_JITTER
+
+    #: Fields added after runs were saved, with the value those runs had: a config saved
+    #: before a field existed reads back as it trained (:meth:`from_dict`).
+    LEGACY_VALUES: ClassVar[dict[str, Any]] = {"inducing_jitter": 0.0}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GPSettings:
+        """Settings saved by ``dataclasses.asdict``; a field the saved run predates takes the
+        value of then (:attr:`LEGACY_VALUES`), so a resumed or reloaded run fits as before."""
+        return cls(**{**cls.LEGACY_VALUES, **data})
 
     def __post_init__(self) -> None:
+        jitter = self.inducing_jitter
+        if isinstance(jitter, bool) or not isinstance(jitter, (int, float)) or not 0 <= jitter < 1:
+            raise ValueError(
+                f"inducing_jitter: expected a number in [0, 1) (a fraction of the signal "
+                f"variance), found {jitter!r}"
+            )
         value = self.fixed_noise_var
         if value is not None and (
             isinstance(value, bool)
@@ -191,8 +220,12 @@ class _FitcTerms(NamedTuple):
     chol_a: Tensor  # (E, M, M) Cholesky of A = I + V Gamma^-1 V^T
 
 
-def _fitc_terms(hyper: GPHyper, inputs: Tensor, inducing: Tensor, floor_var: Tensor) -> _FitcTerms:
+def _fitc_terms(
+    hyper: GPHyper, inputs: Tensor, inducing: Tensor, floor_var: Tensor, jitter: float
+) -> _FitcTerms:
     k_mm = se_kernel(inducing, inducing, hyper.log_lengthscales, hyper.log_signal)
+    eye = torch.eye(inducing.shape[0], dtype=inputs.dtype)
+    k_mm = k_mm + (jitter * torch.exp(2.0 * hyper.log_signal))[:, None, None] * eye
     k_mn = se_kernel(inducing, inputs, hyper.log_lengthscales, hyper.log_signal)
     chol_mm = cholesky_jitter(k_mm, "K_mm")
     v = torch.linalg.solve_triangular(chol_mm, k_mn, upper=False)
@@ -200,23 +233,29 @@ def _fitc_terms(hyper: GPHyper, inputs: Tensor, inducing: Tensor, floor_var: Ten
     # with diag(K_nn) = alpha^2 and Q_nn = V^T V. The clamp guards round-off (K_nn >= Q_nn).
     diag_gap = (torch.exp(2.0 * hyper.log_signal)[:, None] - v.square().sum(1)).clamp(min=0.0)
     gamma = diag_gap + _noise_var(hyper, floor_var)[:, None]
-    eye = torch.eye(inducing.shape[0], dtype=inputs.dtype)
     chol_a = cholesky_jitter(eye + (v / gamma[:, None, :]) @ v.transpose(-1, -2), "FITC A")
     return _FitcTerms(chol_mm, v, gamma, chol_a)
 
 
 def fitc_nll(
-    hyper: GPHyper, inputs: Tensor, targets: Tensor, inducing: Tensor, floor_var: Tensor
+    hyper: GPHyper,
+    inputs: Tensor,
+    targets: Tensor,
+    inducing: Tensor,
+    floor_var: Tensor,
+    jitter: float = INDUCING_JITTER,
 ) -> Tensor:
     """Negative log marginal likelihood of FITC, ``y ~ N(0, Q_nn + Gamma)``, summed over outputs.
 
     By the matrix determinant lemma and Woodbury, with ``A = I + V Gamma^-1 V^T``:
     ``log|Q + Gamma| = log|Gamma| + log|A|`` and
     ``y^T (Q + Gamma)^-1 y = y^T Gamma^-1 y - |L_A^-1 V Gamma^-1 y|^2`` (cost O(N M^2)).
+    ``Q_nn = K_nm K_mm^-1 K_mn`` with ``K_mm`` carrying ``jitter * alpha^2`` on its diagonal
+    (:attr:`GPSettings.inducing_jitter`).
 
     Shapes: ``inputs`` (N, D), ``targets`` (N, E), ``inducing`` (M, D).
     """
-    terms = _fitc_terms(hyper, inputs, inducing, floor_var)
+    terms = _fitc_terms(hyper, inputs, inducing, floor_var, jitter)
     y = targets.T  # (E, N)
     weighted = terms.v @ (y / terms.gamma)[..., None]  # (E, M, 1)
     proj = torch.linalg.solve_triangular(terms.chol_a, weighted, upper=False)[..., 0]
@@ -364,13 +403,14 @@ def fit_gp(
         if inducing is None:
             nll = exact_nll(hyper, x, y, floor_var)
         else:
-            nll = fitc_nll(hyper, x, y, inducing, floor_var)
+            nll = fitc_nll(hyper, x, y, inducing, floor_var, settings.inducing_jitter)
         return nll + _penalty(hyper, log_input_std, settings)
 
     hyper = _optimise_hyper(objective, init or initial_hyper(x, y), settings.train_iterations)
     if not all(bool(torch.isfinite(p).all()) for p in hyper):
         hyper = initial_hyper(x, y)  # a diverged line search: fall back to the data's spread
-    return posterior(_with_noise(hyper, fixed_log_noise), x, y, floor_var, inducing)
+    hyper = _with_noise(hyper, fixed_log_noise)
+    return posterior(hyper, x, y, floor_var, inducing, settings.inducing_jitter)
 
 
 def _with_noise(hyper: GPHyper, log_noise: Tensor | None) -> GPHyper:
@@ -412,9 +452,15 @@ def pair_weights(beta: Tensor, inv_k: Tensor | None = None) -> Tensor:
 
 
 def posterior(
-    hyper: GPHyper, inputs: Tensor, targets: Tensor, floor_var: Tensor, inducing: Tensor | None
+    hyper: GPHyper,
+    inputs: Tensor,
+    targets: Tensor,
+    floor_var: Tensor,
+    inducing: Tensor | None,
+    jitter: float = INDUCING_JITTER,
 ) -> GPPosterior:
-    """Build the :class:`GPPosterior` (beta, Xi) of given hyperparameters (no gradients)."""
+    """Build the :class:`GPPosterior` (beta, Xi) of given hyperparameters (no gradients);
+    ``jitter`` is FITC's :attr:`GPSettings.inducing_jitter`."""
     with torch.no_grad():
         noise_var = _noise_var(hyper, floor_var)
         if inducing is None:
@@ -434,7 +480,7 @@ def posterior(
                 False,
                 pair_weights(beta, inv_k),
             )
-        terms = _fitc_terms(hyper, inputs, inducing, floor_var)
+        terms = _fitc_terms(hyper, inputs, inducing, floor_var, jitter)
         # With K_mm = L L^T: K_mm + K_mn Gamma^-1 K_nm = L A L^T, hence
         # beta = L^-T A^-1 V Gamma^-1 y and Xi = L^-T (I - A^-1) L^-1.
         weighted = terms.v @ (targets.T / terms.gamma)[..., None]
