@@ -89,15 +89,22 @@ def peak_rss_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KIB_PER_MIB  # Linux: KiB
 
 
+def case_config(points: int, sparse: bool, **overrides) -> PilcoConfig:
+    """The benchmark's PILCO settings (cart-pole, :data:`NUM_BASIS`, :data:`HORIZON`, then
+    ``overrides``); an exact GP on all ``points`` unless ``sparse``."""
+    config = PilcoConfig.for_system(
+        "cartpole", **{"num_basis": NUM_BASIS, "horizon": HORIZON, **overrides}
+    )
+    if not sparse:
+        config.gp = GPSettings(max_full_points=max(points, config.gp.max_full_points))
+    return config
+
+
 def run_case(points: int, sparse: bool, repeats: int, policy_iterations: int | None) -> dict:
     """One case in this process; returns its figures."""
     system = make_system("cartpole")
-    overrides = {"num_basis": NUM_BASIS, "horizon": HORIZON}
-    if policy_iterations is not None:
-        overrides["policy_iterations"] = policy_iterations
-    config = PilcoConfig.for_system("cartpole", **overrides)
-    if not sparse:
-        config.gp = GPSettings(max_full_points=max(points, config.gp.max_full_points))
+    overrides = {} if policy_iterations is None else {"policy_iterations": policy_iterations}
+    config = case_config(points, sparse, **overrides)
     inputs, targets = cartpole_data(points, seed=0)
     start = time.perf_counter()
     model = fit_gp(inputs, targets, config.gp, np.random.default_rng(0))

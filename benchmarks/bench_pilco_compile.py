@@ -62,9 +62,8 @@ import torch
 
 import leoc.pilco.moments
 import leoc.pilco.propagate
-from bench_pilco import HORIZON, NUM_BASIS, THREADS, cartpole_data, cpu_model
-from leoc.pilco.config import PilcoConfig
-from leoc.pilco.gp import GPSettings, fit_gp
+from bench_pilco import HORIZON, THREADS, cartpole_data, case_config, cpu_model
+from leoc.pilco.gp import fit_gp
 from leoc.pilco.objective import predict_policy
 from leoc.pilco.policy import build_policy
 from leoc.systems import make_system
@@ -81,8 +80,7 @@ def _plain_cholesky(matrix: torch.Tensor, name: str = "matrix") -> torch.Tensor:
 
 def _setup(points: int):
     system = make_system("cartpole")
-    config = PilcoConfig.for_system("cartpole", num_basis=NUM_BASIS, horizon=HORIZON)
-    config.gp = GPSettings(max_full_points=max(points, config.gp.max_full_points))
+    config = case_config(points, sparse=False)
     inputs, targets = cartpole_data(points, seed=0)
     model = fit_gp(inputs, targets, config.gp, np.random.default_rng(0))
     policy = build_policy(system, config, torch.Generator().manual_seed(0), inputs[:, :5])

@@ -55,9 +55,9 @@ __all__ = [
     "BIAS_SHARE",
     "DEGENERATE_LOG_WIDTH",
     "DIAGNOSES",
+    "EARLY_STOP_SHARE",
     "FLAT_GRADIENT",
     "PROGRESS_RATIO",
-    "EARLY_STOP_SHARE",
     "RECENT",
     "Diagnosis",
     "describe",
@@ -81,9 +81,9 @@ DIAGNOSES = (
 PROGRESS_RATIO = 0.9
 #: ``flat cost``: the gradient's norm at every optimisation's start below this. The stalled
 #: pendulum runs measured started every optimisation after the first on norms of 1.2 to 700
-#: (medians 4.5 to 330); a pendulum hybrid
-#: whose predicted cost stayed at 39.97 of 40 (every predicted state far from the target)
-#: started them on 2e-4 to 0.04 (2026-11-29; 1e-3 before, which that run crossed).
+#: (medians 4.5 to 330); a pendulum hybrid whose predicted cost stayed at 39.97 of 40 (every
+#: predicted state far from the target) started them on 2e-4 to 0.04 (2026-11-29; 1e-3
+#: before, which that run crossed).
 FLAT_GRADIENT = 0.1
 #: ``stalled`` against ``slow descent``: the share of the optimisations after the first (whose
 #: random policy starts on a flat cost, where L-BFGS's restarts are the rule) that stopped
