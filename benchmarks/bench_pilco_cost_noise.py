@@ -9,11 +9,49 @@ below 1e-6), the gradient's norm, and the largest entry of the GP's pair weights
 ``beta_a beta_b^T - delta_ab K_a^-1`` (:class:`leoc.pilco.gp.GPPosterior`), the terms whose sum
 gives the predicted variance by cancellation. With ``--gp KEY=VALUE ...`` the last GP is also
 refitted on the run's data (its checkpoint) with those :class:`leoc.pilco.gp.GPSettings` changed,
-and measured the same way (a refit draws its own FITC inducing inputs, seed 0).
+and measured the same way (a refit draws its own FITC inducing inputs, seed 0). With
+``--jitters J ...`` the last GP's posterior is rebuilt at its own hyperparameters and inducing
+inputs, on the data it saw, with FITC's ``inducing_jitter`` J
+(:attr:`leoc.pilco.gp.GPSettings.inducing_jitter`): that one choice switched alone. Every row
+also gives the ``slope error``, ``|central difference - |g|| / |g|`` along the negative gradient
+at a step of 1e-4: near 0 for a cost whose gradient a line search can follow.
 
 Usage::
 
     python benchmarks/bench_pilco_cost_noise.py RUN_DIR ... [--gp noise_floor=1e-2 ...]
+        [--jitters 0 1e-8 1e-6]
+
+**FITC's jitter** (2026-11-29, leoc 1ed329f, ``--jitters 0 1e-8 1e-6`` on the pendulum PILCO
+baselines of ``results/pilco-reliability/gp-max-snr-ab``, default arm, trained before the jitter
+existed; last GP on 1200 data points with 200 inducing inputs). Without a jitter (the runs as
+trained) the largest entry of ``Xi`` (the GP's variance weights) reached 2.9e10 to 4.6e12; the
+inducing inputs' Gram matrix K_mm was near singular, and the variance's cancellation made the
+cost noise: along the negative gradient, steps of 1e-8 and 1e-6 moved the stalled seed 2's cost
+by 2.5 (of 30.4) and the central difference missed the gradient by a factor of 400. With 1e-6
+the noise was below 1e-5 on all five runs and the slope error at most 0.011:
+
+=================  ======  ========  =======  =====  ======================  ===========
+run                jitter  max |Xi|  cost     |g|    noise along -g (1e-8,   slope error
+                                                     1e-6)
+=================  ======  ========  =======  =====  ======================  ===========
+seed2 (stalled)    0       4.6e12    30.432   12.1   2.5                     400
+seed2              1e-8    6.1e7     30.985   1.48   1.4e-4                  0.21
+seed2              1e-6    2.6e6     31.001   3.39   2.2e-6                  0.0014
+seed6 (stalled)    0       3.8e11    31.838   0.307  8.1e-5                  0.58
+seed6              1e-6    3.5e6     31.878   8.95   9.9e-6                  0.011
+seed7 (stalled)    0       2.9e10    32.189   0.899  2.1e-3                  1.7
+seed7              1e-6    2.6e6     32.125   6.01   6.3e-6                  0.0002
+seed0 (held)       0       1.0e10    20.807   0.129  3.9e-6                  0.19
+seed0              1e-6    1.4e7     20.808   0.110  7.1e-8                  0.00059
+seed5 (held)       0       2.9e10    20.722   0.222  8.4e-6                  0.25
+seed5              1e-6    2.5e7     20.723   0.242  2.3e-7                  0.00054
+=================  ======  ========  =======  =====  ======================  ===========
+
+(That table came from a first version of this measurement, which stepped along the negative
+gradient; this script's noise column steps along a random direction, as below.) The costs move
+by at most 0.6 (seed2's, within its own noise), and the stalled runs show gradients of 3 to 9
+that a line search can follow. Whether that turns stalls into learning is measured by training
+again: ``results/pilco-reliability/``.
 
 Measured on this project's 2-core machine (2026-11-29, the runs of ``bench_pilco_failures.py`` at
 the paper profile, commit be653e6): the noise grows with the pair weights, and it is large where the
@@ -46,14 +84,37 @@ import numpy as np
 import torch
 
 from leoc.pilco import load_pilco_run
-from leoc.pilco.gp import GPPosterior, GPSettings, fit_gp
+from leoc.pilco.checkpoint import CHECKPOINT_NAME
+from leoc.pilco.gp import GPPosterior, GPSettings, _noise_model, fit_gp, posterior
 from leoc.pilco.objective import predict_policy
 
 STEPS = (1e-13, 1e-12, 1e-11, 1e-10)
+#: The central difference's step along the negative gradient, for the slope error.
+SLOPE_STEP = 1e-4
 
 
-def _probe(run, model: GPPosterior) -> tuple[float, float, float]:
-    """(cost, noise, gradient norm) of the run's policy under ``model``."""
+def _set(params: list[torch.Tensor], theta: list[torch.Tensor], direction, step: float) -> None:
+    with torch.no_grad():
+        for p, t, d in zip(params, theta, direction, strict=True):
+            p.copy_(t + step * d)
+
+
+def _slope_error(run, model: GPPosterior, params, theta, gradient, norm: float) -> float:
+    """|central difference along -g / |g| at SLOPE_STEP - |g|| / |g| (the policy restored)."""
+    direction = [-g / norm for g in gradient]
+    costs = []
+    for step in (SLOPE_STEP, -SLOPE_STEP):
+        _set(params, theta, direction, step)
+        with torch.no_grad():
+            costs.append(
+                float(predict_policy(run.policy, model, run.system, run.config).total_cost)
+            )
+    _set(params, theta, direction, 0.0)
+    return abs((costs[1] - costs[0]) / (2 * SLOPE_STEP) - norm) / norm
+
+
+def _probe(run, model: GPPosterior) -> tuple[float, float, float, float]:
+    """(cost, noise, gradient norm, slope error) of the run's policy under ``model``."""
     params = [p for p in run.policy.parameters() if p.requires_grad]
     theta = [p.detach().clone() for p in params]
     generator = torch.Generator().manual_seed(0)
@@ -69,16 +130,33 @@ def _probe(run, model: GPPosterior) -> tuple[float, float, float]:
             p.copy_(t)
     run.policy.zero_grad()
     predict_policy(run.policy, model, run.system, run.config).total_cost.backward()
-    norm = float(torch.cat([p.grad.reshape(-1) for p in params]).norm())
+    gradient = [p.grad.detach().clone() for p in params]
+    norm = float(torch.cat([g.reshape(-1) for g in gradient]).norm())
+    slope_error = _slope_error(run, model, params, theta, gradient, norm)
     base = float(costs[0])
-    return base, max(abs(float(c) - base) for c in costs[1:]), norm
+    return base, max(abs(float(c) - base) for c in costs[1:]), norm, slope_error
 
 
 def _row(label: str, run, model: GPPosterior, seconds: float | None = None) -> str:
-    cost, noise, norm = _probe(run, model)
+    cost, noise, norm, slope_error = _probe(run, model)
     weights = float(model.pair_weights.abs().max())
     fit = "" if seconds is None else f" (fit {seconds:.0f} s)"
-    return f"| {label}{fit} | {cost:.4f} | {noise:.1e} | {norm:.3g} | {weights:.1e} |"
+    return (
+        f"| {label}{fit} | {cost:.4f} | {noise:.1e} | {norm:.3g} | {slope_error:.2g} | "
+        f"{weights:.1e} |"
+    )
+
+
+def rebuilt(folder: Path, model: GPPosterior, settings: GPSettings, jitter: float) -> GPPosterior:
+    """The run's last GP at its own hyperparameters and inducing inputs, rebuilt with FITC's
+    ``jitter`` on the data it saw (the checkpoint's, less the rollout that followed the fit)."""
+    saved = torch.load(folder / CHECKPOINT_NAME, weights_only=False)
+    log = saved["log"]
+    count = int(log[-2]["data_size"]) if len(log) > 1 else len(saved["inputs"])
+    x = torch.as_tensor(saved["inputs"][:count], dtype=torch.float64)
+    y = torch.as_tensor(saved["targets"][:count], dtype=torch.float64)
+    inducing = model.support if model.sparse else None
+    return posterior(model.hyper, x, y, _noise_model(y, settings).floor_var, inducing, jitter)
 
 
 def _changes(pairs: list[str]) -> dict[str, float]:
@@ -95,14 +173,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path, help="PILCO run folders")
     parser.add_argument("--gp", nargs="*", default=[], help="refit with GPSettings KEY=VALUE")
+    parser.add_argument(
+        "--jitters", nargs="*", type=float, default=[], help="rebuild with FITC jitter J"
+    )
     args = parser.parse_args()
     changes = _changes(args.gp)
     torch.set_num_threads(1)
-    print("| run (model) | predicted cost | noise | gradient norm | max pair weight |")
-    print("|---|---|---|---|---|")
+    for folder in args.runs if changes or args.jitters else []:
+        if not (folder / CHECKPOINT_NAME).exists():
+            parser.error(
+                f"runs: expected a PILCO run folder with {CHECKPOINT_NAME}, found {folder}"
+            )
+    print(
+        "| run (model) | predicted cost | noise | gradient norm | slope error | max pair weight |"
+    )
+    print("|---|---|---|---|---|---|")
     for folder in args.runs:
         run = load_pilco_run(folder)
         print(_row(f"{folder} (saved)", run, run.model), flush=True)
+        for jitter in args.jitters:
+            model = rebuilt(folder, run.model, run.config.gp, jitter)
+            print(_row(f"{folder} (jitter {jitter:g})", run, model), flush=True)
         if not changes:
             continue
         saved = torch.load(folder / "checkpoint.pt", weights_only=False)

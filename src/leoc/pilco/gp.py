@@ -86,7 +86,8 @@ class GPSettings:
         inducing inputs closer than a length-scale made ``Xi`` reach 1e12 on the pendulum, and
         PILCO's predicted horizon cost moved by 1.6 (of 32) for a 1e-8 step of the policy's
         parameters: the cancellation in the GP's variance made the cost noise that L-BFGS
-        stalls on. At 1e-6 that noise fell below 1e-5 (``benchmarks/bench_pilco_noise.py``).
+        stalls on. At 1e-6 that noise fell below 1e-5
+        (``benchmarks/bench_pilco_cost_noise.py --jitters``).
     """
 
     max_full_points: int = 300
