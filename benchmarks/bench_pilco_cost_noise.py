@@ -12,7 +12,7 @@ refitted on the run's data (its checkpoint) with those :class:`leoc.pilco.gp.GPS
 and measured the same way (a refit draws its own FITC inducing inputs, seed 0). With
 ``--jitters J ...`` the last GP's posterior is rebuilt at its own hyperparameters and inducing
 inputs, on the data it saw, with FITC's ``inducing_jitter`` J
-(:attr:`leoc.pilco.gp.GPSettings.inducing_jitter`): that one choice switched alone. Every row
+(``GPSettings.inducing_jitter``): that one choice switched alone. Every row
 also gives the ``slope error``, ``|central difference - |g|| / |g|`` along the negative gradient
 at a step of 1e-4: near 0 for a cost whose gradient a line search can follow.
 

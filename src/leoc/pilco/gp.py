@@ -51,7 +51,7 @@ LOG_2PI = math.log(2.0 * math.pi)
 # The smallest spread used to scale initial length-scales (a constant input column).
 MIN_INPUT_STD = 1e-3
 #: FITC's jitter on the inducing inputs' Gram matrix, a fraction of the signal variance
-#: (:attr:`GPSettings.inducing_jitter`'s default).
+#: (the default of :class:`GPSettings`' ``inducing_jitter``).
 INDUCING_JITTER = 1e-6
 
 
@@ -107,7 +107,8 @@ class GPSettings:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> GPSettings:
         """Settings saved by ``dataclasses.asdict``; a field the saved run predates takes the
-        value of then (:attr:`LEGACY_VALUES`), so a resumed or reloaded run fits as before."""
+        value of then (:attr:`GPSettings.LEGACY_VALUES`), so a resumed or reloaded run fits as
+        before."""
         return cls(**{**cls.LEGACY_VALUES, **data})
 
     def __post_init__(self) -> None:
@@ -252,7 +253,7 @@ def fitc_nll(
     ``log|Q + Gamma| = log|Gamma| + log|A|`` and
     ``y^T (Q + Gamma)^-1 y = y^T Gamma^-1 y - |L_A^-1 V Gamma^-1 y|^2`` (cost O(N M^2)).
     ``Q_nn = K_nm K_mm^-1 K_mn`` with ``K_mm`` carrying ``jitter * alpha^2`` on its diagonal
-    (:attr:`GPSettings.inducing_jitter`).
+    (:class:`GPSettings`, ``inducing_jitter``).
 
     Shapes: ``inputs`` (N, D), ``targets`` (N, E), ``inducing`` (M, D).
     """
@@ -461,7 +462,7 @@ def posterior(
     jitter: float = INDUCING_JITTER,
 ) -> GPPosterior:
     """Build the :class:`GPPosterior` (beta, Xi) of given hyperparameters (no gradients);
-    ``jitter`` is FITC's :attr:`GPSettings.inducing_jitter`."""
+    ``jitter`` is FITC's ``inducing_jitter`` (:class:`GPSettings`)."""
     with torch.no_grad():
         noise_var = _noise_var(hyper, floor_var)
         if inducing is None:
