@@ -128,18 +128,34 @@ def test_errors_name_what_is_missing(tmp_path) -> None:
         diagnose_curve(old, HORIZON)
 
 
-GP_SNR_STUDY = (
-    Path(__file__).resolve().parents[1] / "results" / "pilco-reliability" / "gp-max-snr-ab"
-)
+PILCO_STUDIES = Path(__file__).resolve().parents[1] / "results" / "pilco-reliability"
+# (study, arm, seeds published): every arm of every A/B study published there
+PUBLISHED_ARMS = [
+    ("gp-max-snr-ab", "default", 10),
+    ("gp-max-snr-ab", "gp_max_snr_100", 10),
+    ("fitc-jitter-ab", "inducing_jitter_1e-6", 20),  # 10 baselines, 10 hybrids
+    ("fitc-jitter-ab", "inducing_jitter_1e-6_15_iterations", 4),
+]
 
 
-@pytest.mark.parametrize("arm", ["default", "gp_max_snr_100"])
-def test_the_published_snr_study_prints_what_its_records_hold(arm) -> None:
-    """results/pilco-reliability/gp-max-snr-ab/README.md shows, per arm, the table that
-    diagnose_run and describe make of the run records published beside it (so a change of a
-    class's definition, or a hand edit of the README, cannot leave the published table stale)."""
-    folder = GP_SNR_STUDY / arm
+def test_every_published_arm_is_checked() -> None:
+    """A study arm added under results/pilco-reliability/ joins PUBLISHED_ARMS (and so the test
+    below); the list is not a snapshot that can go stale."""
+    found = {
+        (arm.parent.name, arm.name)
+        for arm in PILCO_STUDIES.glob("*/*")
+        if arm.is_dir() and any(arm.glob("*/*/seed*/train"))
+    }
+    assert found == {(study, arm) for study, arm, _ in PUBLISHED_ARMS}
+
+
+@pytest.mark.parametrize(("study", "arm", "seeds"), PUBLISHED_ARMS)
+def test_the_published_studies_print_what_their_records_hold(study, arm, seeds) -> None:
+    """results/pilco-reliability/STUDY/README.md shows, per arm, the table that diagnose_run
+    and describe make of the run records published beside it (so a change of a class's
+    definition, or a hand edit of the README, cannot leave the published table stale)."""
+    folder = PILCO_STUDIES / study / arm
     runs = sorted(folder.glob("*/*/seed*/train"))  # seeds 0-9: text order is seed order
-    assert len(runs) == 10
+    assert len(runs) == seeds
     table = describe({str(r.parent.relative_to(folder)): diagnose_run(r) for r in runs})
-    assert table in (GP_SNR_STUDY / "README.md").read_text(encoding="utf-8")
+    assert table in (PILCO_STUDIES / study / "README.md").read_text(encoding="utf-8")
