@@ -85,7 +85,14 @@ import torch
 
 from leoc.pilco import load_pilco_run
 from leoc.pilco.checkpoint import CHECKPOINT_NAME
-from leoc.pilco.gp import GPPosterior, GPSettings, _noise_model, fit_gp, posterior
+from leoc.pilco.gp import (
+    GPPosterior,
+    GPSettings,
+    _noise_model,
+    _training_data,
+    fit_gp,
+    posterior,
+)
 from leoc.pilco.objective import predict_policy
 
 STEPS = (1e-13, 1e-12, 1e-11, 1e-10)
@@ -121,13 +128,10 @@ def _probe(run, model: GPPosterior) -> tuple[float, float, float, float]:
     direction = [torch.randn(t.shape, generator=generator, dtype=t.dtype) for t in theta]
     costs = []
     for h in (0.0, *STEPS):
+        _set(params, theta, direction, h)
         with torch.no_grad():
-            for p, t, d in zip(params, theta, direction, strict=True):
-                p.copy_(t + h * d)
             costs.append(predict_policy(run.policy, model, run.system, run.config).total_cost)
-    with torch.no_grad():
-        for p, t in zip(params, theta, strict=True):
-            p.copy_(t)
+    _set(params, theta, direction, 0.0)
     run.policy.zero_grad()
     predict_policy(run.policy, model, run.system, run.config).total_cost.backward()
     gradient = [p.grad.detach().clone() for p in params]
@@ -147,14 +151,13 @@ def _row(label: str, run, model: GPPosterior, seconds: float | None = None) -> s
     )
 
 
-def rebuilt(folder: Path, model: GPPosterior, settings: GPSettings, jitter: float) -> GPPosterior:
+def rebuilt(saved: dict, model: GPPosterior, settings: GPSettings, jitter: float) -> GPPosterior:
     """The run's last GP at its own hyperparameters and inducing inputs, rebuilt with FITC's
-    ``jitter`` on the data it saw (the checkpoint's, less the rollout that followed the fit)."""
-    saved = torch.load(folder / CHECKPOINT_NAME, weights_only=False)
+    ``jitter`` on the data it saw (``saved``: the run's checkpoint, whose data end with the
+    rollout that followed the fit)."""
     log = saved["log"]
     count = int(log[-2]["data_size"]) if len(log) > 1 else len(saved["inputs"])
-    x = torch.as_tensor(saved["inputs"][:count], dtype=torch.float64)
-    y = torch.as_tensor(saved["targets"][:count], dtype=torch.float64)
+    x, y = _training_data(saved["inputs"][:count], saved["targets"][:count])
     inducing = model.support if model.sparse else None
     return posterior(model.hyper, x, y, _noise_model(y, settings).floor_var, inducing, jitter)
 
@@ -191,12 +194,14 @@ def main() -> None:
     for folder in args.runs:
         run = load_pilco_run(folder)
         print(_row(f"{folder} (saved)", run, run.model), flush=True)
+        if not changes and not args.jitters:
+            continue
+        saved = torch.load(folder / CHECKPOINT_NAME, weights_only=False)
         for jitter in args.jitters:
-            model = rebuilt(folder, run.model, run.config.gp, jitter)
+            model = rebuilt(saved, run.model, run.config.gp, jitter)
             print(_row(f"{folder} (jitter {jitter:g})", run, model), flush=True)
         if not changes:
             continue
-        saved = torch.load(folder / "checkpoint.pt", weights_only=False)
         for label, change in (("default refit", {}), (" ".join(args.gp), changes)):
             settings = dataclasses.replace(run.config.gp, **change)
             started = time.perf_counter()

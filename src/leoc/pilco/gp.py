@@ -83,10 +83,10 @@ class GPSettings:
         jitter that bounds the condition number of the inducing inputs' Gram matrix near
         ``1 / inducing_jitter`` (GPflow adds an absolute 1e-6 for the same reason). Without it
         (0, leoc before this setting; the Cholesky then adds jitter only when it fails), 200
-        inducing inputs closer than a length-scale made ``Xi`` reach 1e12 on the pendulum, and
-        PILCO's predicted horizon cost moved by 1.6 (of 32) for a 1e-8 step of the policy's
-        parameters: the cancellation in the GP's variance made the cost noise that L-BFGS
-        stalls on. At 1e-6 that noise fell below 1e-5
+        inducing inputs closer than a length-scale made ``Xi`` reach 4.6e12 on the pendulum,
+        and PILCO's predicted horizon cost moved by 2.5 (of 30) for 1e-8 and 1e-6 steps of the
+        policy's parameters: the cancellation in the GP's variance made the cost noise that
+        L-BFGS stalls on. At 1e-6 that noise fell below 1e-5
         (``benchmarks/bench_pilco_cost_noise.py --jitters``).
     """
 
