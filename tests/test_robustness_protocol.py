@@ -260,3 +260,76 @@ def test_the_figure_reads_cleanly() -> None:
     figure = draw_protocol_scores(results, {"LQR": "linear"})
     assert layout_problems(figure) == []
     assert len(figure.axes) == 3
+
+
+# ---------------------------------------------------------------------------- run folders
+@pytest.fixture(scope="module")
+def two_pilco_runs_named_train(tmp_path_factory, tiny_pilco_settings) -> list[str]:
+    """Two tiny PILCO pendulum runs (control period 2), each in a folder named ``train``, as
+    ``benchmarks/bench_pilco_failures.py`` lays them out (``.../seedN/train``)."""
+    from leoc.pilco.train import train_pilco
+
+    root = tmp_path_factory.mktemp("runs")
+    runs = []
+    for seed, hybrid in ((0, False), (1, True)):
+        run = root / f"seed{seed}" / "train"
+        train_pilco(
+            "pendulum",
+            hybrid=hybrid,
+            seed=seed,
+            run_dir=run,
+            iterations=1,
+            progress=False,
+            **tiny_pilco_settings,
+        )
+        runs.append(str(run))
+    return runs
+
+
+def test_cli_scores_runs_of_one_name_apart_and_the_lqr_at_their_period(
+    two_pilco_runs_named_train, capsys
+) -> None:
+    """Two runs in folders of one name are both scored (one used to replace the other), and
+    the LQR beside them runs at their control period (2), not the simulator's step: its
+    scores equal the protocol run on a period-2 LQR and differ from a period-1 LQR's."""
+    from leoc.experiments.controllers import load_trained_controller
+    from leoc.experiments.variants import get_variant
+
+    argv = ["robustness", "--controller", "linear", *two_pilco_runs_named_train]
+    argv += ["--levels", "2", "--episodes", "2", "--categories", "viscous_friction", "push"]
+    assert main([*argv, "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert list(printed["results"]) == ["LQR (period 2 steps)", "seed0/train", "seed1/train"]
+    system = make_system("pendulum")
+    # At these levels the period-1 LQR holds fewer viscous-friction episodes (0.25 against 0.5).
+    options = dict(levels=2, episodes=2, categories=("viscous_friction", "push"))
+    for period in (2, 1):
+        lqr = get_variant("leoc").linear_controller(system, period)
+        expected = run_protocol(system, lqr, "LQR", **options).score()
+        got = printed["scores"]["LQR (period 2 steps)"]["all"]["robustness"]
+        assert (abs(got - expected) < 1e-12) == (period == 2)
+    for spec in two_pilco_runs_named_train:
+        controller = load_trained_controller(spec, system="pendulum")
+        expected = run_protocol(system, controller, "run", **options).score()
+        label = "/".join(spec.split("/")[-2:])
+        assert abs(printed["scores"][label]["all"]["robustness"] - expected) < 1e-12
+
+
+def test_cli_asks_for_the_lqr_period_beside_runs_of_two_periods(
+    two_pilco_runs_named_train, tmp_path, tiny_pilco_settings, capsys
+) -> None:
+    """A period-1 run beside a period-2 run: which period the LQR shares is the user's call,
+    asked in one line; naming it scores all three."""
+    from leoc.pilco.train import train_pilco
+
+    one = tmp_path / "period1"
+    settings = {**tiny_pilco_settings, "action_repeat": 1}
+    train_pilco("pendulum", seed=2, run_dir=one, iterations=1, progress=False, **settings)
+    argv = ["robustness", "--controller", "linear", two_pilco_runs_named_train[0], str(one)]
+    argv += ["--levels", "2", "--episodes", "1", "--categories", "push"]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--action-repeat: expected it for the LQR beside runs of different" in line
+    assert main([*argv, "--action-repeat", "1", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert list(printed["results"]) == ["LQR (period 1 step)", "train", "period1"]

@@ -54,8 +54,9 @@ def add_parser(commands: Any) -> None:
     parser.add_argument(
         "--action-repeat",
         type=positive_int,
-        default=1,
-        help="control period of the LQR in simulator steps (default 1)",
+        default=None,
+        help="control period of the LQR in simulator steps (default: the run folders' own "
+        "period, which they must then share; 1 without run folders)",
     )
     parser.add_argument(
         "--levels",
@@ -162,28 +163,63 @@ def robustness_plant(scored: Scored):
     return make_system(scored.system).with_rules(next(iter(plants), DEFAULT_RULES))
 
 
-def _controllers(args: argparse.Namespace, scored: Scored, system) -> dict[str, tuple[str, Any]]:
-    """Label -> (colour key, controller) of every spec: the LQR designed on ``system`` at
-    ``--action-repeat``, or a run's saved controller."""
-    from leoc.cli.simulate import controller_key, controller_label
+def _runs(scored: Scored) -> dict[str, Any]:
+    """Spec -> saved controller of every run folder among ``scored``'s specs."""
     from leoc.experiments.controllers import load_trained_controller
+
+    return {
+        spec: load_trained_controller(Path(spec), system=scored.system)
+        for spec in scored.specs
+        if spec != LINEAR
+    }
+
+
+def _controllers(scored: Scored, system, runs: dict, period: int) -> dict[str, tuple[str, Any]]:
+    """Label -> (colour key, controller) of every spec: the LQR designed on ``system`` at
+    ``period``, or a run's saved controller (``runs``). Labels are distinct: a run folder's
+    ``SYSTEM/CONTROLLER/seedN`` or name, else as many trailing path parts as tell them apart."""
+    from leoc.cli.roa import run_labels
+    from leoc.cli.simulate import controller_key, controller_label
     from leoc.experiments.variants import get_variant
     from leoc.systems.rollout import control_period
 
+    labels = {spec: controller_label(spec, control_period(c)) for spec, c in runs.items()}
+    if len(set(labels.values())) < len(labels):
+        labels = run_labels(list(runs))
     found = {}
     for spec in scored.specs:
         if spec == LINEAR:
-            controller = get_variant("leoc").linear_controller(system, args.action_repeat)
+            controller = get_variant("leoc").linear_controller(system, period)
+            found[controller_label(spec, period)] = (LINEAR, controller)
         else:
-            controller = load_trained_controller(Path(spec), system=scored.system)
-        found[controller_label(spec, control_period(controller))] = (
-            controller_key(spec),
-            controller,
-        )
+            found[labels[spec]] = (controller_key(spec), runs[spec])
     return found
 
 
-def _max_levels(system, args: argparse.Namespace):
+def lqr_period(requested: int | None, runs: dict[str, Any]) -> int:
+    """The LQR's control period: ``requested``, else the runs' own (the closed loop they were
+    trained in), else 1 without runs.
+
+    Raises
+    ------
+    ValueError
+        No period requested and runs of different periods (which one the LQR should share is
+        the user's choice).
+    """
+    from leoc.systems.rollout import control_period
+
+    if requested is not None:
+        return requested
+    periods = {spec: control_period(controller) for spec, controller in runs.items()}
+    if len(set(periods.values())) > 1:
+        raise ValueError(
+            "--action-repeat: expected it for the LQR beside runs of different control "
+            f"periods, found none (periods {periods})"
+        )
+    return next(iter(periods.values()), 1)
+
+
+def _max_levels(system, period: int, seed: int):
     """The table's maximum levels of ``system``; for a system without an entry, measured with
     its LQR first (said on stderr)."""
     from leoc.evaluation.robustness_protocol import DEFAULT_MAX_LEVELS, measured_max_levels
@@ -196,8 +232,8 @@ def _max_levels(system, args: argparse.Namespace):
         "fails first",
         file=sys.stderr,
     )
-    lqr = get_variant("leoc").linear_controller(system, args.action_repeat)
-    return measured_max_levels(system, lqr, seed=args.seed)[0]
+    lqr = get_variant("leoc").linear_controller(system, period)
+    return measured_max_levels(system, lqr, seed=seed)[0]
 
 
 def _progress(label: str):
@@ -215,14 +251,14 @@ def _progress(label: str):
     return report
 
 
-def _calibrate(args: argparse.Namespace, system) -> int:
+def _calibrate(args: argparse.Namespace, system, period: int) -> int:
     """``--calibrate``: where the LQR fails in each category, and the levels that follow."""
     import dataclasses
 
     from leoc.evaluation.robustness_protocol import CALIBRATION_EPISODES, measured_max_levels
     from leoc.experiments.variants import get_variant
 
-    lqr = get_variant("leoc").linear_controller(system, args.action_repeat)
+    lqr = get_variant("leoc").linear_controller(system, period)
     levels, found = measured_max_levels(system, lqr, seed=args.seed)
     record = {
         "system": system.name,
@@ -234,7 +270,7 @@ def _calibrate(args: argparse.Namespace, system) -> int:
         print(json.dumps(record, indent=1))
         return 0
     print(
-        f"Where the LQR of {system.name} (period {args.action_repeat}) holds none of "
+        f"Where the LQR of {system.name} (period {period}) holds none of "
         f"{CALIBRATION_EPISODES} operating-region episodes (seed {args.seed}):"
     )
     for name, entry in found.items():
@@ -255,10 +291,12 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     scored = resolve_scored(args.target, args.controller)
     system = robustness_plant(scored)
+    runs = _runs(scored)
+    period = lqr_period(args.action_repeat, runs)
     if args.calibrate:
-        return _calibrate(args, system)
-    controllers = _controllers(args, scored, system)
-    max_levels = _max_levels(system, args)
+        return _calibrate(args, system, period)
+    controllers = _controllers(scored, system, runs, period)
+    max_levels = _max_levels(system, period, args.seed)
     results = {}
     for label, (_, controller) in controllers.items():
         print(f"leoc robustness: {label} on {system.name}", file=sys.stderr)
