@@ -333,3 +333,64 @@ def test_the_flat_top_cover_is_the_largest_flat_top_level_on_the_proved_set() ->
     assert flat_top_cover(controller, proved, [0.05, 0.0]) > sampled
     assert flat_top_cover(torch.nn.Linear(3, 1), proved, [0.0, 0.0]) is None
     assert flat_top_cover(controller, SimpleNamespace(rho=0.0, certificate=None), [0, 0]) is None
+
+
+def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand() -> None:
+    """Per category: the hybrid's mean score minus its LQR's, P(hybrid seed > baseline seed),
+    and the verdicts, against counts made by hand; the ROA hybrid that held the LQR's very
+    operating-region episodes is labelled by construction; PILCO's hybrid is compared with the
+    LQR at PILCO's period (``linear_pilco``), not the step's."""
+    both, none_, one = [True, True], [False, False], [True, False]
+    lqr = [both, one, one, none_]  # observation noise 3/8, push 1/8
+
+    def runs(name, helds):
+        return [{"robustness_protocol": _protocol(name, held)} for held in helds]
+
+    evaluations = {
+        "pendulum": {
+            "linear": runs("linear", [lqr]),
+            "linear_pilco": runs("linear_pilco", [[none_] * 4]),
+            # observation noise 4/8 on every seed: above the LQR's 3/8; push 2/8, 1/8, 0/8
+            "ddpg_hybrid": runs(
+                "ddpg_hybrid",
+                [[both, both, both, none_], [both, both, one, none_]] * 1
+                + [[both, both, none_, none_]],
+            ),
+            "ddpg_hybrid_roa": runs("ddpg_hybrid_roa", [lqr, lqr, lqr]),
+            "ddpg_baseline": runs("ddpg_baseline", [[none_] * 4, [one, none_, both, both]]),
+            "pilco_hybrid": runs("pilco_hybrid", [[none_] * 4] * 3),
+        }
+    }
+    rows = protocol_section.protocol_verdicts(evaluations)
+    by = {(row["controller"], row["category"]): row for row in rows}
+    assert {row["controller"] for row in rows} == {"ddpg_hybrid", "ddpg_hybrid_roa", "pilco_hybrid"}
+    noise, push = by["ddpg_hybrid", "observation_noise"], by["ddpg_hybrid", "push"]
+    assert noise["lqr"] == "linear" and noise["baseline"] == "ddpg_baseline"
+    # from the operating region (the swing-up episodes all fail): the LQR holds 3/4 and 1/4
+    assert noise["versus_lqr"]["difference"] == pytest.approx(4 / 4 - 3 / 4)
+    assert noise["versus_lqr"]["verdict"] == "above"  # every seed above: so is every resample
+    assert push["versus_lqr"]["difference"] == pytest.approx((2 + 1 + 0) / 12 - 1 / 4)
+    assert push["versus_lqr"]["verdict"] == "unresolved"
+    low, high = push["versus_lqr"]["ci_low"], push["versus_lqr"]["ci_high"]
+    assert -1 / 4 <= low < 0 < high <= 1 / 4  # between the seeds' least and largest differences
+    # the baseline's two seeds score 0/8 and 1/8 on observation noise, 0/8 and 4/8 on push;
+    # P(hybrid > baseline), ties counted half: noise, 4/8 beats both on every seed -> 1
+    assert noise["versus_baseline"]["probability"] == pytest.approx(1.0)
+    assert noise["versus_baseline"]["verdict"] == "above (n < 3)"
+    # push: hybrid 2/8, 1/8, 0/8 against 0/8, 4/8 -> wins 2, ties 1 (0 vs 0) of 6
+    assert push["versus_baseline"]["probability"] == pytest.approx(2.5 / 6)
+    assert push["versus_baseline"]["ci_low"] is None  # 2 baseline seeds: no interval
+    assert push["versus_baseline"]["verdict"] == "below (n < 3)"
+    roa = by["ddpg_hybrid_roa", "robustness"]
+    assert roa["versus_lqr"]["verdict"] == "equal" and roa["operating_as_lqr"]
+    assert not noise["operating_as_lqr"]
+    pilco = by["pilco_hybrid", "push"]
+    assert pilco["lqr"] == "linear_pilco" and pilco["baseline"] is None
+    assert pilco["versus_lqr"]["verdict"] == "equal"
+    lines = protocol_section.verdict_sentences([r for r in rows if r["system"] == "pendulum"])
+    assert lines[0].startswith(
+        f"- {label('ddpg_hybrid')}: at least as robust as its LQR (linear (LQR at dt)) in 2 of 2"
+    )
+    assert "by construction" in lines[1] and "by construction" not in lines[0]
+    table = "\n".join(protocol_section.verdict_table(rows))
+    assert "| +0.25 [+0.25, +0.25] | above |" in table

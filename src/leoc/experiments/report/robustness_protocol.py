@@ -12,6 +12,7 @@ import numpy as np
 
 from leoc.evaluation.robustness_protocol import (
     CATEGORY_NAMES,
+    PROTOCOL_START_KINDS,
     CategoryResult,
     LevelResult,
     ProtocolResult,
@@ -19,11 +20,19 @@ from leoc.evaluation.robustness_protocol import (
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.markdown import markdown_table
 from leoc.experiments.report.base import FMT, Report, Rows, Section, Study, label, ordered
+from leoc.experiments.stats import (
+    MIN_RUNS_FOR_INTERVAL,
+    probability_of_improvement,
+    stratified_bootstrap_ci,
+)
+from leoc.names import LINEAR, parse_controller
 
 KEY = "robustness_protocol"
 """The runs' entry the section reads (``evaluation.json``)."""
 SCORE = "robustness"
 """The column of the categories' mean (the robustness score)."""
+OPERATING = PROTOCOL_START_KINDS[0]
+"""The start kind from the operating region (where a hybrid's flat top can make it its LQR)."""
 NOT_MEASURED = (
     "Not measured for these runs: they were written before `leoc reproduce` ran the "
     "robustness protocol (`leoc robustness RUN_DIR` scores one run)."
@@ -157,9 +166,9 @@ def _maxima(row: dict[str, Any]) -> str:
     )
 
 
-def _system_lines(system: str, rows: Rows) -> list[str]:
+def _system_lines(system: str, rows: Rows, verdicts: Rows) -> list[str]:
     constants = ", ".join(rows[0]["max_levels"]["constants"])
-    return [
+    lines = [
         "",
         f"### {system}",
         "",
@@ -169,6 +178,224 @@ def _system_lines(system: str, rows: Rows) -> list[str]:
         "",
         f"![Robustness protocol: {system}]({figure_name(system)})",
     ]
+    if verdicts:
+        lines += [
+            "",
+            VERDICT_METHOD,
+            "",
+            *verdict_sentences(verdicts),
+            "",
+            *verdict_table(verdicts),
+        ]
+    return lines
+
+
+def reference_names(controller: str, available: Any) -> tuple[str | None, str | None]:
+    """A hybrid's references in a study: its LQR (``linear_LEARNER``, the LQR at the learner's
+    control period, else ``linear``) and its baseline (``LEARNER_baseline``); None where the
+    study has no such runs."""
+    learner = parse_controller(controller).learner
+    lqr = next((name for name in (f"{LINEAR}_{learner}", LINEAR) if name in available), None)
+    baseline = f"{learner}_baseline"
+    return lqr, baseline if baseline in available else None
+
+
+def _mean_of_resamples(resamples: np.ndarray) -> np.ndarray:
+    return resamples.mean(axis=(1, 2))
+
+
+def _versus_lqr(hybrid: list[float], lqr: float) -> dict[str, Any]:
+    """The hybrid's mean share over seeds minus its LQR's (both from the operating region),
+    with a 95% stratified-bootstrap interval over the hybrid's seeds (the LQR is designed, not
+    trained: one value), and the verdict: ``above``/``below`` where the interval excludes 0,
+    ``equal`` where every seed scores the LQR's score, else ``unresolved``; ``n < 3`` seeds
+    give no interval."""
+    differences = np.asarray(hybrid, dtype=float) - lqr
+    low = high = None
+    if len(differences) >= MIN_RUNS_FOR_INTERVAL:
+        low, high = stratified_bootstrap_ci(differences, _mean_of_resamples)
+    return {
+        "difference": float(differences.mean()),
+        "ci_low": low,
+        "ci_high": high,
+        "verdict": _verdict(differences, low, high, 0.0),
+    }
+
+
+def _versus_baseline(hybrid: list[float], baseline: list[float]) -> dict[str, Any]:
+    """P(a hybrid seed scores above a baseline seed) with its 95% interval
+    (:func:`leoc.experiments.stats.probability_of_improvement`), and the verdict: ``above`` or
+    ``below`` where the interval excludes 0.5, else ``unresolved`` (``equal`` for identical
+    scores)."""
+    estimate = probability_of_improvement(hybrid, baseline)
+    differences = np.subtract.outer(np.asarray(hybrid), np.asarray(baseline)).ravel()
+    return {
+        "probability": estimate.probability,
+        "ci_low": estimate.ci_low,
+        "ci_high": estimate.ci_high,
+        "verdict": _verdict(differences, estimate.ci_low, estimate.ci_high, 0.5),
+    }
+
+
+def _verdict(differences: np.ndarray, low: float | None, high: float | None, tie: float) -> str:
+    if np.all(differences == 0):
+        return "equal"
+    if low is None or high is None:
+        return "above (n < 3)" if differences.mean() > 0 else "below (n < 3)"
+    if low > tie:
+        return "above"
+    return "below" if high < tie else "unresolved"
+
+
+def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bool:
+    """Whether ``hybrid`` held exactly the episodes ``lqr`` held from ``kind`` starts, at every
+    level of every category."""
+    return all(
+        mine.held.get(kind) == theirs.held.get(kind)
+        for ours, its in zip(hybrid.categories, lqr.categories, strict=True)
+        for mine, theirs in zip(ours.levels, its.levels, strict=True)
+    )
+
+
+def protocol_verdicts(evaluations: Evaluations) -> Rows:
+    """Rows, per system, hybrid and category (and the robustness score): whether the hybrid
+    is at least as robust as its LQR (from the operating region, where the claim is made: the
+    LQR cannot swing up) and more robust than its baseline (every start), with intervals over
+    seeds (:func:`reference_names` names both); ``operating_as_lqr`` where the hybrid held the
+    LQR's very episodes from the operating region at every level on every seed (the signature
+    of a comparison that holds by construction: the state never left the hybrid's flat top)."""
+    rows = []
+    for system, by_controller in protocol_results(evaluations).items():
+        for controller, results in by_controller.items():
+            if not parse_controller(controller).hybrid:
+                continue
+            lqr, baseline = reference_names(controller, by_controller)
+            first = results[0].scores()
+            for name in [*(n for n in CATEGORY_NAMES if n in first), SCORE]:
+                mine = [_score(result, name) for result in results]
+                row = {
+                    "system": system,
+                    "controller": controller,
+                    "category": name,
+                    "lqr": lqr,
+                    "baseline": baseline,
+                    "versus_lqr": None,
+                    "versus_baseline": None,
+                    "operating_as_lqr": False,
+                }
+                if lqr is not None:
+                    reference = by_controller[lqr]
+                    value = float(np.mean([_score(r, name, OPERATING) for r in reference]))
+                    near = [_score(result, name, OPERATING) for result in results]
+                    row["versus_lqr"] = _versus_lqr(near, value)
+                    row["operating_as_lqr"] = len(reference) == 1 and all(
+                        _same_episodes(r, reference[0], OPERATING) for r in results
+                    )
+                if baseline is not None:
+                    theirs = [_score(r, name) for r in by_controller[baseline]]
+                    row["versus_baseline"] = _versus_baseline(mine, theirs)
+                rows.append(row)
+    return rows
+
+
+def _score(result: ProtocolResult, name: str, start_kind: str | None = None) -> float:
+    """Category ``name``'s score (or the robustness score) from ``start_kind`` (None: all)."""
+    return result.score(start_kind) if name == SCORE else result.scores(start_kind)[name]
+
+
+def _with_interval(value: float, low: float | None, high: float | None, signed: bool) -> str:
+    """``value [low, high]`` to two decimals (signed: with its sign), the value alone without
+    an interval."""
+    form = "{:+.2f}" if signed else "{:.2f}"
+    if low is None or high is None:
+        return form.format(value)
+    return f"{form.format(value)} [{form.format(low)}, {form.format(high)}]"
+
+
+def verdict_table(rows: Rows) -> list[str]:
+    """Markdown rows of one system's verdicts: per hybrid and category, the score minus its
+    LQR's and P(hybrid > baseline), each with its interval and verdict."""
+    headers = [
+        "hybrid",
+        "category",
+        "operating region, minus its LQR",
+        "verdict",
+        "P(> its baseline), all starts",
+        "verdict",
+    ]
+    table = []
+    for row in rows:
+        lqr, baseline = row["versus_lqr"], row["versus_baseline"]
+        table.append(
+            [
+                label(row["controller"]),
+                row["category"].replace("_", " "),
+                "-"
+                if lqr is None
+                else _with_interval(lqr["difference"], lqr["ci_low"], lqr["ci_high"], True),
+                "-" if lqr is None else lqr["verdict"],
+                "-"
+                if baseline is None
+                else _with_interval(
+                    baseline["probability"], baseline["ci_low"], baseline["ci_high"], False
+                ),
+                "-" if baseline is None else baseline["verdict"],
+            ]
+        )
+    return markdown_table(headers, table)
+
+
+def verdict_sentences(rows: Rows) -> list[str]:
+    """Per hybrid: in how many categories it is at least as robust as its LQR (not ``below``)
+    and more robust than its baseline (``above``), naming the exceptions, and whether from the
+    operating region it held its LQR's very episodes (by construction)."""
+    lines = []
+    for controller in dict.fromkeys(row["controller"] for row in rows):
+        mine = [row for row in rows if row["controller"] == controller and row["category"] != SCORE]
+        parts = []
+        if mine[0]["versus_lqr"] is not None:
+            below = [
+                r["category"].replace("_", " ")
+                for r in mine
+                if r["versus_lqr"]["verdict"].startswith("below")
+            ]
+            parts.append(
+                f"at least as robust as its LQR ({label(mine[0]['lqr'])}) in "
+                f"{len(mine) - len(below)} of {len(mine)} categories"
+                + (f" (below in {', '.join(below)})" if below else "")
+            )
+        if mine[0]["versus_baseline"] is not None:
+            above = [
+                r["category"].replace("_", " ")
+                for r in mine
+                if r["versus_baseline"]["verdict"].startswith("above")
+            ]
+            parts.append(
+                f"more robust than its baseline in {len(above)} of {len(mine)}"
+                + (f" ({', '.join(above)})" if above else "")
+            )
+        if mine[0]["operating_as_lqr"]:
+            parts.append(
+                "from the operating region it held its LQR's very episodes at every level on "
+                "every seed: there the comparison holds by construction (its flat top)"
+            )
+        if parts:
+            lines.append(f"- {label(controller)}: {'; '.join(parts)}.")
+    return lines
+
+
+VERDICT_METHOD = (
+    "Does the hybrid keep its LQR's robustness and beat its baseline? Per category, the "
+    "hybrid's mean share held from the operating region over seeds minus its LQR's (the LQR at "
+    "the hybrid's control period; the claim is made near the operating point, and the LQR "
+    "cannot swing up), with a 95% stratified-bootstrap interval over the hybrid's seeds; and "
+    "the probability that a hybrid seed scores above a baseline seed from every start (Agarwal "
+    "et al. 2021), with its 95% interval. Verdicts: above or below where the interval excludes "
+    "0 (or 0.5), unresolved where it does not, equal where every score is the same; with fewer "
+    "than 3 seeds no interval (n < 3). A hybrid that held its LQR's very episodes from the "
+    "operating region is its LQR there by construction, and is said so."
+)
+"""The verdicts' opening paragraph."""
 
 
 METHOD = (
@@ -188,7 +415,10 @@ METHOD = (
 
 def compute(study: Study) -> dict[str, Any]:
     """The ``robustness_protocol`` table (:func:`protocol_summary`)."""
-    return {"robustness_protocol": protocol_summary(study.evaluations)}
+    return {
+        "robustness_protocol": protocol_summary(study.evaluations),
+        "robustness_protocol_verdicts": protocol_verdicts(study.evaluations),
+    }
 
 
 def render(report: Report) -> list[str]:
@@ -210,7 +440,12 @@ def render(report: Report) -> list[str]:
         f"each start, protocol seed {first['seed']}.",
     ]
     for system in dict.fromkeys(row["system"] for row in rows):
-        lines += _system_lines(system, [row for row in rows if row["system"] == system])
+        verdicts = report.tables.get("robustness_protocol_verdicts", [])
+        lines += _system_lines(
+            system,
+            [row for row in rows if row["system"] == system],
+            [row for row in verdicts if row["system"] == system],
+        )
     return lines
 
 
