@@ -333,3 +333,6 @@ def test_cli_asks_for_the_lqr_period_beside_runs_of_two_periods(
     assert main([*argv, "--action-repeat", "1", "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert list(printed["results"]) == ["LQR (period 1 step)", "train", "period1"]
+    # without the LQR, runs of two periods are scored side by side as they are
+    assert main([*argv[:2], *argv[3:], "--json"]) == 0
+    assert list(json.loads(capsys.readouterr().out)["results"]) == ["train", "period1"]

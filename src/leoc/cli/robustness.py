@@ -284,7 +284,11 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from leoc.evaluation.robustness_protocol import CATEGORY_NAMES, run_protocol
+    from leoc.evaluation.robustness_protocol import (
+        CATEGORY_NAMES,
+        DEFAULT_MAX_LEVELS,
+        run_protocol,
+    )
     from leoc.experiments.controllers import trained_under
 
     torch.set_num_threads(1)
@@ -292,7 +296,9 @@ def run(args: argparse.Namespace) -> int:
     scored = resolve_scored(args.target, args.controller)
     system = robustness_plant(scored)
     runs = _runs(scored)
-    period = lqr_period(args.action_repeat, runs)
+    period = args.action_repeat or 1  # the LQR's, where neither scored nor calibrating with it
+    if LINEAR in scored.specs or args.calibrate or system.name not in DEFAULT_MAX_LEVELS:
+        period = lqr_period(args.action_repeat, runs)
     if args.calibrate:
         return _calibrate(args, system, period)
     controllers = _controllers(scored, system, runs, period)
