@@ -345,6 +345,15 @@ def verdict_table(rows: Rows) -> list[str]:
     return markdown_table(headers, table)
 
 
+def _categories_where(rows: Rows, comparison: str, verdict: str) -> list[str]:
+    """The categories of ``rows`` whose ``comparison`` has a verdict starting with ``verdict``."""
+    return [
+        row["category"].replace("_", " ")
+        for row in rows
+        if row[comparison]["verdict"].startswith(verdict)
+    ]
+
+
 def verdict_sentences(rows: Rows) -> list[str]:
     """Per hybrid: in how many categories it is at least as robust as its LQR (not ``below``)
     and more robust than its baseline (``above``), naming the exceptions, and whether from the
@@ -354,22 +363,14 @@ def verdict_sentences(rows: Rows) -> list[str]:
         mine = [row for row in rows if row["controller"] == controller and row["category"] != SCORE]
         parts = []
         if mine[0]["versus_lqr"] is not None:
-            below = [
-                r["category"].replace("_", " ")
-                for r in mine
-                if r["versus_lqr"]["verdict"].startswith("below")
-            ]
+            below = _categories_where(mine, "versus_lqr", "below")
             parts.append(
                 f"at least as robust as its LQR ({label(mine[0]['lqr'])}) in "
                 f"{len(mine) - len(below)} of {len(mine)} categories"
                 + (f" (below in {', '.join(below)})" if below else "")
             )
         if mine[0]["versus_baseline"] is not None:
-            above = [
-                r["category"].replace("_", " ")
-                for r in mine
-                if r["versus_baseline"]["verdict"].startswith("above")
-            ]
+            above = _categories_where(mine, "versus_baseline", "above")
             parts.append(
                 f"more robust than its baseline in {len(above)} of {len(mine)}"
                 + (f" ({', '.join(above)})" if above else "")
