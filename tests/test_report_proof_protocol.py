@@ -4,6 +4,7 @@ without the entries says, and a smoke study that writes both (evaluated, reporte
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 from pathlib import Path
@@ -80,13 +81,18 @@ def _proof_evaluations() -> dict:
 
 
 def _table_cells(lines: list[str]) -> dict[str, dict[str, str]]:
-    """The markdown table in ``lines`` as controller label -> header -> cell."""
-    rows = [line for line in lines if line.startswith("| ")]
-    headers = [cell.strip() for cell in rows[0].strip("|").split("|")]
-    table = {}
-    for line in rows[1:]:
-        cells = dict(zip(headers, (c.strip() for c in line.strip("|").split("|")), strict=True))
-        table[cells.get("controller")] = cells
+    """The markdown tables in ``lines`` (each under its own header row) as controller label ->
+    header -> cell; a label keeps the row of the first table that has it."""
+    table: dict[str, dict[str, str]] = {}
+    for is_table, block in itertools.groupby(lines, lambda line: line.startswith("|")):
+        if not is_table:
+            continue
+        header, _, *rows = list(block)
+        headers = [cell.strip() for cell in header.strip("|").split("|")]
+        for line in rows:
+            cells = line.strip("|").split("|")
+            cells = dict(zip(headers, (c.strip() for c in cells), strict=True))
+            table.setdefault(cells.get("controller"), cells)
     return table
 
 
@@ -301,6 +307,12 @@ def test_a_smoke_study_proves_and_scores_its_controllers_and_replots_them(tmp_pa
             ]
             cell = protocol[label(run["spec"]["controller"])]
             assert cell[category["name"].replace("_", " ")] == f"{np.mean(held):.2f}"
+    # below the scores, the verdicts: one table after the protocol's, a sentence per hybrid
+    lines = _section(text, "## Robustness protocol")
+    assert protocol_section.VERDICT_METHOD in lines
+    assert any(
+        line.startswith(f"- {label('ddpg_hybrid_roa')}: at least as robust") for line in lines
+    )
     assert (tmp_path / "robustness_protocol_pendulum.png").stat().st_size > 0
     before = {name: (tmp_path / name).read_bytes() for name in ("report.md", "results.json")}
     assert main(["plot", str(tmp_path)]) == 0
