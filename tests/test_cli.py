@@ -571,3 +571,20 @@ def test_ablation_bad_choices_are_parser_errors(capsys) -> None:
         error = capsys.readouterr().err
         assert stop.value.code == 2 and error.count("\n") == 1
         assert f"argument {option}" in error
+
+
+def test_run_labels_name_runs_as_simulate_does_and_deepen_only_where_names_collide(
+    tmp_path,
+) -> None:
+    """``roa`` and ``robustness`` label runs as ``simulate`` does (``SYSTEM/CONTROLLER/seedN``
+    or the folder's name); folders of one name get as many trailing parts as tell them apart."""
+    from leoc.cli.roa import run_labels
+
+    reproduce = str(tmp_path / "runs" / "pendulum" / "ddpg_hybrid" / "seed3")
+    named = str(tmp_path / "mine" / "td3_noisy")
+    assert run_labels([reproduce, named]) == {
+        reproduce: "pendulum/ddpg_hybrid/seed3",
+        named: "td3_noisy",
+    }
+    first, second = (str(tmp_path / f"seed{s}" / "train") for s in (0, 1))
+    assert run_labels([first, second]) == {first: "seed0/train", second: "seed1/train"}

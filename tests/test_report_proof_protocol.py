@@ -406,3 +406,15 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
     assert "by construction" in lines[1] and "by construction" not in lines[0]
     table = "\n".join(protocol_section.verdict_table(rows))
     assert "| +0.25 [+0.25, +0.25] | above |" in table
+
+
+def test_a_verdict_without_an_interval_whose_mean_difference_is_zero_is_unresolved() -> None:
+    """Two hybrid seeds (0.75, 0.25) against one baseline seed (0.5): one win and one loss,
+    mean difference 0 but not every score equal: neither above nor below (n < 3); a mean
+    above or below 0 keeps its sign."""
+    tied = protocol_section._versus_baseline([0.75, 0.25], [0.5])
+    assert tied["probability"] == pytest.approx(0.5)
+    assert tied["verdict"] == "unresolved (n < 3)"
+    assert protocol_section._versus_baseline([0.75, 0.5], [0.5])["verdict"] == "above (n < 3)"
+    assert protocol_section._versus_baseline([0.25, 0.5], [0.5])["verdict"] == "below (n < 3)"
+    assert protocol_section._versus_baseline([0.5, 0.5], [0.5])["verdict"] == "equal"

@@ -181,11 +181,8 @@ def _controllers(scored: Scored, system, runs: dict, period: int) -> dict[str, t
     from leoc.cli.roa import run_labels
     from leoc.cli.simulate import controller_key, controller_label
     from leoc.experiments.variants import get_variant
-    from leoc.systems.rollout import control_period
 
-    labels = {spec: controller_label(spec, control_period(c)) for spec, c in runs.items()}
-    if len(set(labels.values())) < len(labels):
-        labels = run_labels(list(runs))
+    labels = run_labels(list(runs))
     found = {}
     for spec in scored.specs:
         if spec == LINEAR:

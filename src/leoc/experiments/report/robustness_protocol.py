@@ -241,7 +241,8 @@ def _verdict(differences: np.ndarray, low: float | None, high: float | None, tie
     if np.all(differences == 0):
         return "equal"
     if low is None or high is None:
-        return "above (n < 3)" if differences.mean() > 0 else "below (n < 3)"
+        mean = differences.mean()
+        return "unresolved (n < 3)" if mean == 0 else f"{'above' if mean > 0 else 'below'} (n < 3)"
     if low > tie:
         return "above"
     return "below" if high < tie else "unresolved"
@@ -270,6 +271,10 @@ def protocol_verdicts(evaluations: Evaluations) -> Rows:
             if not parse_controller(controller).hybrid:
                 continue
             lqr, baseline = reference_names(controller, by_controller)
+            as_lqr = lqr is not None and len(by_controller[lqr]) == 1
+            as_lqr = as_lqr and all(
+                _same_episodes(r, by_controller[lqr][0], OPERATING) for r in results
+            )
             first = results[0].scores()
             for name in [*(n for n in CATEGORY_NAMES if n in first), SCORE]:
                 mine = [_score(result, name) for result in results]
@@ -281,16 +286,13 @@ def protocol_verdicts(evaluations: Evaluations) -> Rows:
                     "baseline": baseline,
                     "versus_lqr": None,
                     "versus_baseline": None,
-                    "operating_as_lqr": False,
+                    "operating_as_lqr": as_lqr,
                 }
                 if lqr is not None:
                     reference = by_controller[lqr]
                     value = float(np.mean([_score(r, name, OPERATING) for r in reference]))
                     near = [_score(result, name, OPERATING) for result in results]
                     row["versus_lqr"] = _versus_lqr(near, value)
-                    row["operating_as_lqr"] = len(reference) == 1 and all(
-                        _same_episodes(r, reference[0], OPERATING) for r in results
-                    )
                 if baseline is not None:
                     theirs = [_score(r, name) for r in by_controller[baseline]]
                     row["versus_baseline"] = _versus_baseline(mine, theirs)
