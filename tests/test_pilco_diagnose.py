@@ -13,7 +13,9 @@ from leoc.pilco.diagnose import (
     DEGENERATE_LOG_WIDTH,
     EARLY_STOP_SHARE,
     FLAT_GRADIENT,
+    NEAR_BUDGET,
     PROGRESS_RATIO,
+    SATURATED_SHARE,
     describe,
     diagnose_curve,
     diagnose_run,
@@ -90,6 +92,30 @@ def test_a_stall_stops_early_and_a_slow_descent_spends_its_budget() -> None:
     assert diagnose_curve(rows, HORIZON).kind == "stalled"  # budget unknown: the old class
     table = describe({"run": diagnose_curve(rows, HORIZON, policy_iterations=75)})
     assert "| 0.50 0.50 | 75 5 75 75 75 | - |" in table
+
+
+def test_a_stop_near_the_budget_spent_it_and_a_saturated_cost_is_flat_on_any_slope() -> None:
+    """An optimisation that ran NEAR_BUDGET of its budget spent it (the held pendulum hybrids
+    ended theirs at 72-75 of 75): one just short of that share is early, one at it is not. A
+    predicted cost at SATURATED_SHARE of the horizon at every iteration is a flat cost even on
+    start gradients far above FLAT_GRADIENT; just below it on one iteration, a stall."""
+    flat = [30.0, 29.5, 29.0, 28.5, 28.0]
+    rows = _curve(flat, flat)
+    at = int(NEAR_BUDGET * 75) + (NEAR_BUDGET * 75 % 1 > 0)  # the least count that spent it
+    for row in rows[1:]:
+        row["lbfgs_iterations"] = at
+    assert diagnose_curve(rows, HORIZON, policy_iterations=75).kind == "slow descent"
+    for row in rows[2:]:
+        row["lbfgs_iterations"] = at - 1
+    assert diagnose_curve(rows, HORIZON, policy_iterations=75).kind == "stalled"
+    top = SATURATED_SHARE * HORIZON
+    saturated = _curve([top + 0.3, top + 0.2, top, top + 0.1], [HORIZON] * 4)
+    for row in saturated[1:]:
+        row["gradient_norm_start"] = 40 * FLAT_GRADIENT
+        row["lbfgs_iterations"] = 3
+    assert diagnose_curve(saturated, HORIZON, policy_iterations=75).kind == "flat cost"
+    saturated[3]["predicted_cost"] = top - 0.01
+    assert diagnose_curve(saturated, HORIZON, policy_iterations=75).kind == "stalled"
 
 
 def test_numerical_failures_come_first() -> None:
