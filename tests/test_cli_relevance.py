@@ -111,7 +111,8 @@ def test_an_roa_hybrid_from_the_command_line(tmp_path, monkeypatch, capsys) -> N
     assert json.loads(capsys.readouterr().out)["controller"] == str(run)
     roa = ["roa", "--controller", str(run), "--samples", "500", "--starts", "4", "--json"]
     assert main(roa) == 0
-    basin = json.loads(capsys.readouterr().out)["basins"][run.name]
+    # labelled as simulate labels it: SYSTEM/CONTROLLER/seedN
+    basin = json.loads(capsys.readouterr().out)["basins"]["pendulum/ddpg_hybrid_roa/seed0"]
     assert basin["flat_top_same_P"] is True
 
 
