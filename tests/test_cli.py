@@ -578,7 +578,7 @@ def test_run_labels_name_runs_as_simulate_does_and_deepen_only_where_names_colli
 ) -> None:
     """``roa`` and ``robustness`` label runs as ``simulate`` does (``SYSTEM/CONTROLLER/seedN``
     or the folder's name); folders of one name get as many trailing parts as tell them apart."""
-    from leoc.cli.roa import run_labels
+    from leoc.cli.simulate import run_labels
 
     reproduce = str(tmp_path / "runs" / "pendulum" / "ddpg_hybrid" / "seed3")
     named = str(tmp_path / "mine" / "td3_noisy")

@@ -16,7 +16,7 @@ from leoc.cli._args import (
     system_name,
 )
 from leoc.cli.lqr import print_matrix
-from leoc.cli.simulate import load_controller
+from leoc.cli.simulate import load_controller, run_labels
 from leoc.names import GYM_PREFIX, LYAPUNOV_CHOICES
 
 
@@ -297,24 +297,6 @@ def _roa_controllers(system, design, lqr: CertifiedLQR, runs: dict) -> dict:
     for spec, controller in runs.items():
         controllers[labels[spec]] = controller
     return controllers
-
-
-def run_labels(specs: list[str]) -> dict[str, str]:
-    """A label per run folder, the one ``roa``, ``robustness`` and ``simulate`` name runs by:
-    :func:`~leoc.cli.simulate.controller_label` (``SYSTEM/CONTROLLER/seedN`` or the folder's
-    name) where those are distinct, else as many trailing path parts as make them distinct
-    (``seed0/train`` beside ``seed1/train``)."""
-    from leoc.cli.simulate import controller_label
-
-    labels = {spec: controller_label(spec, 1) for spec in specs}
-    if len(set(labels.values())) == len(labels):
-        return labels
-    parts = {spec: Path(spec).resolve().parts for spec in specs}
-    for depth in range(1, max((len(p) for p in parts.values()), default=1) + 1):
-        labels = {spec: "/".join(path[-depth:]) for spec, path in parts.items()}
-        if len(set(labels.values())) == len(labels):
-            return labels
-    return {spec: str(Path(spec).resolve()) for spec in specs}
 
 
 class _Certified(NamedTuple):

@@ -178,8 +178,7 @@ def _controllers(scored: Scored, system, runs: dict, period: int) -> dict[str, t
     """Label -> (colour key, controller) of every spec: the LQR designed on ``system`` at
     ``period``, or a run's saved controller (``runs``). Labels are distinct: a run folder's
     ``SYSTEM/CONTROLLER/seedN`` or name, else as many trailing path parts as tell them apart."""
-    from leoc.cli.roa import run_labels
-    from leoc.cli.simulate import controller_key, controller_label
+    from leoc.cli.simulate import controller_key, controller_label, run_labels
     from leoc.experiments.variants import get_variant
 
     labels = run_labels(list(runs))

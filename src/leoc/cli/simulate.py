@@ -221,14 +221,34 @@ def controller_key(spec: str) -> str:
 
 
 def controller_label(spec: str, period: int) -> str:
-    """The legend label of a simulated controller: the LQR and its period, or the run folder
-    as ``SYSTEM/CONTROLLER/seedN`` (a reproduce run) or its folder name."""
+    """The legend label of a simulated controller: the LQR and its period, or the run folder's
+    :func:`run_label`."""
     if spec == LINEAR:
         return f"LQR (period {period} step{'s' if period > 1 else ''})"
+    return run_label(spec)
+
+
+def run_label(spec: str) -> str:
+    """A run folder's label: ``SYSTEM/CONTROLLER/seedN`` (a reproduce run) or its folder name."""
     parts = Path(spec).resolve().parts
     if len(parts) >= 3 and parts[-1].startswith("seed"):
         return "/".join(parts[-3:])
     return parts[-1]
+
+
+def run_labels(specs: list[str]) -> dict[str, str]:
+    """A distinct label per run folder, the one ``simulate``, ``roa`` and ``robustness`` name
+    runs by: :func:`run_label` where those are distinct, else as many trailing path parts as
+    make them distinct (``seed0/train`` beside ``seed1/train``)."""
+    labels = {spec: run_label(spec) for spec in specs}
+    if len(set(labels.values())) == len(labels):
+        return labels
+    parts = {spec: Path(spec).resolve().parts for spec in specs}
+    for depth in range(1, max((len(p) for p in parts.values()), default=1) + 1):
+        labels = {spec: "/".join(path[-depth:]) for spec, path in parts.items()}
+        if len(set(labels.values())) == len(labels):
+            return labels
+    return {spec: str(Path(spec).resolve()) for spec in specs}
 
 
 def simulated_variant(target: Target, requested: str | None) -> str:

@@ -237,12 +237,22 @@ def _versus_baseline(hybrid: list[float], baseline: list[float]) -> dict[str, An
     }
 
 
+#: Score differences at most this large are nil: scores are shares of held episodes (multiples
+#: of 1 / episodes), so anything smaller is a sum's rounding, not a difference.
+_NIL = 1e-9
+
+
 def _verdict(differences: np.ndarray, low: float | None, high: float | None, tie: float) -> str:
-    if np.all(differences == 0):
+    """``equal`` where every score difference is nil (within :data:`_NIL`), else ``above`` or
+    ``below`` where the interval ``[low, high]`` excludes ``tie``; without an interval (fewer
+    than 3 seeds), the sign of the mean difference, marked ``(n < 3)``."""
+    if np.all(np.abs(differences) <= _NIL):
         return "equal"
     if low is None or high is None:
-        mean = differences.mean()
-        return "unresolved (n < 3)" if mean == 0 else f"{'above' if mean > 0 else 'below'} (n < 3)"
+        mean = float(differences.mean())
+        if abs(mean) <= _NIL:
+            return "unresolved (n < 3)"
+        return f"{'above' if mean > 0 else 'below'} (n < 3)"
     if low > tie:
         return "above"
     return "below" if high < tie else "unresolved"
@@ -271,9 +281,10 @@ def protocol_verdicts(evaluations: Evaluations) -> Rows:
             if not parse_controller(controller).hybrid:
                 continue
             lqr, baseline = reference_names(controller, by_controller)
-            as_lqr = lqr is not None and len(by_controller[lqr]) == 1
-            as_lqr = as_lqr and all(
-                _same_episodes(r, by_controller[lqr][0], OPERATING) for r in results
+            as_lqr = (
+                lqr is not None
+                and len(by_controller[lqr]) == 1
+                and all(_same_episodes(r, by_controller[lqr][0], OPERATING) for r in results)
             )
             first = results[0].scores()
             for name in [*(n for n in CATEGORY_NAMES if n in first), SCORE]:
