@@ -406,6 +406,24 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
     assert "by construction" in lines[1] and "by construction" not in lines[0]
     table = "\n".join(protocol_section.verdict_table(rows))
     assert "| +0.25 [+0.25, +0.25] | above |" in table
+    # lost episodes (every start; the swing-up ones all fail) at levels where the LQR lost an
+    # operating-region episode (noise level 1, both push levels), by hand over the 3 seeds:
+    # noise 4 lost per seed, 2 of them at level 1; push 6, 7 and 8, all where the LQR loses
+    assert noise["lost"] == {"lost": 12, "where_lqr_loses": 6}
+    assert push["lost"] == {"lost": 21, "where_lqr_loses": 21}
+    assert by["ddpg_hybrid", "robustness"]["lost"] == {"lost": 33, "where_lqr_loses": 27}
+    assert "27 of its 33 lost episodes were at levels where its LQR lost" in lines[0]
+    assert "| above (n < 3) | 6 of 12 |" in table
+    assert by["pilco_hybrid", "robustness"]["lost"] == {"lost": 48, "where_lqr_loses": 48}
+    # another sweep (a level moved) is not compared level by level
+    moved = ProtocolResult.from_dict(evaluations["pendulum"]["linear"][0]["robustness_protocol"])
+    level = moved.categories[1].levels[0]._replace(level=0.5)
+    moved.categories[1].levels[0] = level
+    hybrid = ProtocolResult.from_dict(
+        evaluations["pendulum"]["ddpg_hybrid"][0]["robustness_protocol"]
+    )
+    assert protocol_section._lost(hybrid, moved, "push") is None
+    assert protocol_section._lost(hybrid, moved, "observation_noise") == (4, 2)
 
 
 def test_a_verdict_without_an_interval_whose_mean_difference_is_zero_is_unresolved() -> None:

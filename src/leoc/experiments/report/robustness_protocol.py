@@ -5,6 +5,7 @@ per system (``robustness_protocol_SYSTEM.png``)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -268,6 +269,43 @@ def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bo
     )
 
 
+def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, int] | None:
+    """Episodes ``hybrid`` lost (every start) in category ``name`` (or every category), and
+    how many of those were at levels where ``lqr`` lost an operating-region episode too; None
+    where the two did not run the same sweep."""
+    theirs = {category.name: category for category in lqr.categories}
+    lost = where = 0
+    for category in hybrid.categories:
+        if name not in (SCORE, category.name):
+            continue
+        reference = theirs.get(category.name)
+        if reference is None or len(reference.levels) != len(category.levels):
+            return None
+        for mine, its in zip(category.levels, reference.levels, strict=True):
+            same = mine.constant == its.constant and math.isclose(mine.level, its.level)
+            if not same:
+                return None
+            held, total = mine.held_count()
+            lqr_held, lqr_total = its.held_count(OPERATING)
+            lost += total - held
+            where += (total - held) if lqr_held < lqr_total else 0
+    return lost, where
+
+
+def _lost_where_lqr_loses(
+    results: list[ProtocolResult], lqr: list[ProtocolResult], name: str
+) -> dict[str, int] | None:
+    """``{"lost": N, "where_lqr_loses": M}`` summed over the hybrid's seeds (:func:`_lost`),
+    None without a single LQR run on the same sweep."""
+    counts = [_lost(result, lqr[0], name) for result in results] if len(lqr) == 1 else [None]
+    if any(count is None for count in counts):
+        return None
+    return {
+        "lost": sum(count[0] for count in counts),
+        "where_lqr_loses": sum(count[1] for count in counts),
+    }
+
+
 def protocol_verdicts(evaluations: Evaluations) -> Rows:
     """Rows, per system, hybrid and category (and the robustness score): whether the hybrid
     is at least as robust as its LQR (from the operating region, where the claim is made: the
@@ -298,9 +336,11 @@ def protocol_verdicts(evaluations: Evaluations) -> Rows:
                     "versus_lqr": None,
                     "versus_baseline": None,
                     "operating_as_lqr": as_lqr,
+                    "lost": None,
                 }
                 if lqr is not None:
                     reference = by_controller[lqr]
+                    row["lost"] = _lost_where_lqr_loses(results, reference, name)
                     value = float(np.mean([_score(r, name, OPERATING) for r in reference]))
                     near = [_score(result, name, OPERATING) for result in results]
                     row["versus_lqr"] = _versus_lqr(near, value)
@@ -335,6 +375,7 @@ def verdict_table(rows: Rows) -> list[str]:
         "verdict",
         "P(> its baseline), all starts",
         "verdict",
+        "lost where its LQR loses",
     ]
     table = []
     for row in rows:
@@ -353,9 +394,15 @@ def verdict_table(rows: Rows) -> list[str]:
                     baseline["probability"], baseline["ci_low"], baseline["ci_high"], False
                 ),
                 "-" if baseline is None else baseline["verdict"],
+                _lost_cell(row["lost"]),
             ]
         )
     return markdown_table(headers, table)
+
+
+def _lost_cell(lost: dict[str, int] | None) -> str:
+    """``M of N``: of the hybrid's N lost episodes, the M at levels where its LQR lost too."""
+    return "-" if lost is None else f"{lost['where_lqr_loses']} of {lost['lost']}"
 
 
 def _categories_where(rows: Rows, comparison: str, verdict: str) -> list[str]:
@@ -369,8 +416,9 @@ def _categories_where(rows: Rows, comparison: str, verdict: str) -> list[str]:
 
 def verdict_sentences(rows: Rows) -> list[str]:
     """Per hybrid: in how many categories it is at least as robust as its LQR (not ``below``)
-    and more robust than its baseline (``above``), naming the exceptions, and whether from the
-    operating region it held its LQR's very episodes (by construction)."""
+    and more robust than its baseline (``above``), naming the exceptions; how many of its lost
+    episodes were at levels where its LQR lost too; and whether from the operating region it
+    held its LQR's very episodes (by construction)."""
     lines = []
     for controller in dict.fromkeys(row["controller"] for row in rows):
         mine = [row for row in rows if row["controller"] == controller and row["category"] != SCORE]
@@ -387,6 +435,13 @@ def verdict_sentences(rows: Rows) -> list[str]:
             parts.append(
                 f"more robust than its baseline in {len(above)} of {len(mine)}"
                 + (f" ({', '.join(above)})" if above else "")
+            )
+        total = [row for row in rows if row["controller"] == controller and row not in mine]
+        lost = total[0]["lost"] if total else None
+        if lost is not None and lost["lost"]:
+            parts.append(
+                f"{lost['where_lqr_loses']} of its {lost['lost']} lost episodes were at levels "
+                "where its LQR lost operating-region episodes too"
             )
         if mine[0]["operating_as_lqr"]:
             parts.append(
@@ -407,7 +462,11 @@ VERDICT_METHOD = (
     "et al. 2021), with its 95% interval. Verdicts: above or below where the interval excludes "
     "0 (or 0.5), unresolved where it does not, equal where every score is the same; with fewer "
     "than 3 seeds no interval (n < 3). A hybrid that held its LQR's very episodes from the "
-    "operating region is its LQR there by construction, and is said so."
+    "operating region is its LQR there by construction, and is said so. Lost where its LQR "
+    "loses: of the hybrid's lost episodes (every start, summed over seeds), those at levels "
+    "where its LQR lost an operating-region episode too. Each sweep ends where the LQR holds "
+    "none, and near the operating point the hybrid is its LQR, so losses there are the "
+    "design's, not the learned part's (a coincidence of levels, not a measured cause)."
 )
 """The verdicts' opening paragraph."""
 
