@@ -371,11 +371,18 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
             "ddpg_hybrid_roa": runs("ddpg_hybrid_roa", [lqr, lqr, lqr]),
             "ddpg_baseline": runs("ddpg_baseline", [[none_] * 4, [one, none_, both, both]]),
             "pilco_hybrid": runs("pilco_hybrid", [[none_] * 4] * 3),
+            # a paper-relevance hybrid with its LQR's very episodes: evidence, not construction
+            "sac_hybrid": runs("sac_hybrid", [lqr, lqr, lqr]),
         }
     }
     rows = protocol_section.protocol_verdicts(evaluations)
     by = {(row["controller"], row["category"]): row for row in rows}
-    assert {row["controller"] for row in rows} == {"ddpg_hybrid", "ddpg_hybrid_roa", "pilco_hybrid"}
+    assert {row["controller"] for row in rows} == {
+        "ddpg_hybrid",
+        "ddpg_hybrid_roa",
+        "pilco_hybrid",
+        "sac_hybrid",
+    }
     noise, push = by["ddpg_hybrid", "observation_noise"], by["ddpg_hybrid", "push"]
     assert noise["lqr"] == "linear" and noise["baseline"] == "ddpg_baseline"
     # from the operating region (the swing-up episodes all fail): the LQR holds 3/4 and 1/4
@@ -404,6 +411,8 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
         f"- {label('ddpg_hybrid')}: at least as robust as its LQR (linear (LQR at dt)) in 2 of 2"
     )
     assert "by construction" in lines[1] and "by construction" not in lines[0]
+    assert by["sac_hybrid", "robustness"]["operating_as_lqr"]
+    assert "evidence, not construction" in lines[3] and "holds by construction" not in lines[3]
     table = "\n".join(protocol_section.verdict_table(rows))
     assert "| +0.25 [+0.25, +0.25] | above |" in table
     # lost episodes (every start; the swing-up ones all fail) at levels where the LQR lost an
