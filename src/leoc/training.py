@@ -48,7 +48,7 @@ import torch
 
 from leoc.io import save_figure_atomic, write_csv_atomic, write_json_atomic
 from leoc.systems.base import System
-from leoc.systems.rollout import Controller, simulate
+from leoc.systems.rollout import Controller, simulate, simulate_settings
 
 EVAL_SEED_OFFSET = 10_000
 CONFIG_FILE = "config.json"
@@ -96,6 +96,26 @@ def evaluate_episodes(system: System, controller: Controller, starts: np.ndarray
         for i in range(len(starts))
     ]
     returns = batch.total_rewards
+    return Evaluation(float(returns.mean()), float(returns.std()), returns.tolist(), hold_steps)
+
+
+def evaluate_on_plants(
+    system: System, controller: Controller, starts: np.ndarray, plants: Sequence[Sequence[Any]]
+) -> Evaluation:
+    """:func:`evaluate_episodes` with episode ``i`` on its own perturbed plant: ``plants[i]``,
+    a sequence of :class:`~leoc.systems.perturbations.Perturbation` (every episode at once,
+    :func:`~leoc.systems.rollout.simulate_settings`)."""
+    if len(plants) != len(starts):
+        raise ValueError(
+            f"plants: expected one per start ({len(starts)}), found {len(plants)}"
+        )
+    settings = [(starts[i : i + 1], tuple(plant)) for i, plant in enumerate(plants)]
+    batches = simulate_settings(system, controller, settings)
+    hold_steps = [
+        system.hold_step(batch.states[0, 1:], terminated=bool(batch.terminated[0]))
+        for batch in batches
+    ]
+    returns = np.array([float(batch.total_rewards[0]) for batch in batches])
     return Evaluation(float(returns.mean()), float(returns.std()), returns.tolist(), hold_steps)
 
 

@@ -65,6 +65,9 @@ DESCRIPTION = (
     "robustness_protocol.md); the evaluations stay on the nominal plant."
 )
 PERTURBATION_FLAGS = {"fixed": "--perturb", "randomised": "--randomise"}
+#: ``--select-on``'s choices (``DDPGConfig.selection_plants``; kept here so that the parser
+#: does not import the learners).
+SELECTION_PLANTS = ("nominal", "training")
 """Each :class:`~leoc.systems.TrainingPerturbations` field and the ``leoc train`` flag that
 fills it."""
 
@@ -163,6 +166,15 @@ def add_perturbation_arguments(train: argparse.ArgumentParser) -> None:
         help="domain randomisation: each training episode draws the level of CATEGORY "
         "uniformly between none and MAX (-MAX to MAX for actuator_gain and parameter_error, "
         "whole steps for action_delay), from --seed; repeatable",
+    )
+    group.add_argument(
+        "--select-on",
+        choices=SELECTION_PLANTS,
+        default=None,
+        help="DDPG/TD3/SAC: the plants model selection judges on: the nominal evaluation "
+        "episodes (default), or, with --randomise, the same starts on plants of the training "
+        "distribution (one stratum of each range per episode, fixed for the run); the "
+        "learning curve stays nominal",
     )
 
 
@@ -354,7 +366,27 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     perturbations = perturbations_of(args)
     if perturbations is not None:  # the flags replace a profile's training perturbations
         settings["training_perturbations"] = perturbations
+    select_on = getattr(args, "select_on", None)
+    if select_on is not None:
+        check_select_on(args.algo, select_on, settings)
+        settings["selection_plants"] = select_on
     return settings
+
+
+def check_select_on(algo: str, select_on: str, settings: dict[str, Any]) -> None:
+    """Refuse ``--select-on`` for PILCO (no model selection) and ``--select-on training``
+    without randomised training perturbations (no plants to draw from)."""
+    if algo not in MODEL_FREE_ALGOS:
+        raise ValueError(
+            f"--select-on: expected it only with --algo {', '.join(MODEL_FREE_ALGOS)} (they "
+            f"select a model among their evaluations), found --algo {algo}"
+        )
+    randomised = (settings.get("training_perturbations") or {}).get("randomised")
+    if select_on == "training" and not randomised:
+        raise ValueError(
+            "--select-on: expected 'training' only with --randomise (the training distribution "
+            "to draw the selection plants from), found no randomised perturbation"
+        )
 
 
 def perturbations_of(args: argparse.Namespace) -> dict[str, Any] | None:
@@ -473,6 +505,11 @@ def run_gym(args: argparse.Namespace) -> int:
             f"--variant, --profile: expected neither for a gymnasium env (leoc's settings, "
             f"GYM_DEFAULTS), found --variant {args.variant} --profile {args.profile}"
         )
+    if getattr(args, "select_on", None) is not None:
+        raise ValueError(
+            f"--select-on: expected it only for a leoc system (it needs --randomise), found "
+            f"--select-on {args.select_on} for {args.system}"
+        )
     if getattr(args, "perturb", None) or getattr(args, "randomise", None):
         raise ValueError(
             "--perturb, --randomise: expected neither for a gymnasium env (leoc's perturbations "
@@ -537,4 +574,12 @@ def announce_perturbations(settings: dict[str, Any], quiet: bool) -> None:
     from leoc.systems import TrainingPerturbations
 
     spec = TrainingPerturbations.from_dict(record)
-    print(f"training under perturbation: {spec.describe()} (evaluations on the nominal plant)")
+    selection = (
+        "; model selection on plants of the training distribution"
+        if settings.get("selection_plants") == "training"
+        else ""
+    )
+    print(
+        f"training under perturbation: {spec.describe()} (evaluations on the nominal "
+        f"plant{selection})"
+    )

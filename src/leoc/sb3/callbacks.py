@@ -17,6 +17,8 @@ in the largest share of its episodes, the highest mean return among those (the e
 the success test of a swing-up is holding, and a return alone can prefer a fast swing that falls
 over to a slower one that holds. :func:`selection_key` and :func:`selection_start` are the rule,
 shared with the ablation's re-selection (:func:`leoc.experiments.ablation.delivered_steps`).
+Every rule judges the curve's nominal evaluation episodes, unless the run selects on plants of
+its training distribution (``selection_plants``: :class:`LearningCurveCallback`).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from __future__ import annotations
 import copy
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -33,7 +35,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from leoc.progress import evaluation_text, is_terminal, steps_line
 from leoc.sb3.config import MODEL_SELECTIONS
 from leoc.sb3.physical import PhysicalPolicy, physical_policy
-from leoc.training import Evaluation, curve_row, evaluate_episodes
+from leoc.training import Evaluation, curve_row, evaluate_episodes, evaluate_on_plants
 
 __all__ = [
     "MODEL_SELECTIONS",
@@ -114,6 +116,10 @@ class LearningCurveCallback(BaseCallback):
         (:func:`selection_start`).
     label : str
         The learner's name in the progress lines (``ddpg``, ``td3``, ``sac``).
+    selection_plants : sequence of sequences of Perturbation, optional
+        One perturbed plant per start: model selection then judges on these episodes
+        (:func:`leoc.training.evaluate_on_plants`) rather than on the curve's nominal ones,
+        whose row records them under ``"selection"`` (``DDPGConfig.selection_plants``).
 
     Attributes
     ----------
@@ -138,6 +144,7 @@ class LearningCurveCallback(BaseCallback):
         model_selection: str = "final",
         selection_start: int = 0,
         label: str = "ddpg",
+        selection_plants: Sequence[Sequence[Any]] | None = None,
     ) -> None:
         if model_selection not in MODEL_SELECTIONS:
             raise ValueError(
@@ -156,6 +163,14 @@ class LearningCurveCallback(BaseCallback):
         self.model_selection = model_selection
         self.selection_start = int(selection_start)
         self.label = label
+        self.selection_plants = None if selection_plants is None else list(selection_plants)
+        if self.selection_plants is not None and len(self.selection_plants) != len(
+            self.eval_starts
+        ):
+            raise ValueError(
+                f"selection_plants: expected one per evaluation start ({len(self.eval_starts)}),"
+                f" found {len(self.selection_plants)}"
+            )
         self.selected_steps: int | None = None
         self._selected_key: tuple | None = None
         self._selected_actor: dict[str, Any] | None = None
@@ -231,14 +246,24 @@ class LearningCurveCallback(BaseCallback):
         result = evaluate_episodes(self.system, policy, self.eval_starts)
         steps = int(self.num_timesteps)
         self._last_eval_step = steps
-        self.curve.append(curve_row(steps, self.system.dt, result))
+        row = curve_row(steps, self.system.dt, result)
+        judged = result
+        if self.selection_plants is not None:
+            judged = evaluate_on_plants(self.system, policy, self.eval_starts, self.selection_plants)
+            row["selection"] = {
+                "mean_return": judged.mean_return,
+                "held_fraction": judged.held_fraction,
+                "returns": judged.returns,
+                "hold_steps": judged.hold_steps,
+            }
+        self.curve.append(row)
         if result.mean_return > self.best_return:
             self.best_return = result.mean_return
             self.best_policy = policy
             if self.save_best is not None:
                 self.save_best(self.model)
         self._last = result
-        self._consider_for_selection(steps, result)
+        self._consider_for_selection(steps, judged)
         if self._bar is not None:
             self._bar.set_postfix(
                 eval_return=f"{result.mean_return:.1f}", held=f"{result.held_fraction:.0%}"

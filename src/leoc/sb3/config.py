@@ -86,6 +86,8 @@ CRITIC_LOSSES = ("mse", "huber")
 CRITIC_ACTION_UNITS = ("normalised", "physical")
 HIDDEN_INITS = ("torch", "tf_agents")
 MODEL_SELECTIONS = ("final", "best_last_third", "best_held")
+#: Where model selection's evaluation episodes run (``DDPGConfig.selection_plants``).
+SELECTION_PLANTS = ("nominal", "training")
 
 # ------------------------------------------------------------------------------------------- SAC
 #: :meth:`DDPGConfig.for_system` defaults of ``algo="sac"`` where SAC's differ from the paper's
@@ -347,6 +349,14 @@ class DDPGConfig:
         maxima, each episode's plant drawn from the run's seed); empty: the nominal plant.
         The evaluation episodes run on the nominal plant. Recorded in ``config.json`` only
         when not empty (a nominal run's config is as before).
+    selection_plants : {"nominal", "training"}
+        The plants ``model_selection`` judges on: the learning curve's nominal evaluation
+        episodes (the default), or, for a run with randomised ``training_perturbations``,
+        as many episodes from the same starts on plants of the training distribution, one
+        stratum of each range per episode, the same plants at every evaluation
+        (:meth:`leoc.systems.TrainingPerturbations.selection_draws`); the curve stays nominal
+        and each row records the selection episodes' return and held share under
+        ``"selection"``. Recorded in ``config.json`` only when not ``"nominal"``.
     """
 
     system: str
@@ -388,6 +398,7 @@ class DDPGConfig:
     sac_action_noise: bool = False
     step_rules: dict[str, Any] = dataclasses.field(default_factory=dict)
     training_perturbations: dict[str, Any] = dataclasses.field(default_factory=dict)
+    selection_plants: str = "nominal"
 
     def __post_init__(self) -> None:
         from leoc.names import gym_env_id
@@ -444,6 +455,28 @@ class DDPGConfig:
         object.__setattr__(self, "training_perturbations", setting)
         self._check_authors_fields()
         self._check_algo_fields()
+        self._check_selection_plants()
+
+    def _check_selection_plants(self) -> None:
+        """``selection_plants``: one of :data:`SELECTION_PLANTS`; ``"training"`` needs a model
+        selection and randomised training perturbations to draw from."""
+        if self.selection_plants not in SELECTION_PLANTS:
+            raise ValueError(
+                f"selection_plants: expected one of {SELECTION_PLANTS}, found "
+                f"{self.selection_plants!r}"
+            )
+        if self.selection_plants == "nominal":
+            return
+        if self.model_selection == "final":
+            raise ValueError(
+                "selection_plants: expected 'nominal' with model_selection='final' (nothing is "
+                "selected), found 'training'"
+            )
+        if not self.training_perturbations.get("randomised"):
+            raise ValueError(
+                "selection_plants: expected 'training' only with randomised training "
+                f"perturbations, found {self.training_perturbations or 'the nominal plant'}"
+            )
 
     def _check_algo_fields(self) -> None:
         """Fields of another algorithm keep their defaults; SAC's own fields are valid."""
@@ -578,6 +611,8 @@ class DDPGConfig:
         data["hybrid"] = None if self.hybrid is None else self.hybrid.to_dict()
         if not self.training_perturbations:  # a nominal run's config is as it always was
             del data["training_perturbations"]
+        if self.selection_plants == "nominal":  # as every run before the field
+            del data["selection_plants"]
         return data
 
     @classmethod

@@ -264,6 +264,19 @@ def _episode_plants(config: DDPGConfig, plant: System, seed: int) -> Any:
     return None if spec.is_nominal else EpisodePlants(spec, plant, seed)
 
 
+def _selection_plants(config: DDPGConfig, plant: System, seed: int) -> list[Any] | None:
+    """The perturbations of each evaluation episode model selection judges on, for a run that
+    selects on its training distribution (``selection_plants="training"``); None: the
+    nominal evaluation episodes."""
+    from leoc.systems import TrainingPerturbations
+
+    if config.selection_plants == "nominal":
+        return None
+    spec = TrainingPerturbations.from_dict(config.training_perturbations)
+    draws = spec.selection_draws(plant, seed, config.eval_episodes)
+    return [draw.perturbations for draw in draws]
+
+
 def earlier_run(
     run_path: Path,
     config_dict: dict[str, Any],
@@ -337,6 +350,7 @@ def _learn(
             config.model_selection, config.total_steps, config.learning_starts
         ),
         label=algo,
+        selection_plants=_selection_plants(config, plant, seed),
     )
     checkpoint_path = run_path / CHECKPOINT_FILE
     checkpoint = CheckpointCallback(

@@ -28,6 +28,7 @@ from leoc.systems.pendulum import Pendulum, PendulumParams, pendulum_reward, pen
 from leoc.systems.perturbation_levels import (
     PUSHES_PER_EPISODE,
     RANDOMISATION_STREAM,
+    SELECTION_STREAM,
     TWO_SIDED_CATEGORIES,
     EpisodeDraw,
     EpisodePlants,
@@ -81,6 +82,7 @@ register_system("acrobot", Acrobot, replace=True)
 __all__ = [
     "PUSHES_PER_EPISODE",
     "RANDOMISATION_STREAM",
+    "SELECTION_STREAM",
     "TWO_SIDED_CATEGORIES",
     "EpisodeDraw",
     "EpisodePlants",

@@ -42,6 +42,17 @@ mapped to ``max * u``, ``max * (2 u - 1)`` (two-sided) or ``min(floor((max + 1) 
 pushes, which :class:`~leoc.systems.perturbations.PerturbedPlant` mixes with their kind, so
 every episode meets fresh noise). An episode's plant depends on ``s`` and ``k`` only, whatever
 ran before it: a resumed run meets the plants the uninterrupted run would have met.
+
+Selection plants. A DDPG/TD3/SAC run trained under randomisation may select its controller on
+plants of the training distribution (``selection_plants="training"`` of
+:class:`leoc.sb3.DDPGConfig`) rather than on the nominal one:
+:meth:`TrainingPerturbations.selection_draws` gives its ``n`` selection episodes their plants, the
+same at every evaluation (so evaluations compare), stratified so that few episodes still span
+each range: a Latin hypercube, episode ``k``'s uniform for entry ``j`` being
+``(p_j[k] + v_kj) / n`` with ``p_j`` a random permutation of ``0 .. n-1`` and ``v_kj`` uniform in
+``[0, 1)``, mapped to a level as above. Drawn from
+``default_rng(SeedSequence([s, SELECTION_STREAM]))``: the permutations in key order, then the
+``(n, R)`` offsets, then one noise seed per episode; fixed entries keep their level.
 """
 
 from __future__ import annotations
@@ -71,6 +82,7 @@ __all__ = [
     "CATEGORY_NAMES",
     "PUSHES_PER_EPISODE",
     "RANDOMISATION_STREAM",
+    "SELECTION_STREAM",
     "TWO_SIDED_CATEGORIES",
     "EpisodeDraw",
     "EpisodePlants",
@@ -87,6 +99,8 @@ TWO_SIDED_CATEGORIES: tuple[str, ...] = ("actuator_gain", "parameter_error")
 PUSHES_PER_EPISODE = 2.0
 #: The ``SeedSequence`` key of the training episodes' draws (module docstring).
 RANDOMISATION_STREAM = 43
+#: The ``SeedSequence`` key of the selection episodes' plants (module docstring).
+SELECTION_STREAM = 44
 SEED_SPAN = 2**32  # the episode's noise seed is drawn from [0, SEED_SPAN)
 PARAMETER_ERROR = "parameter_error"
 KINDS = ("fixed", "randomised")  # the two fields of TrainingPerturbations
@@ -328,6 +342,27 @@ class TrainingPerturbations:
             levels[key] = _drawn_level(key, maximum, float(uniform))
         perturbations = self.perturbations_at(system, levels, noise_seed, action_repeat)
         return EpisodeDraw(levels, noise_seed, perturbations)
+
+    def selection_draws(
+        self, system: System, seed: int, episodes: int, action_repeat: int = 1
+    ) -> list[EpisodeDraw]:
+        """The plants of the ``episodes`` selection episodes of a run seeded ``seed`` (module
+        docstring: one stratum of each randomised range per episode)."""
+        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes <= 0:
+            raise ValueError(f"episodes: expected a positive int, found {episodes!r}")
+        rng = np.random.default_rng(np.random.SeedSequence([seed, SELECTION_STREAM]))
+        strata = [rng.permutation(episodes) for _ in self.randomised]
+        offsets = rng.random((episodes, len(self.randomised)))
+        draws = []
+        for k in range(episodes):
+            levels = dict(self.fixed)
+            for j, (key, maximum) in enumerate(self.randomised):
+                uniform = (float(strata[j][k]) + float(offsets[k, j])) / episodes
+                levels[key] = _drawn_level(key, maximum, uniform)
+            noise_seed = int(rng.integers(SEED_SPAN))
+            found = self.perturbations_at(system, levels, noise_seed, action_repeat)
+            draws.append(EpisodeDraw(levels, noise_seed, found))
+        return draws
 
     def widest(self, system: System, action_repeat: int = 1) -> tuple[Perturbation, ...]:
         """The perturbations with every randomised entry at its maximum (the environment's
