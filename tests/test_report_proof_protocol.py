@@ -433,6 +433,17 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
     )
     assert protocol_section._lost(hybrid, moved, "push") is None
     assert protocol_section._lost(hybrid, moved, "observation_noise") == (4, 2)
+    # the LQR's very episodes: every level counts, the first and the last included
+    same = protocol_section._same_episodes
+    lqr_run = ProtocolResult.from_dict(_protocol("linear", lqr))
+    assert same(ProtocolResult.from_dict(_protocol("sac_hybrid", lqr)), lqr_run, "operating_region")
+    for index in (0, 3):
+        changed = [list(held) for held in lqr]
+        changed[index] = [not episode for episode in changed[index]]
+        other = ProtocolResult.from_dict(_protocol("sac_hybrid", changed))
+        assert not same(other, lqr_run, "operating_region"), index
+        assert same(other, lqr_run, "swing_up")  # the swing-up episodes all fail in both
+    assert not same(ProtocolResult.from_dict(_protocol("sac_hybrid", lqr)), moved, "swing_up")
 
 
 def test_a_verdict_without_an_interval_whose_mean_difference_is_zero_is_unresolved() -> None:

@@ -106,9 +106,7 @@ def evaluate_on_plants(
     a sequence of :class:`~leoc.systems.perturbations.Perturbation` (every episode at once,
     :func:`~leoc.systems.rollout.simulate_settings`)."""
     if len(plants) != len(starts):
-        raise ValueError(
-            f"plants: expected one per start ({len(starts)}), found {len(plants)}"
-        )
+        raise ValueError(f"plants: expected one per start ({len(starts)}), found {len(plants)}")
     settings = [(starts[i : i + 1], tuple(plant)) for i, plant in enumerate(plants)]
     batches = simulate_settings(system, controller, settings)
     hold_steps = [

@@ -249,7 +249,9 @@ class LearningCurveCallback(BaseCallback):
         row = curve_row(steps, self.system.dt, result)
         judged = result
         if self.selection_plants is not None:
-            judged = evaluate_on_plants(self.system, policy, self.eval_starts, self.selection_plants)
+            judged = evaluate_on_plants(
+                self.system, policy, self.eval_starts, self.selection_plants
+            )
             row["selection"] = {
                 "mean_return": judged.mean_return,
                 "held_fraction": judged.held_fraction,

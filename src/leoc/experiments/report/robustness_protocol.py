@@ -259,22 +259,14 @@ def _verdict(differences: np.ndarray, low: float | None, high: float | None, tie
     return "below" if high < tie else "unresolved"
 
 
-def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bool:
-    """Whether ``hybrid`` held exactly the episodes ``lqr`` held from ``kind`` starts, at every
-    level of every category."""
-    return all(
-        mine.held.get(kind) == theirs.held.get(kind)
-        for ours, its in zip(hybrid.categories, lqr.categories, strict=True)
-        for mine, theirs in zip(ours.levels, its.levels, strict=True)
-    )
-
-
-def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, int] | None:
-    """Episodes ``hybrid`` lost (every start) in category ``name`` (or every category), and
-    how many of those were at levels where ``lqr`` lost an operating-region episode too; None
-    where the two did not run the same sweep."""
+def _matched_levels(
+    hybrid: ProtocolResult, lqr: ProtocolResult, name: str = SCORE
+) -> list[tuple[Any, Any]] | None:
+    """The (hybrid level, LQR level) pairs of category ``name`` (or of every category), in
+    sweep order; None where the two did not run the same sweep (a category, a level or a
+    constant missing or different)."""
     theirs = {category.name: category for category in lqr.categories}
-    lost = where = 0
+    pairs = []
     for category in hybrid.categories:
         if name not in (SCORE, category.name):
             continue
@@ -282,13 +274,34 @@ def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, 
         if reference is None or len(reference.levels) != len(category.levels):
             return None
         for mine, its in zip(category.levels, reference.levels, strict=True):
-            same = mine.constant == its.constant and math.isclose(mine.level, its.level)
-            if not same:
+            if mine.constant != its.constant or not math.isclose(mine.level, its.level):
                 return None
-            held, total = mine.held_count()
-            lqr_held, lqr_total = its.held_count(OPERATING)
-            lost += total - held
-            where += (total - held) if lqr_held < lqr_total else 0
+            pairs.append((mine, its))
+    return pairs
+
+
+def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bool:
+    """Whether ``hybrid`` held exactly the episodes ``lqr`` held from ``kind`` starts, at every
+    level of every category (False where the sweeps differ)."""
+    pairs = _matched_levels(hybrid, lqr)
+    return pairs is not None and all(
+        mine.held.get(kind) == its.held.get(kind) for mine, its in pairs
+    )
+
+
+def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, int] | None:
+    """Episodes ``hybrid`` lost (every start) in category ``name`` (or every category), and
+    how many of those were at levels where ``lqr`` lost an operating-region episode too; None
+    where the two did not run the same sweep."""
+    pairs = _matched_levels(hybrid, lqr, name)
+    if pairs is None:
+        return None
+    lost = where = 0
+    for mine, its in pairs:
+        held, total = mine.held_count()
+        lqr_held, lqr_total = its.held_count(OPERATING)
+        lost += total - held
+        where += (total - held) if lqr_held < lqr_total else 0
     return lost, where
 
 
@@ -436,7 +449,9 @@ def verdict_sentences(rows: Rows) -> list[str]:
                 f"more robust than its baseline in {len(above)} of {len(mine)}"
                 + (f" ({', '.join(above)})" if above else "")
             )
-        total = [row for row in rows if row["controller"] == controller and row not in mine]
+        total = [
+            row for row in rows if row["controller"] == controller and row["category"] == SCORE
+        ]
         lost = total[0]["lost"] if total else None
         if lost is not None and lost["lost"]:
             parts.append(
