@@ -588,3 +588,23 @@ def test_run_labels_name_runs_as_simulate_does_and_deepen_only_where_names_colli
     }
     first, second = (str(tmp_path / f"seed{s}" / "train") for s in (0, 1))
     assert run_labels([first, second]) == {first: "seed0/train", second: "seed1/train"}
+
+
+def test_train_threads_sets_torchs_thread_count_and_refuses_zero(tmp_path, capsys) -> None:
+    """``--threads N`` is torch.set_num_threads(N) for the run (set before anything else, so a
+    refused run shows it too); 0 is an argparse error naming the flag."""
+    import torch
+
+    before = torch.get_num_threads()
+    wanted = 1 if before != 1 else 2
+    try:
+        command = ["train", "pendulum", "--algo", "sac", "--out", str(tmp_path / "run")]
+        code = main([*command, "--threads", str(wanted), "--select-on", "training"])
+        assert code == 2 and torch.get_num_threads() == wanted
+    finally:
+        torch.set_num_threads(before)
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main([*command, "--threads", "0"])
+    assert "--threads" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

@@ -124,6 +124,14 @@ def add_parser(commands: Any) -> None:
         "(default: refuse, naming the settings that differ)",
     )
     train.add_argument("--quiet", action="store_true", help="no progress output")
+    train.add_argument(
+        "--threads",
+        type=positive_int,
+        help="torch threads of this run (default: torch's own, one per core); give 1 to each "
+        "of several runs started side by side, which otherwise contend for the cores (two "
+        "SAC runs on 2 cores: 4 against 23 steps/s each). Not recorded: a run resumes at any "
+        "count, and its numbers may differ in the last bits between counts",
+    )
     add_env_option(train, f"{GYM_PREFIX}ENV_ID only, saved in the run's config")
     add_perturbation_arguments(train)
     train.set_defaults(run=run)
@@ -455,6 +463,7 @@ def run(args: argparse.Namespace) -> int:
     from leoc.learners import get_learner
     from leoc.policies.spec import with_hybrid_overrides
 
+    set_threads(getattr(args, "threads", None))
     if gym_env_id(args.system) is not None:
         return run_gym(args)
     if getattr(args, "env_option", None):
@@ -489,6 +498,14 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(message) from error
     print(f"run folder: {result.run_dir}")
     return 0
+
+
+def set_threads(threads: int | None) -> None:
+    """``torch.set_num_threads(threads)`` where ``--threads`` was given."""
+    if threads is not None:
+        import torch
+
+        torch.set_num_threads(threads)
 
 
 def run_gym(args: argparse.Namespace) -> int:
