@@ -69,8 +69,6 @@ def print_matrix(name: str, matrix: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if gym_env_id(args.system) is not None:
-        from leoc.cli._gym import run_gym_lqr
-
         return run_gym_lqr(args)
     from leoc.control import design_lqr
     from leoc.experiments.linear import design_summary
@@ -114,3 +112,71 @@ def run(args: argparse.Namespace) -> int:
         f"{margins.gain_crossover_frequency:.3f} rad/s"
     )
     return 0
+
+
+def run_gym_lqr(args: argparse.Namespace) -> int:
+    """``leoc lqr gym:ENV_ID``: the discrete LQR of the env's own step (central differences,
+    :func:`leoc.sb3.gym_plant`) about its default operating point, with the error bounds."""
+    import numpy as np
+
+    from leoc.gym_adapter import linearise_env
+    from leoc.sb3.gym import gym_plant, make_gym_env
+
+    if args.method != "discrete" or args.action_repeat != 1:
+        raise ValueError(
+            f"--method, --action-repeat: expected discrete and 1 for a gymnasium env (the "
+            f"discrete LQR of its own step), found {args.method} and {args.action_repeat}"
+        )
+    env_id = str(gym_env_id(args.system))
+    env = make_gym_env(env_id)
+    plant = gym_plant(env, env_id, None, args.q, args.r)
+    lin, lqr = linearise_env(env, plant.state, plant.action), plant.lqr  # plant's, again
+    dt = float(env.unwrapped.dt)
+    env.close()
+    eigenvalues = lqr.closed_loop_eigenvalues
+    summary = {
+        "system": args.system,
+        "dt": dt,
+        "state": lqr.state.tolist(),
+        "action": lqr.action.tolist(),
+        "A_d": lin.A_d.tolist(),
+        "B_d": lin.B_d.tolist(),
+        "error_A": float(np.max(lin.error_A)),
+        "error_B": float(np.max(lin.error_B)),
+        "Q": lqr.Q.tolist(),
+        "R": lqr.R.tolist(),
+        "K": lqr.K.tolist(),
+        "W": plant.gain.tolist(),
+        "b": plant.bias.tolist(),
+        "closed_loop_eigenvalues": [[z.real, z.imag] for z in eigenvalues],
+        "spectral_radius": float(np.max(np.abs(eigenvalues))),
+        "observation_jacobian_error": plant.jacobian_error,
+        "observation_error": plant.observation_error,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    _print_gym_lqr(summary, plant)
+    return 0
+
+
+def _print_gym_lqr(summary: dict[str, Any], plant: Any) -> None:
+    """The text of ``leoc lqr gym:ENV_ID``."""
+    print(
+        f"LQR design for {summary['system']} (discrete, central differences of the env's own "
+        f"step), dt = {summary['dt']} s; operating state {summary['state']}, action "
+        f"{summary['action']}"
+    )
+    for name in ("A_d", "B_d", "Q", "R", "K"):
+        print_matrix(name + (" (u = u_eq - K (x - x_eq))" if name == "K" else ""), summary[name])
+    print(f"largest error bound of A_d: {summary['error_A']:.3g}, of B_d: {summary['error_B']:.3g}")
+    print_matrix("W (G(o) = W o + b, on the observation)", plant.gain)
+    print_matrix("b", plant.bias)
+    eigenvalues = plant.lqr.closed_loop_eigenvalues
+    print(f"closed-loop eigenvalues: {', '.join(f'{z:.4f}' for z in eigenvalues)}")
+    radius = summary["spectral_radius"]
+    print(f"spectral radius: {radius:.6f} (stable: {radius < 1})")
+    print(
+        f"observation map: Jacobian error {plant.jacobian_error:.3g}, observation error "
+        f"{plant.observation_error:.3g} (relative, at the env's default starts)"
+    )
