@@ -30,6 +30,7 @@ def _proof(rho, share, lqr_share, offset=(0.0, 0.0), lyapunov="lqr", cover=None,
         "box_share": share,
         "lqr_box_share": lqr_share,
         "box_share_ratio": share / lqr_share,
+        "volume_ratio": more.get("volume"),
         "offset": list(offset),
         "lyapunov": lyapunov,
         "limited_by": more.get("limit", "decrease"),
@@ -55,9 +56,9 @@ def _proof_evaluations() -> dict:
     with an offset equilibrium on one seed and none found on the other, and the LQR (its entry
     None)."""
     hybrid = [
-        _proof(4.0, 0.60, 0.60),
-        _proof(2.0, 0.30, 0.60, limit="budget"),
-        _proof(9.0, 0.66, 0.60, lyapunov="own"),
+        _proof(4.0, 0.60, 0.60, volume=1.0),
+        _proof(2.0, 0.30, 0.60, limit="budget", volume=0.25),
+        _proof(9.0, 0.66, 0.60, lyapunov="own", volume=1.46),
     ]
     roa = [
         _proof(4.0, 0.60, 0.60, cover=0.5),
@@ -115,6 +116,8 @@ def test_the_proved_region_table_is_the_saved_entries_read_by_hand() -> None:
     assert hybrid["share of the box"] == "60% [30%, 66%]"
     assert hybrid["LQR's share"] == "60%"
     assert hybrid["ratio to the LQR's share"] == "1x [0.5x, 1.1x]"
+    assert hybrid["volume / the LQR's"] == "1x [0.25x, 1.46x]"
+    assert cells["DDPG baseline"]["volume / the LQR's"] == "–"  # no run recorded it
     assert hybrid["V kept"] == "lqr 2/3, own 1/3"
     assert hybrid["limited by"] == "decrease 2/3, budget 1/3"
     assert hybrid["x* - a"] == "0"

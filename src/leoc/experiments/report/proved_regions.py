@@ -51,6 +51,7 @@ HEADERS = (
     "share of the box",
     "LQR's share",
     "ratio to the LQR's share",
+    "volume / the LQR's",
     "x* - a",
     "limited by",
     "by construction",
@@ -75,6 +76,7 @@ def _by_construction(entry: dict[str, Any]) -> bool:
 def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
     """One controller's proved regions over its seeds (``entries``, seed order)."""
     ratios = [e["box_share_ratio"] for e in entries if e["box_share_ratio"] is not None]
+    volumes = [e["volume_ratio"] for e in entries if e.get("volume_ratio") is not None]
     found = [e for e in entries if e.get("equilibrium_found", True)]
     return {
         "system": system,
@@ -85,6 +87,7 @@ def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[st
         "lqr_box_share": _spread([e["lqr_box_share"] for e in entries]),
         "box_share_ratio": _spread(ratios) if ratios else None,
         "box_share_ratios": [e["box_share_ratio"] for e in entries],
+        "volume_ratio": _spread(volumes) if volumes else None,
         "offset_median": np.median([e["offset"] for e in found], axis=0).tolist()
         if found
         else None,
@@ -101,10 +104,11 @@ def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[st
 
 def proved_region_summary(evaluations: Evaluations) -> Rows:
     """Rows: system, controller, over the seeds with an entry: the proved level, the proved
-    set's share of the basin box, the LQR's, their ratio (median, least, largest), the
-    equilibrium offset (median per state over the seeds whose search found one, None if none
-    did), the V kept and what limited the proof (counts), and per seed whether the proved set
-    lies in the hybrid's flat top (by construction)."""
+    set's share of the basin box, the LQR's, their ratio, the proved volume over the LQR's
+    (median, least, largest; None where no run recorded it), the equilibrium offset (median
+    per state over the seeds whose search found one, None if none did), the V kept and what
+    limited the proof (counts), and per seed whether the proved set lies in the hybrid's flat
+    top (by construction)."""
     rows = []
     for system, by_controller in evaluations.items():
         for controller in ordered(by_controller):
@@ -215,6 +219,7 @@ def _cells(row: dict[str, Any]) -> list[str]:
         _span(row["box_share"], percent),
         _span(row["lqr_box_share"], percent),
         _span(row["box_share_ratio"], lambda value: f"{FMT.format(value)}x"),
+        _span(row["volume_ratio"], lambda value: f"{FMT.format(value)}x"),
         _offset(row),
         _counts(row["limited_by"], row["n_runs"]),
         _basis(row),
@@ -257,7 +262,9 @@ METHOD = (
     "('V kept'); rho is the proved level, in the units of that V. Beside it, the proved region "
     "of its LQR (at the controller's period, saturated as the controller's output is: PILCO's "
     "sin, else the clip) on the same seeded samples of the basin box of the region-of-"
-    "attraction section: the share of the box inside each proved set, and their ratio. "
+    "attraction section: the share of the box inside each proved set, and their ratio; and the "
+    "proved ellipsoid's volume over the LQR's (exact, from rho and det P; it tells apart "
+    "controllers whose proved sets both cover the whole box, and counts states outside it). "
     "x* - a is the equilibrium's offset (a baseline's steady-state error; 0 for a hybrid, "
     "whose pi(a) = G(a)). Cells: median [least, largest] over seeds. A hybrid whose proved set "
     "lies inside its relevance's flat top (r == 1 on all of it: the ROA relevance) is its "
