@@ -219,7 +219,11 @@ def test_the_light_name_tables_agree_with_the_registry_and_profiles() -> None:
     from leoc.policies import RELEVANCE_DESIGNS
 
     assert names.LEARNER_NAMES == learner_names()
-    assert set(names.FRAMEWORKS) == {get_learner(name).settings_of for name in learner_names()}
+    # reproduce's learners: every controller name's (the linear references aside), each a
+    # registered learner; the learners whose settings they take are among them
+    learners = {names.parse_controller(c).learner for c in names.CONTROLLERS} - {names.LINEAR}
+    assert set(names.FRAMEWORKS) == learners and learners <= set(learner_names())
+    assert {get_learner(name).settings_of for name in names.FRAMEWORKS} <= learners
     assert names.RELEVANCE_NAMES == tuple(RELEVANCE_DESIGNS)
     for name, (env_id, entry_point) in names.BUILTIN_ENV_IDS.items():
         assert gym.registry[env_id].max_episode_steps == make_system(name).episode_steps

@@ -364,10 +364,13 @@ def test_runs_are_queued_longest_first() -> None:
     assert specs[0].key == "cartpole/sac_hybrid_roa/seed0"
     assert {spec.framework for spec in specs[-6:]} == {"linear"}
     # a profile without measured costs falls back on each framework's cost: SAC, PILCO, DDPG,
-    # linear
+    # TD3 (DDPG's, whose settings it takes: after DDPG's on the tie), linear
     smoke = run_specs(get_profile("smoke"), ("pendulum",), CONTROLLERS)
     order = list(dict.fromkeys(spec.framework for spec in smoke))
-    assert order == ["sac", "pilco", "ddpg", "linear"]
+    assert order == ["sac", "pilco", "ddpg", "td3", "linear"]
+    td3 = next(spec for spec in smoke if spec.framework == "td3")
+    ddpg = next(spec for spec in smoke if spec.framework == "ddpg")
+    assert get_profile("smoke").training_seconds(td3) == get_profile("smoke").training_seconds(ddpg)
 
 
 def _mountain_car_responses(system) -> dict[str, np.ndarray]:

@@ -63,6 +63,10 @@ CONTROLLERS = (
     "ddpg_hybrid",
     "ddpg_hybrid_roa",
     "ddpg_hybrid_lyapunov",
+    "td3_baseline",
+    "td3_hybrid",
+    "td3_hybrid_roa",
+    "td3_hybrid_lyapunov",
     "sac_baseline",
     "sac_hybrid",
     "sac_hybrid_roa",
@@ -74,11 +78,11 @@ CONTROLLERS = (
     # has the paper's or the ROA relevance, leoc.pilco.config), so such a run could not train
 )
 """Every controller ``leoc reproduce`` knows, in report order: per framework its baseline, then
-its hybrids with the paper's, the ROA and (DDPG and SAC only) the Lyapunov relevance."""
+its hybrids with the paper's, the ROA and (DDPG, TD3 and SAC only) the Lyapunov relevance."""
 LEARNER_NAMES = ("pilco", "ddpg", "td3", "sac")
 """leoc's learners (``leoc.learners.learner_names()``, registration order): ``leoc train
 --algo``'s choices."""
-FRAMEWORKS = ("ddpg", "sac", "pilco")
+FRAMEWORKS = ("ddpg", "td3", "sac", "pilco")
 """The learners of ``leoc reproduce``'s trained controllers (each controller's name starts with
 one), in report order."""
 
@@ -154,9 +158,9 @@ def controller_framework(controller: str) -> str:
     return parse_controller(controller).learner
 
 
-REQUEST_ONLY_FRAMEWORKS = ("sac",)
+REQUEST_ONLY_FRAMEWORKS = ("td3", "sac")
 """Learners whose controllers ``leoc reproduce`` runs only when ``--controllers`` names them
-(the paper has no SAC)."""
+(the paper has no TD3 and no SAC)."""
 REQUEST_ONLY_RELEVANCES = ("roa", "lyapunov")
 """Relevance designs whose hybrids ``leoc reproduce`` runs only when ``--controllers`` names them
 (the paper's hybrids have the paper's relevance)."""
@@ -167,8 +171,8 @@ DEFAULT_CONTROLLERS = tuple(
     and controller_framework(name) not in REQUEST_ONLY_FRAMEWORKS
 )
 """What ``leoc reproduce`` runs unless ``--controllers`` says otherwise: the paper's controllers
-and the two linear references (the ROA- and Lyapunov-relevance hybrids and SAC's controllers are
-added on request)."""
+and the two linear references (the ROA- and Lyapunov-relevance hybrids and TD3's and SAC's
+controllers are added on request)."""
 PROFILE_NAMES = ("quick", "smoke", "paper")
 """The profiles of ``leoc reproduce`` (``leoc.experiments.profiles.PROFILES``, same order)."""
 VARIANT_NAMES = ("leoc", "authors")

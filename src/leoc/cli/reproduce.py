@@ -66,8 +66,9 @@ def add_parser(commands: Any) -> None:
         default=list(DEFAULT_CONTROLLERS),
         help="controllers to run (default: the two linear references and the paper's four; "
         "add ddpg_hybrid_roa / pilco_hybrid_roa for the ROA-relevance hybrids, "
-        "ddpg_hybrid_lyapunov / sac_hybrid_lyapunov for the Lyapunov-relevance hybrids (PILCO "
-        "has none), sac_baseline / sac_hybrid / sac_hybrid_roa for SAC at the DDPG budgets)",
+        "ddpg_hybrid_lyapunov / td3_hybrid_lyapunov / sac_hybrid_lyapunov for the Lyapunov-"
+        "relevance hybrids (PILCO has none), td3_baseline / td3_hybrid / td3_hybrid_roa for TD3 "
+        "and sac_baseline / sac_hybrid / sac_hybrid_roa for SAC, at the DDPG budgets)",
     )
     reproduce.set_defaults(run=run)
 

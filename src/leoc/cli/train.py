@@ -123,6 +123,14 @@ def add_parser(commands: Any) -> None:
         help="train afresh in the run folder even if it holds a run of another configuration "
         "(default: refuse, naming the settings that differ)",
     )
+    add_process_arguments(train)
+    add_env_option(train, f"{GYM_PREFIX}ENV_ID only, saved in the run's config")
+    add_perturbation_arguments(train)
+    train.set_defaults(run=run)
+
+
+def add_process_arguments(train: argparse.ArgumentParser) -> None:
+    """Add ``--quiet`` and ``--threads`` (how the run's process behaves) to ``train``."""
     train.add_argument("--quiet", action="store_true", help="no progress output")
     train.add_argument(
         "--threads",
@@ -132,9 +140,6 @@ def add_parser(commands: Any) -> None:
         "SAC runs on 2 cores: 4 against 23 steps/s each). Not recorded: a run resumes at any "
         "count, and its numbers may differ in the last bits between counts",
     )
-    add_env_option(train, f"{GYM_PREFIX}ENV_ID only, saved in the run's config")
-    add_perturbation_arguments(train)
-    train.set_defaults(run=run)
 
 
 def train_system(text: str) -> str:

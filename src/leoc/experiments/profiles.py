@@ -24,7 +24,7 @@ TRAINED_CONTROLLERS = tuple(name for name in CONTROLLERS if name not in LINEAR_C
 # The linear reference of each framework: the LQR designed and run at that framework's control
 # period (DDPG and SAC act every simulator step, PILCO holds each action for ``action_repeat``
 # steps).
-LINEAR_REFERENCE = {"ddpg": "linear", "sac": "linear", "pilco": "linear_pilco"}
+LINEAR_REFERENCE = {"ddpg": "linear", "td3": "linear", "sac": "linear", "pilco": "linear_pilco"}
 CONTROLLER_LABELS = {
     "linear": "linear (LQR at dt)",
     "linear_pilco": "linear (LQR at PILCO's period)",
@@ -36,10 +36,10 @@ CONTROLLER_LABELS = {
     "sac_hybrid": "SAC hybrid",
     "sac_hybrid_roa": "SAC hybrid (ROA relevance)",
     "sac_hybrid_lyapunov": "SAC hybrid (Lyapunov relevance)",
-    # TD3 runs in the ablation harness only (leoc reproduce has no TD3 controllers)
     "td3_baseline": "TD3 baseline",
     "td3_hybrid": "TD3 hybrid",
     "td3_hybrid_roa": "TD3 hybrid (ROA relevance)",
+    "td3_hybrid_lyapunov": "TD3 hybrid (Lyapunov relevance)",
     "pilco_baseline": "PILCO baseline",
     "pilco_hybrid": "PILCO hybrid",
     "pilco_hybrid_roa": "PILCO hybrid (ROA relevance)",
@@ -234,7 +234,10 @@ class Profile:
         same = [v for k, v in self.run_seconds.items() if k.endswith(f"/{spec.controller}")]
         if same:
             return sum(same) / len(same)
-        return FALLBACK_RUN_SECONDS[spec.framework]
+        if spec.framework in FALLBACK_RUN_SECONDS:
+            return FALLBACK_RUN_SECONDS[spec.framework]
+        # a learner with no study of its own (TD3) costs as the one whose settings it takes
+        return FALLBACK_RUN_SECONDS[get_learner(spec.framework).settings_of]
 
     def evaluation_cost(self, spec: RunSpec) -> float:
         """What the proof and the protocol add to ``spec`` [s]: :attr:`evaluation_seconds` of
@@ -392,14 +395,15 @@ QUICK_RUN_SECONDS = {
 # above were measured before they existed. The LQR's protocol at the paper's budget on one core
 # of the same machine (docs/user_guide/robustness_protocol.md's table); a learned controller's
 # protocol costs a factor more per episode (measured side by side on one loaded core, CPU time:
-# a DDPG actor 2.0x the LQR, a PILCO RBF policy at its period 1.4x; SAC's actor is DDPG's MLP);
+# a DDPG actor 2.0x the LQR, a PILCO RBF policy at its period 1.4x; TD3's and SAC's actors are
+# DDPG's MLP);
 # the quick budget's 5 levels x 2 episodes run 0.3x the paper's settings (CPU time, measured).
 # A trained controller's proof: 25 s on the 2-D systems (benchmarks/bench_controller_proof.py:
 # trained pendulum controllers 18-25 s with both V; a mountain-car hybrid 10 s on a loaded
 # core), the cart-pole's its whole budget (its LQR alone takes 168 s, docs/user_guide/roa.md).
 PROTOCOL_LQR_SECONDS = {"pendulum": 15.0, "cartpole": 16.0, "mountaincar": 31.0}
 """The LQR's robustness protocol at the paper's budget [s] per system (one core)."""
-PROTOCOL_LEARNER_FACTOR = {"linear": 1.0, "ddpg": 2.0, "sac": 2.0, "pilco": 1.4}
+PROTOCOL_LEARNER_FACTOR = {"linear": 1.0, "ddpg": 2.0, "td3": 2.0, "sac": 2.0, "pilco": 1.4}
 """A learner's controller's protocol time over the LQR's (measured side by side)."""
 QUICK_PROTOCOL_SHARE = 0.3
 """The quick budget's protocol time over the paper's (measured)."""

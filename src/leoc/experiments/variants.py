@@ -117,7 +117,10 @@ class Variant:
             raise ValueError(f"framework: expected one of {FRAMEWORKS}, found {framework!r}")
         if budget is not None and (isinstance(budget, bool) or int(budget) != budget or budget < 1):
             raise ValueError(f"budget: expected a positive integer or None, found {budget!r}")
-        settings_of = {"ddpg": self.ddpg, "sac": self.sac, "pilco": self.pilco}[framework]
+        # TD3 takes DDPG's settings (leoc.learners: its settings_of)
+        settings_of = {"ddpg": self.ddpg, "td3": self.ddpg, "sac": self.sac, "pilco": self.pilco}[
+            framework
+        ]
         settings = dict(settings_of(system, hybrid, budget)) if settings_of is not None else {}
         if budget is not None:
             settings["iterations" if framework == "pilco" else "total_steps"] = int(budget)

@@ -30,6 +30,8 @@ CONTROLLER_COLOURS = {
     "sac_hybrid_lyapunov": "#ce6dbd",
     "td3_baseline": "#9467bd",
     "td3_hybrid": "#e377c2",
+    "td3_hybrid_roa": "#6b6ecf",
+    "td3_hybrid_lyapunov": "#e7969c",
     "pilco_baseline": "#d62728",
     "pilco_hybrid": "#ff7f0e",
     "pilco_hybrid_roa": "#bcbd22",
@@ -47,6 +49,8 @@ CONTROLLER_STYLES = {
     "pilco_hybrid": ":",
     "pilco_hybrid_roa": (0, (3, 1, 1, 1, 1, 1)),
     "td3_hybrid": "--",
+    "td3_hybrid_roa": (0, (5, 1, 1, 1)),
+    "td3_hybrid_lyapunov": (0, (5, 1, 1, 1, 1, 1)),
 }
 CONTROLLER_MARKERS = {
     "linear": "o",
@@ -55,6 +59,10 @@ CONTROLLER_MARKERS = {
     "ddpg_hybrid": "v",
     "ddpg_hybrid_roa": "D",
     "ddpg_hybrid_lyapunov": "h",
+    "td3_baseline": "H",
+    "td3_hybrid": "8",
+    "td3_hybrid_roa": "+",
+    "td3_hybrid_lyapunov": "x",
     "sac_baseline": "<",
     "sac_hybrid": ">",
     "sac_hybrid_roa": "d",

@@ -146,23 +146,33 @@ def model_selection_text(evaluations: Evaluations) -> str:
     return text
 
 
-def _has_sac(evaluations: Evaluations) -> bool:
-    return any(controller_framework(c) == "sac" for by_c in evaluations.values() for c in by_c)
+def _has(evaluations: Evaluations, learner: str) -> bool:
+    """Whether the report has a controller of ``learner``."""
+    return any(controller_framework(c) == learner for by_c in evaluations.values() for c in by_c)
 
 
 def _dt_hybrids(evaluations: Evaluations) -> str:
-    """The hybrids compared with the LQR at dt: DDPG's, and SAC's when the report has them."""
-    return "DDPG and SAC hybrids" if _has_sac(evaluations) else "DDPG hybrids"
+    """The hybrids compared with the LQR at dt: DDPG's, and TD3's and SAC's when the report
+    has them."""
+    names = ["DDPG"] + [name.upper() for name in ("td3", "sac") if _has(evaluations, name)]
+    listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+    return f"{listed} hybrids"
 
 
 def _sac_note(evaluations: Evaluations) -> str:
-    """What a SAC controller is, said only in a report that has one."""
-    if not _has_sac(evaluations):
-        return ""
-    return (
-        " A SAC controller is SAC's deterministic action (its squashed mean), trained at the "
-        "DDPG budgets."
-    )
+    """What a TD3 or SAC controller is, said only in a report that has one."""
+    note = ""
+    if _has(evaluations, "td3"):
+        note += (
+            " A TD3 controller is TD3's actor (twin critics, delayed actor updates, target "
+            "smoothing), trained with DDPG's settings and budgets."
+        )
+    if _has(evaluations, "sac"):
+        note += (
+            " A SAC controller is SAC's deterministic action (its squashed mean), trained at the "
+            "DDPG budgets."
+        )
+    return note
 
 
 RELEVANCE_NOTES = {
