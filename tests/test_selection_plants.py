@@ -247,7 +247,9 @@ def test_gym_runs_refuse_select_on(tmp_path, capsys) -> None:
 @pytest.mark.slow
 @pytest.mark.usefixtures("single_thread")
 def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_path) -> None:
-    """A short SAC run under a random actuator gain: every row records its selection episodes;
+    """A short SAC run under a random actuator gain trains exactly as the same run selecting on
+    the nominal plant (the replay buffers and nominal curves agree); every row records its
+    selection episodes;
     the selected step is the best of those records by the rule; the saved controller, run again
     on the same plants from the same starts, scores that record (the restored actor is the one
     judged)."""
@@ -255,21 +257,33 @@ def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_pa
     from leoc.sb3.train import train_ddpg
 
     spec = {"randomised": {"actuator_gain": 0.9}}
-    result = train_ddpg(
-        "pendulum",
-        algo="sac",
-        seed=1,
-        run_dir=tmp_path / "run",
-        total_steps=600,
-        learning_starts=100,
-        eval_interval=100,
-        eval_episodes=3,
-        actor_hidden=(16, 16),
-        critic_hidden=(16, 16),
-        training_perturbations=spec,
-        selection_plants="training",
-        progress=False,
-    )
+    runs = {
+        judged_on: train_ddpg(
+            "pendulum",
+            algo="sac",
+            seed=1,
+            run_dir=tmp_path / judged_on,
+            total_steps=600,
+            learning_starts=100,
+            eval_interval=100,
+            eval_episodes=3,
+            actor_hidden=(16, 16),
+            critic_hidden=(16, 16),
+            training_perturbations=spec,
+            selection_plants=judged_on,
+            progress=False,
+        )
+        for judged_on in ("nominal", "training")
+    }
+    result = runs["training"]
+    # the selection episodes change nothing of the training: same transitions, same curve
+    buffers = [run.model.replay_buffer for run in runs.values()]
+    assert np.array_equal(buffers[0].observations, buffers[1].observations)
+    assert np.array_equal(buffers[0].actions, buffers[1].actions)
+    nominal_rows = [
+        [(row["steps"], row["mean_return"]) for row in run.curve] for run in runs.values()
+    ]
+    assert nominal_rows[0] == nominal_rows[1]
     curve = json.loads((result.run_dir / "curve.json").read_text())
     rows = curve["curve"]
     assert all("selection" in row for row in rows)
