@@ -56,6 +56,27 @@ def single_thread():
     torch.set_num_threads(threads)
 
 
+@pytest.fixture
+def train_refusal(tmp_path, capsys):
+    """``refused(arguments)``: run ``leoc train pendulum --out RUN --quiet ARGUMENTS``, check it
+    is refused with exit status 2 in one line on stderr and writes no run folder, and return
+    that line."""
+    from leoc.cli import main
+
+    def refused(arguments: list[str]) -> str:
+        run = tmp_path / "run"
+        try:
+            code = main(["train", "pendulum", "--out", str(run), "--quiet", *arguments])
+        except SystemExit as stop:  # argparse's own errors
+            code = stop.code
+        err = capsys.readouterr().err
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert not run.exists()
+        return err
+
+    return refused
+
+
 class SmokeStudy:
     """One smoke study several slow tests compare with: ``leoc reproduce --profile smoke`` of
     the pendulum's LQR, DDPG hybrid and PILCO hybrid on two jobs (:meth:`command`), the
