@@ -238,7 +238,7 @@ def test_gym_runs_refuse_select_on(tmp_path, capsys) -> None:
 
 @pytest.mark.slow
 @pytest.mark.usefixtures("single_thread")
-def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_path) -> None:
+def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_path, capsys) -> None:
     """A short SAC run under a random actuator gain trains exactly as the same run selecting on
     the nominal plant (the replay buffers and nominal curves agree); every row records its
     selection episodes;
@@ -297,3 +297,10 @@ def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_pa
     # the check can fail: the plants change the returns
     nominal = evaluate_episodes(system, controller, evaluation_starts(system, 1, 3))
     assert np.max(np.abs(np.subtract(nominal.returns, again.returns))) > 1e-3
+    # leoc simulate says which plants chose the kept actor (JSON and text)
+    for judged_on, run in runs.items():
+        assert main(["simulate", str(run.run_dir), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["selection_plants"] == judged_on
+        assert main(["simulate", str(run.run_dir)]) == 0
+        said = "kept actor:         chosen on plants of the training distribution"
+        assert (said in capsys.readouterr().out) == (judged_on == "training")

@@ -317,12 +317,22 @@ def _trained_under(target: Target) -> Any:
     return trained_perturbations(target.controller)
 
 
+def _selection_plants(target: Target) -> str:
+    """Which plants ``target``'s model selection judged on (``nominal`` for the LQR)."""
+    if target.controller == LINEAR:
+        return "nominal"
+    from leoc.experiments.controllers import trained_selection_plants
+
+    return trained_selection_plants(target.controller)
+
+
 def _json_report(
     args: argparse.Namespace, target: Target, system: Any, result: Any, period: int
 ) -> dict[str, Any]:
     """What ``--json`` prints: the test, its plant and rules, what a run was trained under
     (``training_perturbations``, {} for the LQR and nominal runs: the test itself runs on the
-    nominal plant), metrics and record."""
+    nominal plant) and which plants chose its kept actor (``selection_plants``), metrics and
+    record."""
     return {
         "system": target.system,
         "controller": target.controller,
@@ -330,6 +340,7 @@ def _json_report(
         "variant": args.variant,
         "step_rules": dataclasses.asdict(system.rules),
         "training_perturbations": _trained_under(target).as_dict(),
+        "selection_plants": _selection_plants(target),
         "metrics_set": args.metrics,
         "action_repeat": period,
         "metrics": result.metrics._asdict(),
@@ -416,3 +427,5 @@ def _print_metrics(args: argparse.Namespace, target: Target, system, result, per
     trained_under = _trained_under(target)
     if not trained_under.is_nominal:
         print(f"  trained under:      {trained_under.describe()} (simulated on the nominal plant)")
+    if _selection_plants(target) == "training":
+        print("  kept actor:         chosen on plants of the training distribution")

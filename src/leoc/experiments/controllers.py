@@ -122,6 +122,13 @@ def trained_perturbations(run_dir: str | Path) -> TrainingPerturbations:
         raise ValueError(f"run folder: {folder / 'config.json'}: {error}") from error
 
 
+def trained_selection_plants(run_dir: str | Path) -> str:
+    """Which plants the run's model selection judged on: its config's ``selection_plants``
+    (``"training"``: plants of its training distribution), ``"nominal"`` when the config
+    records none (every run before the option, and every run selecting on the nominal plant)."""
+    return str(read_config(trainer_dir(run_dir)).get("selection_plants", "nominal"))
+
+
 def trained_under(specs: list[str]) -> dict[str, dict]:
     """Per run folder of ``specs`` (``linear`` skipped), what it was trained under
     (:func:`trained_perturbations` as a dict; empty entries for a nominal run): what
