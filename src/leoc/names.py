@@ -199,6 +199,10 @@ ROBUSTNESS_LEVELS = 21
 """Levels per category of the robustness protocol (RealAIGym's 21)."""
 ROBUSTNESS_EPISODES = 5
 """Episodes per level and start kind of the robustness protocol."""
+SELECTION_PLANTS = ("nominal", "training")
+"""Where a DDPG/TD3/SAC run's model selection judges its candidates
+(``leoc.sb3.DDPGConfig.selection_plants``, ``leoc train --select-on``): the nominal evaluation
+episodes, or the same starts on plants of the training distribution."""
 LYAPUNOV_CHOICES = ("best", "lqr", "own")
 """The V a controller's proof uses (``leoc roa --prove --lyapunov``,
 :func:`leoc.control.certify_controller`): the larger proved set of the two, the LQR's P, or

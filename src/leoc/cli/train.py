@@ -24,6 +24,7 @@ from leoc.names import (
     PROFILE_NAMES,
     RELEVANCE_NAMES,
     ROBUSTNESS_CATEGORIES,
+    SELECTION_PLANTS,
     VARIANT_NAMES,
     ControllerName,
     gym_env_id,
@@ -65,9 +66,7 @@ DESCRIPTION = (
     "robustness_protocol.md); the evaluations stay on the nominal plant."
 )
 PERTURBATION_FLAGS = {"fixed": "--perturb", "randomised": "--randomise"}
-#: ``--select-on``'s choices (``DDPGConfig.selection_plants``; kept here so that the parser
-#: does not import the learners).
-SELECTION_PLANTS = ("nominal", "training")
+
 """Each :class:`~leoc.systems.TrainingPerturbations` field and the ``leoc train`` flag that
 fills it."""
 

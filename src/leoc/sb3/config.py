@@ -42,6 +42,7 @@ import dataclasses
 import math
 from typing import Any, Literal
 
+from leoc.names import SELECTION_PLANTS
 from leoc.policies.spec import (
     HybridSpec,
     as_hybrid_spec,
@@ -86,8 +87,6 @@ CRITIC_LOSSES = ("mse", "huber")
 CRITIC_ACTION_UNITS = ("normalised", "physical")
 HIDDEN_INITS = ("torch", "tf_agents")
 MODEL_SELECTIONS = ("final", "best_last_third", "best_held")
-#: Where model selection's evaluation episodes run (``DDPGConfig.selection_plants``).
-SELECTION_PLANTS = ("nominal", "training")
 
 # ------------------------------------------------------------------------------------------- SAC
 #: :meth:`DDPGConfig.for_system` defaults of ``algo="sac"`` where SAC's differ from the paper's
@@ -458,8 +457,8 @@ class DDPGConfig:
         self._check_selection_plants()
 
     def _check_selection_plants(self) -> None:
-        """``selection_plants``: one of :data:`SELECTION_PLANTS`; ``"training"`` needs a model
-        selection and randomised training perturbations to draw from."""
+        """``selection_plants``: one of :data:`leoc.names.SELECTION_PLANTS`; ``"training"``
+        needs a model selection and randomised training perturbations to draw from."""
         if self.selection_plants not in SELECTION_PLANTS:
             raise ValueError(
                 f"selection_plants: expected one of {SELECTION_PLANTS}, found "

@@ -159,7 +159,7 @@ def _dt_hybrids(evaluations: Evaluations) -> str:
     return f"{listed} hybrids"
 
 
-def _sac_note(evaluations: Evaluations) -> str:
+def _learner_notes(evaluations: Evaluations) -> str:
     """What a TD3 or SAC controller is, said only in a report that has one."""
     note = ""
     if _has(evaluations, "td3"):
@@ -241,7 +241,7 @@ def render(report: Report) -> list[str]:
         "holds each action for that many steps), and each hybrid is compared with the LQR "
         f"designed for its own period: {_dt_hybrids(evaluations)} with *linear (LQR at dt)*, "
         "PILCO hybrids with *linear (LQR at PILCO's period)*."
-        + _sac_note(evaluations)
+        + _learner_notes(evaluations)
         + relevance_note(evaluations),
         "",
         *_runs_lines(meta, evaluations),
