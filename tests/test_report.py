@@ -424,3 +424,29 @@ def test_every_section_renders_and_each_check_flags_its_own_table():
     keys = [section.check.key for section in SECTIONS if section.check is not None]
     assert keys == ["responses", "robustness", "swing_up", "roa", "proved_regions"]
     assert all(callable(section.render) for section in SECTIONS)
+
+
+@pytest.mark.parametrize(
+    ("controllers", "expected"),
+    [
+        (["linear", "sac_hybrid"], "SAC hybrids with *linear (LQR at dt)*"),
+        (["pilco_hybrid"], "PILCO hybrids with *linear (LQR at PILCO's period)*"),
+        (
+            ["ddpg_hybrid", "td3_baseline", "pilco_hybrid_roa"],
+            "DDPG and TD3 hybrids with *linear (LQR at dt)*, PILCO hybrids with *linear (LQR at "
+            "PILCO's period)*",
+        ),
+        (
+            ["linear"],
+            "DDPG, TD3 and SAC hybrids with *linear (LQR at dt)*, PILCO hybrids with *linear "
+            "(LQR at PILCO's period)*",
+        ),
+    ],
+)
+def test_report_header_names_only_the_learners_it_has(controllers, expected):
+    """The header's LQR-per-period sentence lists the learners present (a SAC-only study once
+    said 'DDPG and SAC hybrids'); an LQR-only report states every learner's rule."""
+    from leoc.experiments.report.header import _period_comparisons
+
+    evaluations = {"pendulum": {name: [] for name in controllers}}
+    assert _period_comparisons(evaluations) == expected

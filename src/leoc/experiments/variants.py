@@ -45,6 +45,7 @@ from typing import Any
 from torch import nn
 
 from leoc.evaluation.rollout import RESPONSE_STEPS
+from leoc.learners import get_learner
 from leoc.names import FRAMEWORKS
 from leoc.pilco.config import authors_pilco_overrides
 from leoc.sb3.config import authors_ddpg_overrides
@@ -117,9 +118,9 @@ class Variant:
             raise ValueError(f"framework: expected one of {FRAMEWORKS}, found {framework!r}")
         if budget is not None and (isinstance(budget, bool) or int(budget) != budget or budget < 1):
             raise ValueError(f"budget: expected a positive integer or None, found {budget!r}")
-        # TD3 takes DDPG's settings (leoc.learners: its settings_of)
-        settings_of = {"ddpg": self.ddpg, "td3": self.ddpg, "sac": self.sac, "pilco": self.pilco}[
-            framework
+        # a learner with no settings of its own takes another's (TD3 DDPG's: its settings_of)
+        settings_of = {"ddpg": self.ddpg, "sac": self.sac, "pilco": self.pilco}[
+            get_learner(framework).settings_of
         ]
         settings = dict(settings_of(system, hybrid, budget)) if settings_of is not None else {}
         if budget is not None:

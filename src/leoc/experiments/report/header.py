@@ -151,12 +151,20 @@ def _has(evaluations: Evaluations, learner: str) -> bool:
     return any(controller_framework(c) == learner for by_c in evaluations.values() for c in by_c)
 
 
-def _dt_hybrids(evaluations: Evaluations) -> str:
-    """The hybrids compared with the LQR at dt: DDPG's, and TD3's and SAC's when the report
-    has them."""
-    names = ["DDPG"] + [name.upper() for name in ("td3", "sac") if _has(evaluations, name)]
-    listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
-    return f"{listed} hybrids"
+def _period_comparisons(evaluations: Evaluations) -> str:
+    """Which LQR each learner's hybrids are compared with, for the learners the report has
+    (every learner's rule where it has none: an LQR-only report)."""
+    dt = [name.upper() for name in ("ddpg", "td3", "sac") if _has(evaluations, name)]
+    pilco = _has(evaluations, "pilco")
+    if not dt and not pilco:
+        dt, pilco = ["DDPG", "TD3", "SAC"], True
+    clauses = []
+    if dt:
+        listed = dt[0] if len(dt) == 1 else f"{', '.join(dt[:-1])} and {dt[-1]}"
+        clauses.append(f"{listed} hybrids with *linear (LQR at dt)*")
+    if pilco:
+        clauses.append("PILCO hybrids with *linear (LQR at PILCO's period)*")
+    return ", ".join(clauses)
 
 
 def _learner_notes(evaluations: Evaluations) -> str:
@@ -239,8 +247,7 @@ def render(report: Report) -> list[str]:
         f"{model_selection_text(evaluations)} Every controller is evaluated at the control "
         "period it was trained at (the 'period' column: simulator steps per decision; PILCO "
         "holds each action for that many steps), and each hybrid is compared with the LQR "
-        f"designed for its own period: {_dt_hybrids(evaluations)} with *linear (LQR at dt)*, "
-        "PILCO hybrids with *linear (LQR at PILCO's period)*."
+        f"designed for its own period: {_period_comparisons(evaluations)}."
         + _learner_notes(evaluations)
         + relevance_note(evaluations),
         "",
