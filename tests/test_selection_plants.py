@@ -210,11 +210,13 @@ BAD_ARGUMENTS = [
     ),
     (
         ["--algo", "sac", "--select-on", "training"],
-        "--select-on: expected 'training' only with --randomise",
+        "--select-on: selection_plants: expected 'training' only with randomised training "
+        "perturbations (leoc train --randomise",
     ),
     (
         ["--algo", "sac", "--select-on", "training", "--perturb", "actuator_gain=0.2"],
-        "--select-on: expected 'training' only with --randomise",
+        "--select-on: selection_plants: expected 'training' only with randomised training "
+        "perturbations (leoc train --randomise",
     ),
     (["--algo", "sac", "--select-on", "worst"], "argument --select-on: invalid choice: 'worst'"),
 ]
@@ -304,3 +306,29 @@ def test_a_run_selecting_on_its_training_plants_saves_the_actor_it_judged(tmp_pa
         assert main(["simulate", str(run.run_dir)]) == 0
         said = "kept actor:         chosen on plants of the training distribution"
         assert (said in capsys.readouterr().out) == (judged_on == "training")
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+def test_a_profile_selects_on_training_plants_through_its_overrides(algo) -> None:
+    """A study profile asks for the selection on training plants as ``leoc train --select-on
+    training`` does: ``ddpg_overrides`` reach every model-free learner's config (TD3 takes
+    DDPG's), next to the profile's randomised perturbations; PILCO's settings never get it."""
+    from leoc.experiments.profiles import Profile
+    from leoc.experiments.variants import get_variant
+    from leoc.learners import ControllerSpec
+
+    profile = Profile(
+        "randomised",
+        (0,),
+        {},
+        {},
+        ddpg_overrides={"selection_plants": "training"},
+        training_perturbations=SPEC.as_dict(),
+    )
+    leoc_variant = get_variant("leoc")
+    settings = profile.training_settings(leoc_variant, ControllerSpec(algo), "pendulum")
+    config = DDPGConfig.for_system("pendulum", **settings)
+    assert config.selection_plants == "training"
+    assert config.training_perturbations == SPEC.as_dict()
+    pilco = profile.training_settings(leoc_variant, ControllerSpec("pilco"), "pendulum")
+    assert "selection_plants" not in pilco

@@ -52,6 +52,10 @@ HYBRID_FLAGS = {
 """Each :class:`~leoc.policies.HybridSpec` field and the ``leoc train`` flag that sets it (a
 ``--freeze-X`` flag sets ``learn_X`` to False); only with ``--hybrid``."""
 
+RUN_FLAGS = {**HYBRID_FLAGS, "selection_plants": "--select-on"}
+"""Each config field a ``leoc train`` flag sets and that flag (:data:`HYBRID_FLAGS` and the
+model-free learners' ``--select-on``): a learner's refusal of the field is led by the flag."""
+
 
 DESCRIPTION = (
     "Train a baseline (the learned policy alone) or the LEOC hybrid (LQR near the operating "
@@ -298,9 +302,19 @@ def hybrid_changes(args: argparse.Namespace) -> dict[str, Any]:
 
 def with_flag(message: str, changes: dict[str, Any]) -> str:
     """``message`` (a ``ValueError``'s, ``"FIELD: ..."`` or ``"FIELD must ..."``) led by the
-    flag that set FIELD, when a flag did (``--r-min: r_min: expected ...``)."""
+    flag that set FIELD, when a flag did (``--r-min: r_min: expected ...``); ``changes``: the
+    fields the flags set (:func:`flag_changes`)."""
     field = re.split(r"\W", message, maxsplit=1)[0]
-    return f"{HYBRID_FLAGS[field]}: {message}" if field in changes else message
+    return f"{RUN_FLAGS[field]}: {message}" if field in changes else message
+
+
+def flag_changes(args: argparse.Namespace) -> dict[str, Any]:
+    """The config fields of :data:`RUN_FLAGS` the flags given set: :func:`hybrid_changes` and
+    ``selection_plants`` (``--select-on``)."""
+    changes = hybrid_changes(args)
+    if getattr(args, "select_on", None) is not None:
+        changes["selection_plants"] = args.select_on
+    return changes
 
 
 def hybrid_of(args: argparse.Namespace) -> Any:
@@ -380,24 +394,19 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
         settings["training_perturbations"] = perturbations
     select_on = getattr(args, "select_on", None)
     if select_on is not None:
-        check_select_on(args.algo, select_on, settings)
+        check_select_on(args.algo)
         settings["selection_plants"] = select_on
     return settings
 
 
-def check_select_on(algo: str, select_on: str, settings: dict[str, Any]) -> None:
-    """Refuse ``--select-on`` for PILCO (no model selection) and ``--select-on training``
-    without randomised training perturbations (no plants to draw from)."""
+def check_select_on(algo: str) -> None:
+    """Refuse ``--select-on`` for PILCO (no model selection); what the model-free learners'
+    config refuses of it (``'training'`` without ``--randomise``) comes back from the learner,
+    led by the flag (:func:`with_flag`)."""
     if algo not in MODEL_FREE_ALGOS:
         raise ValueError(
             f"--select-on: expected it only with --algo {', '.join(MODEL_FREE_ALGOS)} (they "
             f"select a model among their evaluations), found --algo {algo}"
-        )
-    randomised = (settings.get("training_perturbations") or {}).get("randomised")
-    if select_on == "training" and not randomised:
-        raise ValueError(
-            "--select-on: expected 'training' only with --randomise (the training distribution "
-            "to draw the selection plants from), found no randomised perturbation"
         )
 
 
@@ -496,7 +505,7 @@ def run(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
         )
     except ValueError as error:  # a learner refusing a field: name the flag that set it
-        message = with_flag(str(error), hybrid_changes(args))
+        message = with_flag(str(error), flag_changes(args))
         if message == str(error):
             raise
         raise ValueError(message) from error

@@ -474,7 +474,8 @@ class DDPGConfig:
         if not self.training_perturbations.get("randomised"):
             raise ValueError(
                 "selection_plants: expected 'training' only with randomised training "
-                f"perturbations, found {self.training_perturbations or 'the nominal plant'}"
+                "perturbations (leoc train --randomise: the distribution the selection plants "
+                f"are drawn from), found {self.training_perturbations or 'the nominal plant'}"
             )
 
     def _check_algo_fields(self) -> None:
