@@ -6,8 +6,8 @@ worker processes, its ``defaults`` setting: ``DDPGConfig.for_system`` with no ov
 counts the seeds whose delivered controller (``best_held``) holds the operating point in every
 one of 5 held-out swing-up episodes: the success test of ``results/ddpg-ablation``. Four seeds,
 not five: two full rounds of the two workers. These tests are ``extended`` (run by hand, not
-by CI: together they exceed its 45 minutes). The thresholds sit one seed
-below the rates measured over the same seeds (README), so one seed that a different CPU's
+by CI: together they exceed its 45 minutes). The thresholds sit one seed below the rates
+measured over the same seeds (docs/getting_started.md), so one seed that a different CPU's
 rounding sends elsewhere passes, and a regression to the defaults before issue 20 fails (under
 those, the grid's ``leoc`` setting: cart-pole baseline 0 of 5 at 15k, mountain-car ROA hybrid 0
 of 5 at 10k, 1 of 5 re-selected with ``best_held``).

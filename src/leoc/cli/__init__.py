@@ -19,6 +19,7 @@ from leoc.cli import (
     ablation,
     export,
     gym_study,
+    headline,
     lqr,
     plot,
     publish,
@@ -46,6 +47,7 @@ COMMANDS = (
     gym_study,
     plot,
     publish,
+    headline,
 )
 RESUMABLE_COMMANDS = ("reproduce", "ablation", "gym-study", "train")
 

@@ -187,6 +187,50 @@ RESPONSE_CHECK = Check(
 )
 
 
+def _baseline_without_offset(rows: Rows) -> tuple[int, list[Failure]]:
+    """The baselines' response tests that have a linear reference, and those whose steady-state
+    error is the reference's (as :func:`_differs` compares metrics): the cases
+    where the paper's claim (iii), a baseline ends off the operating point, does not show. In
+    the rows' order; size: 0 (nothing to rank)."""
+    index = {(r["system"], r["test"], r["controller"]): r for r in rows}
+    checked, failures = 0, []
+    for (system, test, controller), row in index.items():
+        framework = controller_framework(controller)
+        if controller in LINEAR_CONTROLLERS or "_hybrid" in controller:
+            continue
+        reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
+        if reference is None:
+            continue
+        checked += 1
+        value, ref = row["steady_state_error_mean"], reference["steady_state_error_mean"]
+        if not _differs(value, ref, _peak(reference)):
+            failures.append(
+                Failure(
+                    f"{system} {label(controller)} ({test})",
+                    0.0,
+                    f"steady state error {number(value)} vs {number(ref)}",
+                    "",
+                    f"**{system} {label(controller)}** ({test}) ends where "
+                    f"{label(reference['controller'])} does.",
+                )
+            )
+    return checked, failures
+
+
+#: The paper's claim (iii) on the same rows (the headline table, :mod:`leoc.experiments.headline`):
+#: every learned baseline's response ends off the LQR's end point, its mean steady-state error
+#: differing from the LQR's as the response check compares metrics.
+BASELINE_OFFSET_CHECK = Check(
+    "responses",
+    _baseline_without_offset,
+    cases="baseline response tests",
+    threshold=f"the steady-state error differs from the LQR's by more than "
+    f"{RELATIVE_TOLERANCE:.0%} (of the LQR's, at least {ZERO_FLOOR_OF_PEAK:.0%} of its peak "
+    "deviation)",
+    worked="end off the operating point",
+)
+
+
 def _paper_pm(value: tuple[float, float] | None) -> str:
     """A paper's mean ± std; a std the paper prints negative is shown as its magnitude, marked."""
     if value is None:

@@ -1,0 +1,189 @@
+"""The headline table (``leoc headline``): each cell counts the report's check on one kind of
+controller, against counts made by hand on small tables; the README's and the results page's
+tables are what the command writes from the committed studies; the markers are checked."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from leoc.cli import main
+from leoc.experiments.headline import (
+    BEGIN,
+    CLAIMS,
+    END,
+    HeadlineClaim,
+    claim_cell,
+    headline_lines,
+    load_results,
+    write_headline,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDIES = [ROOT / "results/paper", ROOT / "results/paper-authors"]
+PAGES = [ROOT / "README.md", ROOT / "docs/results.md"]
+
+
+def _response(controller: str, steady: float, peak: float = 1.0) -> dict:
+    """A response row of the report's table (impulse on the pendulum), settling like an LQR."""
+    return {
+        "system": "pendulum",
+        "test": "impulse",
+        "controller": controller,
+        "n_runs": 5,
+        "n_settled": 5,
+        "n_terminated": 0,
+        "steady_state_error_mean": steady,
+        "overshoot_mean": 0.1,
+        "peak_deviation_mean": peak,
+        "settling_time_mean": 40.0,
+    }
+
+
+def _robust(controller: str, scale: float, share: float, parameter: str = "mass") -> dict:
+    return {
+        "system": "pendulum",
+        "controller": controller,
+        "parameter": parameter,
+        "scale": scale,
+        "fraction_stabilised": share,
+    }
+
+
+def _tables(**tables) -> dict:
+    """The tables of a study with every learned controller of ``swing_up`` named."""
+    controllers = ["linear", "ddpg_baseline", "ddpg_hybrid", "ddpg_hybrid_roa", "sac_hybrid"]
+    return {
+        "swing_up": [{"controller": c} for c in controllers],
+        "responses": [],
+        "robustness": [],
+        "improvements": [],
+        "meta": {},
+        **tables,
+    }
+
+
+def _claim(check: str, kind: str) -> HeadlineClaim:
+    return HeadlineClaim("claim", check, kind)
+
+
+def test_response_cells_count_each_relevance_apart() -> None:
+    # LQR steady state 0, peak 1: a steady state off by more than 1% of 1% of the peak (the
+    # report's floor of a zero reference) differs. By hand: paper relevance, DDPG's 5e-5 matches
+    # and SAC's 0.05 differs; the ROA hybrid matches.
+    rows = [
+        _response("linear", 0.0),
+        _response("ddpg_hybrid", 5e-5),
+        _response("sac_hybrid", 0.05),
+        _response("ddpg_hybrid_roa", 0.0),
+        _response("ddpg_baseline", 0.3),
+    ]
+    tables = _tables(responses=rows)
+    paper = claim_cell(_claim("responses", "paper"), tables)
+    assert paper.startswith("**partly**: 1 of 2 hybrid response tests; biggest miss: pendulum")
+    assert "SAC hybrid (impulse)" in paper
+    assert claim_cell(_claim("responses", "roa"), tables) == (
+        "**holds**: 1 of 1 hybrid response tests"
+    )
+    # claim (iii): the baseline ends 0.3 off the LQR's end point: it shows
+    assert claim_cell(_claim("baseline_offsets", "baseline"), tables) == (
+        "**holds**: 1 of 1 baseline response tests"
+    )
+    rows[-1] = _response("ddpg_baseline", -5e-5)
+    assert claim_cell(_claim("baseline_offsets", "baseline"), _tables(responses=rows)).startswith(
+        "**fails**: 0 of 1 baseline response tests; biggest miss: pendulum DDPG baseline"
+    )
+
+
+def test_robustness_cells_count_only_deficits() -> None:
+    # The claim is "at least as robust as its LQR": the DDPG hybrid stabilises more than the LQR
+    # at x2 (holds), the SAC hybrid 30 points less at x3 (fails); by hand 1 of 2.
+    rows = [
+        _robust("linear", 2.0, 0.5),
+        _robust("linear", 3.0, 0.5),
+        _robust("ddpg_hybrid", 2.0, 0.9),
+        _robust("ddpg_hybrid", 3.0, 0.5),
+        _robust("sac_hybrid", 2.0, 0.5),
+        _robust("sac_hybrid", 3.0, 0.2),
+    ]
+    cell = claim_cell(_claim("robustness", "paper"), _tables(robustness=rows))
+    assert cell == (
+        "**partly**: 1 of 2 hybrid x scaled-parameter sweeps; biggest miss: pendulum SAC "
+        "hybrid, mass -30 pp at x3"
+    )
+
+
+def test_improvement_cell_counts_resolved_pairs() -> None:
+    def pair(
+        hybrid: str, low: float, high: float, quantity: str = "interaction time to first hold"
+    ):
+        return {
+            "hybrid": hybrid,
+            "quantity": quantity,
+            "probability": 0.5,
+            "ci_low": low,
+            "ci_high": high,
+        }
+
+    rows = [
+        pair("ddpg_hybrid", 0.6, 1.0),  # above
+        pair("ddpg_hybrid_roa", 0.2, 0.9),  # unresolved
+        pair("sac_hybrid", 0.0, 0.4),  # below
+        pair("sac_hybrid", 0.9, 1.0, quantity="final return"),  # another quantity
+    ]
+    cell = claim_cell(_claim("improvements", "hybrid"), _tables(improvements=rows))
+    assert cell == ("**partly**: resolved above 0.5 in 1 of 3 hybrid-baseline pairs, below in 1")
+    cell = claim_cell(_claim("improvements", "hybrid"), _tables(improvements=rows[:2]))
+    assert cell.startswith("**holds**: resolved above 0.5 in 1 of 2")
+
+
+def test_missing_kinds_and_unmeasured_checks_are_said() -> None:
+    tables = _tables(swing_up=[{"controller": "linear"}, {"controller": "ddpg_hybrid"}])
+    assert claim_cell(_claim("responses", "roa"), tables) == "*no such controller in this study*"
+    assert claim_cell(_claim("responses", "paper"), tables) == "*not measured*"
+
+
+def test_the_committed_tables_are_what_the_command_writes() -> None:
+    """README.md and docs/results.md hold ``leoc headline``'s table of the committed studies
+    (run ``leoc headline --write README.md --write docs/results.md`` after republishing)."""
+    lines = headline_lines([study.relative_to(ROOT) for study in STUDIES])
+    assert len(lines) <= 12 + 1  # header, separator and at most 11 claims: the README's budget
+    assert len(CLAIMS) == len(lines) - 2
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8").split("\n")
+        start, stop = text.index(BEGIN), text.index(END)
+        assert text[start + 1 : stop] == lines, page
+
+
+def test_the_json_round_trip_keeps_the_report_s_checks() -> None:
+    """The headline re-runs the report's checks on results.json's rows: on every row they give
+    the counts the report stored (the JSON form changes no verdict)."""
+    from leoc.experiments.headline import _checks
+
+    stored = json.loads((STUDIES[0] / "results.json").read_text(encoding="utf-8"))["checks"]
+    tables = load_results(STUDIES[0])
+    for name, check in _checks().items():
+        if name in ("baseline_offsets", "robustness"):
+            continue  # the headline's own sides of the responses and robustness rows
+        summary = check.summary(tables[check.key])
+        assert summary.checked == stored[name]["checked"], name
+        assert [f.subject for f in summary.failures] == [
+            f["subject"] for f in stored[name]["failures"]
+        ], name
+
+
+def test_write_needs_both_markers_and_leaves_the_file_alone_otherwise(tmp_path, capsys) -> None:
+    page = tmp_path / "page.md"
+    page.write_text(f"intro\n{BEGIN}\nold\n{END}\nend\n")
+    assert write_headline(page, ["| a |", "|---|"])
+    assert page.read_text() == f"intro\n{BEGIN}\n| a |\n|---|\n{END}\nend\n"
+    assert not write_headline(page, ["| a |", "|---|"])
+    bad = tmp_path / "bad.md"
+    bad.write_text(f"intro\n{END}\n")
+    code = main(["headline", *map(str, STUDIES), "--write", str(bad)])
+    err = capsys.readouterr().err
+    assert code == 2 and "--write: expected the lines" in err and "found one of them" in err
+    assert bad.read_text() == f"intro\n{END}\n"
+    code = main(["headline", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2 and "study: expected a reproduce folder with a report" in err
