@@ -12,10 +12,13 @@ from leoc.experiments.headline import (
     BEGIN,
     CLAIMS,
     END,
+    PROVED_BEGIN,
+    PROVED_END,
     HeadlineClaim,
     claim_cell,
     headline_lines,
     load_results,
+    proved_region_lines,
     write_headline,
 )
 
@@ -187,3 +190,34 @@ def test_write_needs_both_markers_and_leaves_the_file_alone_otherwise(tmp_path, 
     code = main(["headline", str(tmp_path)])
     err = capsys.readouterr().err
     assert code == 2 and "study: expected a reproduce folder with a report" in err
+
+
+def _between(page: Path, begin: str, end: str) -> list[str]:
+    text = page.read_text(encoding="utf-8").split("\n")
+    return text[text.index(begin) + 1 : text.index(end)]
+
+
+def test_the_proved_region_table_joins_the_studies_reports(monkeypatch) -> None:
+    """The results page's proved-region table is ``leoc headline --proved-regions`` of every
+    certified study with a report, and each of its rows is the row of that study's own
+    report.md (rendered when it was published) with the study's folder in front."""
+    monkeypatch.chdir(ROOT)
+    studies = sorted(
+        p for p in Path("results").glob("certified-*") if (p / "results.json").is_file()
+    )
+    assert len(studies) >= 5
+    lines = proved_region_lines(studies)
+    assert _between(ROOT / "docs/results.md", PROVED_BEGIN, PROVED_END) == lines
+    rows = lines[2:]
+    for study in studies:
+        report = (study / "report.md").read_text(encoding="utf-8").split("\n")
+        first = next(
+            i for i, line in enumerate(report) if line == lines[0].replace("| study ", "", 1)
+        )
+        own = []
+        for line in report[first + 2 :]:  # the report's own table, after its two header lines
+            if not line.startswith("|"):
+                break
+            own.append(line)
+        expected = [f"| {study.as_posix()} {line}" for line in own]
+        assert [row for row in rows if row.startswith(f"| {study.as_posix()} |")] == expected

@@ -1,4 +1,5 @@
-"""``leoc headline``: the paper's claims, their verdicts in published studies, as a table."""
+"""``leoc headline``: the paper's claims, their verdicts in published studies, as a table; or
+the trained controllers' proved regions of several studies in one table."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ from pathlib import Path
 from typing import Any
 
 DEFAULT_STUDIES = (Path("results/paper"), Path("results/paper-authors"))
-"""The published studies of the repository's README, relative to its root."""
+"""The published studies of the README's claims table, relative to the repository's root."""
+CERTIFIED_STUDIES = "results/certified-*"
+"""The published studies of the proved-region table by default (those with a report)."""
 
 
 def add_parser(commands: Any) -> None:
@@ -18,37 +21,54 @@ def add_parser(commands: Any) -> None:
         description="Read each study's results.json (written by 'leoc plot' or 'leoc publish') "
         "and print one row per claim of the paper: its verdict in each study (holds, partly, "
         "fails, not measured) with the number that decides it, from the report's own checks. "
-        "With --write, put the table between the headline markers of a markdown file instead "
-        "(the README's table is written so).",
+        "With --proved-regions, the trained controllers' proved regions of every study in one "
+        "table instead. With --write, put the table between its markers in a markdown file "
+        "(the README's and the results page's tables are written so).",
     )
     headline.add_argument(
         "studies",
         type=Path,
         nargs="*",
-        default=list(DEFAULT_STUDIES),
         metavar="STUDY",
-        help="published reproduce folders, one column each (default: results/paper "
-        "results/paper-authors)",
+        help="published reproduce folders (default: results/paper results/paper-authors, one "
+        f"column each; with --proved-regions every {CERTIFIED_STUDIES} folder with a report)",
+    )
+    headline.add_argument(
+        "--proved-regions",
+        action="store_true",
+        help="the proved-region table of the studies (one row per system and controller, a "
+        "column naming the study) instead of the claims",
     )
     headline.add_argument(
         "--write",
         type=Path,
         action="append",
         metavar="FILE",
-        help="a markdown file with the lines '<!-- headline: begin ... -->' and '<!-- "
-        "headline: end -->': the table replaces what is between them (repeatable)",
+        help="a markdown file with the table's begin and end markers ('<!-- headline: begin "
+        "...' or '<!-- proved regions: begin ...', and '<!-- ...: end -->'): the table replaces "
+        "what is between them (repeatable)",
     )
     headline.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from leoc.experiments.headline import headline_lines, write_headline
+    from leoc.experiments import headline as tables
 
-    lines = headline_lines(args.studies)
+    if args.proved_regions:
+        studies = args.studies or sorted(
+            folder
+            for folder in Path().glob(CERTIFIED_STUDIES)
+            if (folder / "results.json").is_file()
+        )
+        lines = tables.proved_region_lines(studies)
+        begin, end = tables.PROVED_BEGIN, tables.PROVED_END
+    else:
+        lines = tables.headline_lines(args.studies or list(DEFAULT_STUDIES))
+        begin, end = tables.BEGIN, tables.END
     if not args.write:
         print("\n".join(lines))
         return 0
     for path in args.write:
-        changed = write_headline(path, lines)
+        changed = tables.write_headline(path, lines, begin, end)
         print(f"{path}: {'table written' if changed else 'table already current'}")
     return 0

@@ -2,12 +2,13 @@
 number that decides it, generated from the studies' ``results.json``.
 
 Each row is one of the report's checks (:mod:`leoc.experiments.report`: the same ``Check``
-the report's summary makes, one home for each threshold) applied to one kind of controller: the hybrids with the paper's relevance, those with
-the ROA relevance, or the baselines; the LQR rows stay in every table as the references. The
-verdict is **holds** when every case checked passes, **fails** when none does, **partly**
-otherwise, and *not measured* when the study has no case (a study published before the check
-existed). Claim (ii) is read from the probability of improvement of the interaction time to
-the first hold, hybrid against its baseline: it holds when no pair is resolved below 0.5.
+the report's summary makes, one home for each threshold) applied to one kind of controller:
+the hybrids with the paper's relevance, those with the ROA relevance, or the baselines; the
+LQR rows stay in every table as the references. The verdict is **holds** when every case
+checked passes, **fails** when none does, **partly** otherwise, and *not measured* when the
+study has no case (a study published before the check existed). Claim (ii) is read from the
+probability of improvement of the interaction time to the first hold, hybrid against its
+baseline: it holds when no pair is resolved below 0.5.
 
 ``leoc headline`` prints the table, or writes it between the :data:`BEGIN` and :data:`END`
 markers of a markdown file (the README); a test checks that the committed README equals what
@@ -29,18 +30,29 @@ __all__ = [
     "BEGIN",
     "CLAIMS",
     "END",
+    "PROVED_BEGIN",
+    "PROVED_END",
     "HeadlineClaim",
     "claim_cell",
     "headline_lines",
     "load_results",
+    "markers",
+    "proved_region_lines",
     "study_heading",
     "write_headline",
 ]
 
-BEGIN = "<!-- headline: begin (written by `leoc headline`; edit the code, not this table) -->"
-"""The line after which :func:`write_headline` writes the table."""
-END = "<!-- headline: end -->"
-"""The line before which the table ends."""
+
+def markers(name: str) -> tuple[str, str]:
+    """The lines between which :func:`write_headline` writes the table called ``name``."""
+    begin = f"<!-- {name}: begin (written by `leoc headline`; edit the code, not this table) -->"
+    return begin, f"<!-- {name}: end -->"
+
+
+BEGIN, END = markers("headline")
+"""The claims table's lines (:func:`markers` of ``headline``)."""
+PROVED_BEGIN, PROVED_END = markers("proved regions")
+"""The cross-study proved-region table's lines (:func:`proved_region_lines`)."""
 SHOWN_MISS = 1
 """Failures named per cell (the biggest; the study's report lists every one)."""
 IMPROVEMENT = "interaction time to first hold"
@@ -240,9 +252,22 @@ def headline_lines(studies: Sequence[str | Path]) -> list[str]:
     return markdown_table(header, rows)
 
 
-def write_headline(path: str | Path, lines: Sequence[str]) -> bool:
-    """Put ``lines`` between the :data:`BEGIN` and :data:`END` lines of the markdown file
-    ``path`` (atomically); whether the file changed.
+def proved_region_lines(studies: Sequence[str | Path]) -> list[str]:
+    """The trained controllers' proved regions of several published studies in one table (the
+    report's own rows and cells, a first column naming the study's folder); the studies that
+    ran no proof add no row."""
+    from leoc.experiments.report.proved_regions import proved_regions_across
+
+    return proved_regions_across(
+        {Path(folder).as_posix(): load_results(folder)["proved_regions"] for folder in studies}
+    )
+
+
+def write_headline(
+    path: str | Path, lines: Sequence[str], begin: str = BEGIN, end: str = END
+) -> bool:
+    """Put ``lines`` between the ``begin`` and ``end`` lines (default :data:`BEGIN` and
+    :data:`END`) of the markdown file ``path`` (atomically); whether the file changed.
 
     Raises
     ------
@@ -254,14 +279,14 @@ def write_headline(path: str | Path, lines: Sequence[str]) -> bool:
     target = Path(path)
     text = target.read_text(encoding="utf-8")
     lines_in = text.split("\n")
-    if BEGIN not in lines_in or END not in lines_in:
+    if begin not in lines_in or end not in lines_in:
+        found = "neither" if begin not in lines_in and end not in lines_in else "one of them"
         raise ValueError(
-            f"--write: expected the lines {BEGIN!r} and {END!r} in {str(target)!r}, found "
-            f"{'neither' if BEGIN not in lines_in and END not in lines_in else 'one of them'}"
+            f"--write: expected the lines {begin!r} and {end!r} in {str(target)!r}, found {found}"
         )
-    start, stop = lines_in.index(BEGIN), lines_in.index(END)
+    start, stop = lines_in.index(begin), lines_in.index(end)
     if stop < start:
-        raise ValueError(f"--write: expected {BEGIN!r} before {END!r} in {str(target)!r}")
+        raise ValueError(f"--write: expected {begin!r} before {end!r} in {str(target)!r}")
     new = "\n".join([*lines_in[: start + 1], *lines, *lines_in[stop:]])
     if new == text:
         return False
