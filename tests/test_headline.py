@@ -221,3 +221,21 @@ def test_the_proved_region_table_joins_the_studies_reports(monkeypatch) -> None:
             own.append(line)
         expected = [f"| {study.as_posix()} {line}" for line in own]
         assert [row for row in rows if row.startswith(f"| {study.as_posix()} |")] == expected
+
+
+def test_the_readme_fits_a_screen_and_its_links_resolve() -> None:
+    """Issue 45: the two set-up commands (install and run the main job, run the tests, which CI
+    runs) in the README's first 30 lines, its first link list within about 60, every local
+    link a file of the repository."""
+    import re
+
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").split("\n")
+    first = lines[:30]
+    assert "pip install -e . && leoc reproduce" in first
+    assert 'pip install -e ".[dev]" && pytest -n auto' in first
+    ci = (ROOT / ".ci/run").read_text(encoding="utf-8").split("\n")
+    assert "pytest -n auto" in ci  # the README's test command is the one CI runs
+    link_list = next(i for i, line in enumerate(lines) if line.startswith("- ["))
+    assert link_list <= 70, link_list
+    targets = re.findall(r"\]\(([^)#]+)\)", "\n".join(lines))
+    assert targets and all((ROOT / target).exists() for target in targets if "://" not in target)
