@@ -418,15 +418,30 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
     assert "evidence, not construction" in lines[3] and "holds by construction" not in lines[3]
     table = "\n".join(protocol_section.verdict_table(rows))
     assert "| +0.25 [+0.25, +0.25] | above |" in table
+
     # lost episodes (every start; the swing-up ones all fail) at levels where the LQR lost an
     # operating-region episode (noise level 1, both push levels), by hand over the 3 seeds:
     # noise 4 lost per seed, 2 of them at level 1; push 6, 7 and 8, all where the LQR loses
-    assert noise["lost"] == {"lost": 12, "where_lqr_loses": 6}
-    assert push["lost"] == {"lost": 21, "where_lqr_loses": 21}
-    assert by["ddpg_hybrid", "robustness"]["lost"] == {"lost": 33, "where_lqr_loses": 27}
-    assert "27 of its 33 lost episodes were at levels where its LQR lost" in lines[0]
-    assert "| above (n < 3) | 6 of 12 |" in table
-    assert by["pilco_hybrid", "robustness"]["lost"] == {"lost": 48, "where_lqr_loses": 48}
+    # From the operating region alone: noise none; push 2, 3 and 4 (seeds' [both, none],
+    # [one, none], [none, none]), all at levels where the LQR loses operating episodes too
+    def counts(lost, where, near, near_where):
+        return {
+            "lost": lost,
+            "where_lqr_loses": where,
+            "operating_lost": near,
+            "operating_where_lqr_loses": near_where,
+        }
+
+    assert noise["lost"] == counts(12, 6, 0, 0)
+    assert push["lost"] == counts(21, 21, 9, 9)
+    assert by["ddpg_hybrid", "robustness"]["lost"] == counts(33, 27, 9, 9)
+    assert (
+        "27 of its 33 lost episodes were at levels where its LQR lost operating-region episodes "
+        "too, 9 of the 9 it lost from the operating region" in lines[0]
+    )
+    assert "| above (n < 3) | 6 of 12 (0 of 0) |" in table
+    # PILCO's hybrid loses all 8 operating episodes per seed, the LQR at its period every one
+    assert by["pilco_hybrid", "robustness"]["lost"] == counts(48, 48, 24, 24)
     # another sweep (a level moved) is not compared level by level
     moved = ProtocolResult.from_dict(evaluations["pendulum"]["linear"][0]["robustness_protocol"])
     level = moved.categories[1].levels[0]._replace(level=0.5)
@@ -436,6 +451,9 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
     )
     assert protocol_section._lost(hybrid, moved, "push") is None
     assert protocol_section._lost(hybrid, moved, "observation_noise") == (4, 2)
+    assert protocol_section._lost(hybrid, moved, "observation_noise", "operating_region") == (0, 0)
+    lqr_sweep = ProtocolResult.from_dict(_protocol("linear", lqr))
+    assert protocol_section._lost(hybrid, lqr_sweep, "push", "operating_region") == (2, 2)
     # the LQR's very episodes: every level counts, the first and the last included
     same = protocol_section._same_episodes
     lqr_run = ProtocolResult.from_dict(_protocol("linear", lqr))

@@ -289,16 +289,18 @@ def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bo
     )
 
 
-def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, int] | None:
-    """Episodes ``hybrid`` lost (every start) in category ``name`` (or every category), and
-    how many of those were at levels where ``lqr`` lost an operating-region episode too; None
-    where the two did not run the same sweep."""
+def _lost(
+    hybrid: ProtocolResult, lqr: ProtocolResult, name: str, start_kind: str | None = None
+) -> tuple[int, int] | None:
+    """Episodes ``hybrid`` lost from ``start_kind`` starts (None: every start) in category
+    ``name`` (or every category), and how many of those were at levels where ``lqr`` lost an
+    operating-region episode too; None where the two did not run the same sweep."""
     pairs = _matched_levels(hybrid, lqr, name)
     if pairs is None:
         return None
     lost = where = 0
     for mine, its in pairs:
-        held, total = mine.held_count()
+        held, total = mine.held_count(start_kind)
         lqr_held, lqr_total = its.held_count(OPERATING)
         lost += total - held
         where += (total - held) if lqr_held < lqr_total else 0
@@ -309,13 +311,19 @@ def _lost_where_lqr_loses(
     results: list[ProtocolResult], lqr: list[ProtocolResult], name: str
 ) -> dict[str, int] | None:
     """``{"lost": N, "where_lqr_loses": M}`` summed over the hybrid's seeds (:func:`_lost`),
-    None without a single LQR run on the same sweep."""
-    counts = [_lost(result, lqr[0], name) for result in results] if len(lqr) == 1 else [None]
-    if any(count is None for count in counts):
+    and the same of the episodes from the operating region (``operating_lost``,
+    ``operating_where_lqr_loses``); None without a single LQR run on the same sweep."""
+    if len(lqr) != 1:
+        return None
+    counts = [_lost(result, lqr[0], name) for result in results]
+    near = [_lost(result, lqr[0], name, OPERATING) for result in results]
+    if any(count is None for count in counts + near):
         return None
     return {
         "lost": sum(count[0] for count in counts),
         "where_lqr_loses": sum(count[1] for count in counts),
+        "operating_lost": sum(count[0] for count in near),
+        "operating_where_lqr_loses": sum(count[1] for count in near),
     }
 
 
@@ -388,7 +396,7 @@ def verdict_table(rows: Rows) -> list[str]:
         "verdict",
         "P(> its baseline), all starts",
         "verdict",
-        "lost where its LQR loses",
+        "lost where its LQR loses (from the operating region)",
     ]
     table = []
     for row in rows:
@@ -414,8 +422,13 @@ def verdict_table(rows: Rows) -> list[str]:
 
 
 def _lost_cell(lost: dict[str, int] | None) -> str:
-    """``M of N``: of the hybrid's N lost episodes, the M at levels where its LQR lost too."""
-    return "-" if lost is None else f"{lost['where_lqr_loses']} of {lost['lost']}"
+    """``M of N (m of n)``: of the hybrid's N lost episodes, the M at levels where its LQR lost
+    too; in brackets the same of the n it lost from the operating region."""
+    if lost is None:
+        return "-"
+    near = lost.get("operating_lost")
+    whole = f"{lost['where_lqr_loses']} of {lost['lost']}"
+    return whole if near is None else f"{whole} ({lost['operating_where_lqr_loses']} of {near})"
 
 
 def _categories_where(rows: Rows, comparison: str, verdict: str) -> list[str]:
@@ -456,7 +469,9 @@ def verdict_sentences(rows: Rows) -> list[str]:
         if lost is not None and lost["lost"]:
             parts.append(
                 f"{lost['where_lqr_loses']} of its {lost['lost']} lost episodes were at levels "
-                "where its LQR lost operating-region episodes too"
+                "where its LQR lost operating-region episodes too, "
+                f"{lost['operating_where_lqr_loses']} of the {lost['operating_lost']} it lost "
+                "from the operating region"
             )
         if mine[0]["operating_as_lqr"]:
             flat = parse_controller(controller).relevance == CONTROLLER_KINDS["hybrid_roa"]
@@ -487,7 +502,8 @@ VERDICT_METHOD = (
     "the operating region is its LQR there by construction (its states stayed on its flat "
     "top), and is said so; a paper-relevance hybrid that did (r < 1 off a) is evidence. Lost "
     "where its LQR loses: of the hybrid's lost episodes (every start, summed over seeds), "
-    "those at levels where its LQR lost an operating-region episode too. Each sweep ends where "
+    "those at levels where its LQR lost an operating-region episode too; in brackets the same "
+    "of the episodes it lost from the operating region. Each sweep ends where "
     "the LQR holds none, and near the operating point the hybrid is (nearly) its LQR, so "
     "losses there are the design's, not the learned part's (a coincidence of levels, not a "
     "measured cause)."
