@@ -239,3 +239,5 @@ def test_the_readme_fits_a_screen_and_its_links_resolve() -> None:
     assert link_list <= 70, link_list
     targets = re.findall(r"\]\(([^)#]+)\)", "\n".join(lines))
     assert targets and all((ROOT / target).exists() for target in targets if "://" not in target)
+    guides = {p.relative_to(ROOT).as_posix() for p in (ROOT / "docs/user_guide").glob("*.md")}
+    assert guides - set(targets) == set()  # every guide page is one click from the README
