@@ -292,3 +292,19 @@ def test_getting_started_states_the_learning_tests_thresholds() -> None:
     for system, controller, budget, seeds, _measured, at_least in _learning_cases():
         expected = learning_case_summary(system, controller, budget, seeds, at_least)
         assert expected in page, f"the page should say: {expected}"
+
+
+def test_getting_started_lists_every_command() -> None:
+    """The command-line table of the getting-started page has a row for every ``leoc``
+    command (``leoc headline`` was once missing from it)."""
+    import argparse
+
+    from leoc.cli import build_parser
+
+    parser = build_parser()
+    commands = next(
+        action for action in parser._actions if isinstance(action, argparse._SubParsersAction)
+    )
+    page = GETTING_STARTED.read_text(encoding="utf-8")
+    missing = [name for name in commands.choices if f"| `leoc {name}" not in page]
+    assert missing == []
