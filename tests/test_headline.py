@@ -14,11 +14,14 @@ from leoc.experiments.headline import (
     END,
     PROVED_BEGIN,
     PROVED_END,
+    ROBUSTNESS_BEGIN,
+    ROBUSTNESS_END,
     HeadlineClaim,
     claim_cell,
     headline_lines,
     load_results,
     proved_region_lines,
+    robustness_lines,
     write_headline,
 )
 
@@ -241,3 +244,37 @@ def test_the_readme_fits_a_screen_and_its_links_resolve() -> None:
     assert targets and all((ROOT / target).exists() for target in targets if "://" not in target)
     guides = {p.relative_to(ROOT).as_posix() for p in (ROOT / "docs/user_guide").glob("*.md")}
     assert guides - set(targets) == set()  # every guide page is one click from the README
+
+
+def _report_tables(report: list[str], header: str) -> list[str]:
+    """The body rows of every table of ``report`` whose header line is ``header``, in order."""
+    rows = []
+    for index, line in enumerate(report):
+        if line != header:
+            continue
+        for row in report[index + 2 :]:
+            if not row.startswith("|"):
+                break
+            rows.append(row)
+    return rows
+
+
+def test_the_robustness_table_joins_the_studies_reports(monkeypatch) -> None:
+    """The results page's robustness-score table is ``leoc headline --robustness`` of every
+    certified study with a report; each row is a row of that study's report.md protocol tables
+    (one per system) with the study's folder and the system in front, in the report's order."""
+    monkeypatch.chdir(ROOT)
+    studies = sorted(
+        p for p in Path("results").glob("certified-*") if (p / "results.json").is_file()
+    )
+    lines = robustness_lines(studies)
+    assert _between(ROOT / "docs/results.md", ROBUSTNESS_BEGIN, ROBUSTNESS_END) == lines
+    header = lines[0].replace("| study | system ", "", 1)
+    for study in studies:
+        report = (study / "report.md").read_text(encoding="utf-8").split("\n")
+        own = _report_tables(report, header)
+        assert own, study
+        mine = [row for row in lines[2:] if row.startswith(f"| {study.as_posix()} |")]
+        assert [row.split(" | ", 2)[2] for row in mine] == [row[2:] for row in own], study
+        systems = {row.split(" | ")[1] for row in mine}
+        assert systems == set(load_results(study)["meta"]["systems"]), study

@@ -31,13 +31,20 @@ def add_parser(commands: Any) -> None:
         nargs="*",
         metavar="STUDY",
         help="published reproduce folders (default: results/paper results/paper-authors, one "
-        f"column each; with --proved-regions every {CERTIFIED_STUDIES} folder with a report)",
+        f"column each; with --proved-regions or --robustness every {CERTIFIED_STUDIES} folder "
+        "with a report)",
     )
     headline.add_argument(
         "--proved-regions",
         action="store_true",
         help="the proved-region table of the studies (one row per system and controller, a "
         "column naming the study) instead of the claims",
+    )
+    headline.add_argument(
+        "--robustness",
+        action="store_true",
+        help="the robustness protocol's scores of the studies (one row per system and "
+        "controller, columns naming the study and the system) instead of the claims",
     )
     headline.add_argument(
         "--write",
@@ -54,14 +61,17 @@ def add_parser(commands: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from leoc.experiments import headline as tables
 
+    if args.proved_regions and args.robustness:
+        raise ValueError("--proved-regions, --robustness: expected one table at a time, found both")
+    certified = sorted(
+        folder for folder in Path().glob(CERTIFIED_STUDIES) if (folder / "results.json").is_file()
+    )
     if args.proved_regions:
-        studies = args.studies or sorted(
-            folder
-            for folder in Path().glob(CERTIFIED_STUDIES)
-            if (folder / "results.json").is_file()
-        )
-        lines = tables.proved_region_lines(studies)
+        lines = tables.proved_region_lines(args.studies or certified)
         begin, end = tables.PROVED_BEGIN, tables.PROVED_END
+    elif args.robustness:
+        lines = tables.robustness_lines(args.studies or certified)
+        begin, end = tables.ROBUSTNESS_BEGIN, tables.ROBUSTNESS_END
     else:
         lines = tables.headline_lines(args.studies or list(DEFAULT_STUDIES))
         begin, end = tables.BEGIN, tables.END

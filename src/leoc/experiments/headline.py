@@ -32,12 +32,15 @@ __all__ = [
     "END",
     "PROVED_BEGIN",
     "PROVED_END",
+    "ROBUSTNESS_BEGIN",
+    "ROBUSTNESS_END",
     "HeadlineClaim",
     "claim_cell",
     "headline_lines",
     "load_results",
     "markers",
     "proved_region_lines",
+    "robustness_lines",
     "study_heading",
     "write_headline",
 ]
@@ -53,6 +56,8 @@ BEGIN, END = markers("headline")
 """The claims table's lines (:func:`markers` of ``headline``)."""
 PROVED_BEGIN, PROVED_END = markers("proved regions")
 """The cross-study proved-region table's lines (:func:`proved_region_lines`)."""
+ROBUSTNESS_BEGIN, ROBUSTNESS_END = markers("robustness scores")
+"""The cross-study robustness-score table's lines (:func:`robustness_lines`)."""
 SHOWN_MISS = 1
 """Failures named per cell (the biggest; the study's report lists every one)."""
 IMPROVEMENT = "interaction time to first hold"
@@ -260,6 +265,17 @@ def proved_region_lines(studies: Sequence[str | Path]) -> list[str]:
 
     return proved_regions_across(
         {Path(folder).as_posix(): load_results(folder)["proved_regions"] for folder in studies}
+    )
+
+
+def robustness_lines(studies: Sequence[str | Path]) -> list[str]:
+    """The robustness protocol's scores of several published studies in one table (the
+    report's own rows and cells, two first columns naming the study's folder and the system);
+    the studies that ran no protocol add no row."""
+    from leoc.experiments.report.robustness_protocol import protocol_across
+
+    return protocol_across(
+        {Path(folder).as_posix(): load_results(folder)["robustness_protocol"] for folder in studies}
     )
 
 
