@@ -1,5 +1,6 @@
 """``leoc headline``: the paper's claims, their verdicts in published studies, as a table; or
-the trained controllers' proved regions of several studies in one table."""
+the trained controllers' proved regions, or their robustness scores, of several studies in one
+table."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from typing import Any
 DEFAULT_STUDIES = (Path("results/paper"), Path("results/paper-authors"))
 """The published studies of the README's claims table, relative to the repository's root."""
 CERTIFIED_STUDIES = "results/certified-*"
-"""The published studies of the proved-region table by default (those with a report)."""
+"""The published studies of the proved-region and robustness tables by default (those with a
+report)."""
 
 
 def add_parser(commands: Any) -> None:
@@ -21,9 +23,10 @@ def add_parser(commands: Any) -> None:
         description="Read each study's results.json (written by 'leoc plot' or 'leoc publish') "
         "and print one row per claim of the paper: its verdict in each study (holds, partly, "
         "fails, not measured) with the number that decides it, from the report's own checks. "
-        "With --proved-regions, the trained controllers' proved regions of every study in one "
-        "table instead. With --write, put the table between its markers in a markdown file "
-        "(the README's and the results page's tables are written so).",
+        "With --proved-regions (or --robustness), the trained controllers' proved regions (or "
+        "robustness scores) of every study in one table instead. With --write, put the table "
+        "between its markers in a markdown file (the README's and the results page's tables "
+        "are written so).",
     )
     headline.add_argument(
         "studies",
@@ -52,8 +55,8 @@ def add_parser(commands: Any) -> None:
         action="append",
         metavar="FILE",
         help="a markdown file with the table's begin and end markers ('<!-- headline: begin "
-        "...' or '<!-- proved regions: begin ...', and '<!-- ...: end -->'): the table replaces "
-        "what is between them (repeatable)",
+        "...', '<!-- proved regions: begin ...' or '<!-- robustness scores: begin ...', and "
+        "'<!-- ...: end -->'): the table replaces what is between them (repeatable)",
     )
     headline.set_defaults(run=run)
 
@@ -63,14 +66,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.proved_regions and args.robustness:
         raise ValueError("--proved-regions, --robustness: expected one table at a time, found both")
-    certified = sorted(
-        folder for folder in Path().glob(CERTIFIED_STUDIES) if (folder / "results.json").is_file()
-    )
     if args.proved_regions:
-        lines = tables.proved_region_lines(args.studies or certified)
+        lines = tables.proved_region_lines(args.studies or certified_studies())
         begin, end = tables.PROVED_BEGIN, tables.PROVED_END
     elif args.robustness:
-        lines = tables.robustness_lines(args.studies or certified)
+        lines = tables.robustness_lines(args.studies or certified_studies())
         begin, end = tables.ROBUSTNESS_BEGIN, tables.ROBUSTNESS_END
     else:
         lines = tables.headline_lines(args.studies or list(DEFAULT_STUDIES))
@@ -82,3 +82,10 @@ def run(args: argparse.Namespace) -> int:
         changed = tables.write_headline(path, lines, begin, end)
         print(f"{path}: {'table written' if changed else 'table already current'}")
     return 0
+
+
+def certified_studies() -> list[Path]:
+    """The :data:`CERTIFIED_STUDIES` folders (from the working folder) that have a report."""
+    return sorted(
+        folder for folder in Path().glob(CERTIFIED_STUDIES) if (folder / "results.json").is_file()
+    )

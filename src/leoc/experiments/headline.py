@@ -18,12 +18,12 @@ the command writes from the committed studies.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from leoc.experiments.markdown import markdown_table
+from leoc.experiments.markdown import markdown_table, stacked_tables
+from leoc.experiments.stats import is_missing
 from leoc.names import LINEAR, parse_controller
 
 __all__ = [
@@ -194,26 +194,23 @@ def load_results(folder: str | Path) -> dict[str, Any]:
 
 
 def _verdict(passed: int, checked: int) -> str:
+    """**holds** when every case checked passes, **fails** when none does, else **partly**."""
     if passed == checked:
         return "**holds**"
     return "**fails**" if passed == 0 else "**partly**"
 
 
 def _improvement_cell(rows: Sequence[Mapping[str, Any]]) -> str:
-    pairs = [r for r in rows if r["quantity"] == IMPROVEMENT and not _missing(r["probability"])]
+    """Claim (ii): a pair passes unless it is resolved below 0.5 (the hybrid holds later)."""
+    pairs = [r for r in rows if r["quantity"] == IMPROVEMENT and not is_missing(r["probability"])]
     if not pairs:
         return "*not measured*"
     above = sum(r["ci_low"] > EVEN for r in pairs)
     below = sum(r["ci_high"] < EVEN for r in pairs)
-    verdict = "**fails**" if below == len(pairs) else "**partly**" if below else "**holds**"
     return (
-        f"{verdict}: resolved above 0.5 in {above} of {len(pairs)} hybrid-baseline pairs, "
-        f"below in {below}"
+        f"{_verdict(len(pairs) - below, len(pairs))}: resolved above 0.5 in {above} of "
+        f"{len(pairs)} hybrid-baseline pairs, below in {below}"
     )
-
-
-def _missing(value: Any) -> bool:
-    return value is None or (isinstance(value, float) and math.isnan(value))
 
 
 def claim_cell(claim: HeadlineClaim, tables: Mapping[str, Any]) -> str:
@@ -261,22 +258,25 @@ def proved_region_lines(studies: Sequence[str | Path]) -> list[str]:
     """The trained controllers' proved regions of several published studies in one table (the
     report's own rows and cells, a first column naming the study's folder); the studies that
     ran no proof add no row."""
-    from leoc.experiments.report.proved_regions import proved_regions_across
+    from leoc.experiments.report.proved_regions import proved_region_table
 
-    return proved_regions_across(
-        {Path(folder).as_posix(): load_results(folder)["proved_regions"] for folder in studies}
-    )
+    return _stacked(proved_region_table, "proved_regions", studies)
 
 
 def robustness_lines(studies: Sequence[str | Path]) -> list[str]:
     """The robustness protocol's scores of several published studies in one table (the
     report's own rows and cells, two first columns naming the study's folder and the system);
     the studies that ran no protocol add no row."""
-    from leoc.experiments.report.robustness_protocol import protocol_across
+    from leoc.experiments.report.robustness_protocol import protocol_table
 
-    return protocol_across(
-        {Path(folder).as_posix(): load_results(folder)["robustness_protocol"] for folder in studies}
-    )
+    return _stacked(protocol_table, "robustness_protocol", studies)
+
+
+def _stacked(table: Any, name: str, studies: Sequence[str | Path]) -> list[str]:
+    """The report table ``name`` of every study, rendered by ``table`` with the study's folder
+    in front (:func:`~leoc.experiments.markdown.stacked_tables`)."""
+    groups = {Path(folder).as_posix(): load_results(folder)[name] for folder in studies}
+    return stacked_tables(table, groups)
 
 
 def write_headline(

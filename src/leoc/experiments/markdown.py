@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
 
-__all__ = ["ALIGN_MARKERS", "markdown_table"]
+__all__ = ["ALIGN_MARKERS", "markdown_table", "stacked_tables"]
 
 #: The separator cell of each column alignment ("": markdown's default, left in most renderers).
 ALIGN_MARKERS = {"": "---", "left": ":---", "right": "---:", "center": ":---:"}
@@ -51,4 +52,14 @@ def markdown_table(
                 f"rows: expected {len(headers)} cells in row {index}, found {len(cells)}"
             )
         lines.append(_row(cells))
+    return lines
+
+
+def stacked_tables(table: Callable[[Any, str], list[str]], groups: Mapping[str, Any]) -> list[str]:
+    """One markdown table of several groups' tables: ``table(rows, name)`` renders one group's
+    rows with ``name`` in its first columns (its header and separator the same for every name);
+    the header once, then every group's rows in the order of ``groups`` (name -> rows)."""
+    lines = table([], "")[:2]
+    for name, rows in groups.items():
+        lines += table(rows, name)[2:]
     return lines

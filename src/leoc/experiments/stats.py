@@ -240,12 +240,18 @@ def stratified_bootstrap_ci(
     return float(low), float(high)
 
 
+def is_missing(value: Any) -> bool:
+    """Whether a recorded value is missing: ``None`` or NaN (how the studies' JSON marks a value
+    that was not measured)."""
+    return value is None or (isinstance(value, float) and math.isnan(value))
+
+
 def _usable_values(values_by_seed: Mapping[Any, Any] | Sequence[Any]) -> tuple[list[float], int]:
-    """Finite values and the count of missing ones (``None`` or NaN)."""
+    """Finite values and the count of missing ones (:func:`is_missing`)."""
     is_mapping = isinstance(values_by_seed, Mapping)
     kept, missing = [], 0
     for value in values_by_seed.values() if is_mapping else values_by_seed:
-        if value is None or (isinstance(value, float) and math.isnan(value)):
+        if is_missing(value):
             missing += 1
             continue
         number = float(value)

@@ -228,19 +228,11 @@ def _cells(row: dict[str, Any]) -> list[str]:
 
 def proved_region_table(rows: Rows, study: str | None = None) -> list[str]:
     """Markdown rows of the proved-region table (:data:`HEADERS`); with ``study``, a first
-    column names it on every row (:func:`proved_regions_across`)."""
+    column names it on every row (several studies' in one table:
+    :func:`leoc.experiments.markdown.stacked_tables`)."""
     if study is None:
         return markdown_table(HEADERS, [_cells(row) for row in rows])
     return markdown_table(("study", *HEADERS), [[study, *_cells(row)] for row in rows])
-
-
-def proved_regions_across(studies: dict[str, Rows]) -> list[str]:
-    """One proved-region table of several studies (``studies``: name -> its rows, in order), a
-    first column naming each row's study."""
-    lines = proved_region_table([], "")[:2]
-    for name, rows in studies.items():
-        lines += proved_region_table(rows, name)[2:]
-    return lines
 
 
 def _budget_text(rows: Rows) -> str:

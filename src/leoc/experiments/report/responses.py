@@ -154,24 +154,29 @@ def _response_failure(row: dict[str, Any], reference: dict[str, Any]) -> Failure
     )
 
 
+def _with_reference(rows: Rows, hybrids: bool) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """(row, its linear reference's row of the same system and test) for the hybrids' response
+    tests (``hybrids``) or the learned baselines', in the rows' order; tests without a
+    reference are left out."""
+    index = {(r["system"], r["test"], r["controller"]): r for r in rows}
+    pairs = []
+    for (system, test, controller), row in index.items():
+        if controller in LINEAR_CONTROLLERS or ("_hybrid" in controller) != hybrids:
+            continue
+        framework = controller_framework(controller)
+        reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
+        if reference is not None:
+            pairs.append((row, reference))
+    return pairs
+
+
 def _response_failures(rows: Rows) -> tuple[int, list[Failure]]:
     """The hybrid response tests that have a linear reference, and those that differ from it
     by more than ``RELATIVE_TOLERANCE`` (relative) in a metric or settle/terminate where it does
     not, in the rows' order."""
-    index = {(r["system"], r["test"], r["controller"]): r for r in rows}
-    checked, failures = 0, []
-    for (system, test, controller), row in index.items():
-        framework = controller_framework(controller)
-        if controller in LINEAR_CONTROLLERS or "_hybrid" not in controller:
-            continue
-        reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
-        if reference is None:
-            continue
-        checked += 1
-        failure = _response_failure(row, reference)
-        if failure is not None:
-            failures.append(failure)
-    return checked, failures
+    pairs = _with_reference(rows, hybrids=True)
+    failures = [_response_failure(row, reference) for row, reference in pairs]
+    return len(pairs), [failure for failure in failures if failure is not None]
 
 
 #: The check: every hybrid's impulse and step responses match its LQR's (a flag per hybrid
@@ -192,29 +197,23 @@ def _baseline_without_offset(rows: Rows) -> tuple[int, list[Failure]]:
     error is the reference's (as :func:`_differs` compares metrics): the cases
     where the paper's claim (iii), a baseline ends off the operating point, does not show. In
     the rows' order; size: 0 (nothing to rank)."""
-    index = {(r["system"], r["test"], r["controller"]): r for r in rows}
-    checked, failures = 0, []
-    for (system, test, controller), row in index.items():
-        framework = controller_framework(controller)
-        if controller in LINEAR_CONTROLLERS or "_hybrid" in controller:
-            continue
-        reference = index.get((system, test, LINEAR_REFERENCE.get(framework, "")))
-        if reference is None:
-            continue
-        checked += 1
+    pairs = _with_reference(rows, hybrids=False)
+    failures = []
+    for row, reference in pairs:
         value, ref = row["steady_state_error_mean"], reference["steady_state_error_mean"]
-        if not _differs(value, ref, _peak(reference)):
-            failures.append(
-                Failure(
-                    f"{system} {label(controller)} ({test})",
-                    0.0,
-                    f"steady state error {number(value)} vs {number(ref)}",
-                    "",
-                    f"**{system} {label(controller)}** ({test}) ends where "
-                    f"{label(reference['controller'])} does.",
-                )
+        if _differs(value, ref, _peak(reference)):
+            continue
+        subject = f"{row['system']} {label(row['controller'])}"
+        failures.append(
+            Failure(
+                f"{subject} ({row['test']})",
+                0.0,
+                f"steady state error {number(value)} vs {number(ref)}",
+                "",
+                f"**{subject}** ({row['test']}) ends where {label(reference['controller'])} does.",
             )
-    return checked, failures
+        )
+    return len(pairs), failures
 
 
 #: The paper's claim (iii) on the same rows (the headline table, :mod:`leoc.experiments.headline`):

@@ -142,8 +142,8 @@ def _cell(spread: dict[str, float]) -> str:
 
 def protocol_table(rows: Rows, study: str | None = None) -> list[str]:
     """Markdown rows of one system's table: per controller, every category's score and the
-    robustness score; with ``study``, two first columns name it and the row's system
-    (:func:`protocol_across`)."""
+    robustness score; with ``study``, two first columns name it and the row's system (several
+    studies' in one table: :func:`leoc.experiments.markdown.stacked_tables`)."""
     names = [name for name in CATEGORY_NAMES if name in rows[0]["scores"]] if rows else []
     names = names or list(CATEGORY_NAMES)
     headers = ["controller", "seeds", *(name.replace("_", " ") for name in names), SCORE]
@@ -160,15 +160,6 @@ def protocol_table(rows: Rows, study: str | None = None) -> list[str]:
         return markdown_table(headers, table)
     leading = [[study, row["system"], *cells] for row, cells in zip(rows, table, strict=True)]
     return markdown_table(["study", "system", *headers], leading)
-
-
-def protocol_across(studies: dict[str, Rows]) -> list[str]:
-    """One robustness-score table of several studies (``studies``: name -> its protocol rows,
-    in order), two first columns naming each row's study and system."""
-    lines = protocol_table([], "")[:2]
-    for name, rows in studies.items():
-        lines += protocol_table(rows, name)[2:]
-    return lines
 
 
 def _maxima(row: dict[str, Any]) -> str:
