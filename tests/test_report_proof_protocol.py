@@ -40,6 +40,7 @@ def _proof(rho, share, lqr_share, offset=(0.0, 0.0), lyapunov="lqr", cover=None,
         "seconds": 1.5,
         "budget_seconds": 2.0,
         "saturation": "clip",
+        **({"lqr_lyapunov": more["lqr_lyapunov"]} if "lqr_lyapunov" in more else {}),
     }
 
 
@@ -61,8 +62,8 @@ def _proof_evaluations() -> dict:
         _proof(9.0, 0.66, 0.60, lyapunov="own", volume=1.46),
     ]
     roa = [
-        _proof(4.0, 0.60, 0.60, cover=0.5),
-        _proof(4.0, 0.60, 0.60, cover=1.0 + 1e-12),
+        _proof(4.0, 0.60, 0.60, cover=0.5, lqr_lyapunov="own"),
+        _proof(4.0, 0.60, 0.60, cover=1.0 + 1e-12, lqr_lyapunov="own"),
         _proof(5.0, 0.65, 0.60, cover=1.3),
     ]
     baseline = [
@@ -115,6 +116,7 @@ def test_the_proved_region_table_is_the_saved_entries_read_by_hand() -> None:
     assert hybrid["proved rho"] == "4 [2, 9]"
     assert hybrid["share of the box"] == "60% [30%, 66%]"
     assert hybrid["LQR's share"] == "60%"
+    assert hybrid["LQR's V"] == "Riccati only"  # written before the reference kept its best V
     assert hybrid["ratio to the LQR's share"] == "1x [0.5x, 1.1x]"
     assert hybrid["volume / the LQR's"] == "1x [0.25x, 1.46x]"
     assert cells["DDPG baseline"]["volume / the LQR's"] == "–"  # no run recorded it
@@ -123,6 +125,7 @@ def test_the_proved_region_table_is_the_saved_entries_read_by_hand() -> None:
     assert hybrid["x* - a"] == "0"
     assert hybrid["by construction"] == "evidence"  # the paper's relevance: no flat top
     roa = cells["DDPG hybrid (ROA relevance)"]
+    assert roa["LQR's V"] == "own 2/3, Riccati only 1/3"
     assert roa["by construction"] == "by construction in 2/3 seeds"  # cover 0.5, 1 + 1e-12
     assert roa["proved rho"] == "4 [4, 5]"
     baseline = cells["DDPG baseline"]

@@ -27,12 +27,24 @@ def add_parser(commands: Any) -> None:
         "table then sets both beside the paper (recorded in RUN_DIR's meta.json, so later "
         "'leoc plot RUN_DIR' keeps it)",
     )
+    plot.add_argument(
+        "--refresh-lqr-reference",
+        action="store_true",
+        help="first remake the LQR reference of every run's proved region written before it "
+        "kept the LQR's best V (the LQR is proved, seconds per run; the trained controllers' "
+        "proofs are kept) and rewrite those evaluation.json files atomically",
+    )
     plot.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from leoc.experiments.report import record_companion, write_report
 
+    if args.refresh_lqr_reference:
+        from leoc.experiments.evaluators import refresh_lqr_references
+
+        count = refresh_lqr_references(args.run_dir)
+        print(f"{count} run(s) given the LQR's best-V reference")
     if args.compare is not None:
         record_companion(args.run_dir, args.compare)
     path = write_report(args.run_dir)

@@ -414,7 +414,9 @@ def _plot_slices(args: argparse.Namespace, system, certificate, basins: dict, bo
     )
 
 
-def _prove_controllers(args: argparse.Namespace, system, certified: _Certified, runs, box):
+def _prove_controllers(
+    args: argparse.Namespace, system, certified: _Certified, saturation: str, runs, box
+):
     """Per run label: its proved region beside the LQR's
     (:func:`~leoc.evaluation.proved_regions.proved_region`); progress on stderr."""
     import sys
@@ -432,6 +434,7 @@ def _prove_controllers(args: argparse.Namespace, system, certified: _Certified, 
             certified.design,
             certified.certificate,
             box,
+            saturation=saturation,
             lyapunov=args.lyapunov,
             samples=args.samples,
             seed=args.seed,
@@ -482,7 +485,9 @@ def run(args: argparse.Namespace) -> int:
     report = _roa_report(args, system, lqr, runs, certified, cover, basins)
     report["trained_under"] = trained_under(list(runs))  # certified on the nominal plant
     if args.prove:
-        report["proofs"] = _prove_controllers(args, system, certified, runs, cover.box)
+        report["proofs"] = _prove_controllers(
+            args, system, certified, lqr.saturation, runs, cover.box
+        )
     if args.plot:
         report["plot"] = _plot_slices(args, system, certified.certificate, basins, cover.box)
     report["seconds"] = time.perf_counter() - started

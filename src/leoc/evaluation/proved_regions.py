@@ -5,6 +5,9 @@ compares what it proves with the LQR's certificate
 (:func:`leoc.policies.hybrid.lqr_certificate`), on one box of states around the operating
 point a:
 
+- the LQR's reference (:func:`lqr_reference`): the LQR proved with the same candidate V as
+  the controller, the larger of its Riccati certificate (``lqr``) and the proof of its own
+  linearisation's V (``own``), so that a ratio credits the controller, never the V;
 - ``box_share``: the share of the box ``a +/- box`` inside the proved set (Monte Carlo, seeded:
   :func:`leoc.evaluation.basins.box_fraction`), and the LQR's on the same box and samples;
 - ``volume_ratio``: the proved ellipsoid's volume over the LQR's (exact: from ``rho`` and
@@ -22,7 +25,7 @@ controller is *seen* to converge) stay beside it as the sampled, larger, figure.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,9 +33,24 @@ from leoc.control.proof import MAX_BOXES, MAX_SECONDS
 from leoc.control.roa import DEFAULT_SAMPLES, LyapunovCertificate
 from leoc.control.trained import ControllerCertificate, certify_controller, log_volume
 from leoc.evaluation.basins import box_fraction
+from leoc.names import LYAPUNOV_CHOICES
 from leoc.systems.base import System
 
-__all__ = ["describe_proved_region", "flat_top_cover", "proved_region"]
+__all__ = [
+    "LQRReference",
+    "describe_proved_region",
+    "flat_top_cover",
+    "lqr_reference",
+    "proved_region",
+    "refresh_lqr_reference",
+]
+
+REFERENCE_KEY = "lqr_lyapunov"
+"""The entry's field naming the V of the LQR's reference; an entry without it was written when
+the reference was the Riccati certificate alone (:func:`refresh_lqr_reference` updates it)."""
+OLD_REFERENCE = "Riccati only"
+"""What such an entry's reference V is called in text and tables (``leoc plot
+--refresh-lqr-reference`` remakes the entry)."""
 
 
 def _ratio(value: float, reference: float) -> float | None:
@@ -40,30 +58,102 @@ def _ratio(value: float, reference: float) -> float | None:
     return value / reference if reference > 0.0 else None
 
 
+class LQRReference(NamedTuple):
+    """The LQR's proved region a controller is compared with (:func:`lqr_reference`).
+
+    Attributes
+    ----------
+    certificate : LyapunovCertificate
+        The kept V's certificate (centred on a: the LQR's equilibrium).
+    lyapunov : str
+        Which V: ``lqr`` (its Riccati P) or ``own`` (its linearisation's discrete Lyapunov P).
+    candidates : dict
+        Every V tried: name -> ``{"rho", "log_volume"}``.
+    """
+
+    certificate: LyapunovCertificate
+    lyapunov: str
+    candidates: dict[str, dict[str, float]]
+
+
+def lqr_reference(
+    system: System,
+    design: Any,
+    riccati: LyapunovCertificate,
+    saturation: str = "clip",
+    *,
+    lyapunov: str = "best",
+    samples: int = DEFAULT_SAMPLES,
+    seed: int = 0,
+    max_seconds: float = MAX_SECONDS,
+    device: Any = "cpu",
+    max_boxes: int = MAX_BOXES,
+) -> LQRReference:
+    """The LQR proved as a controller is proved: with the Riccati V (``riccati``, its
+    certificate) and, unless ``lyapunov == "lqr"``, with its own linearisation's V
+    (:func:`leoc.control.certify_controller` of the saturated LQR,
+    :func:`leoc.policies.hybrid.saturated_lqr`, ``lyapunov="own"``); the larger proved volume
+    is kept (the Riccati V on a tie), only the own V with ``lyapunov == "own"``.
+
+    A hybrid's linearisation at a is its LQR's (d pi/dx (a) = W), so its ``own`` V is its
+    LQR's: measured against the Riccati certificate alone, the mountain car's hybrids proved
+    1.46x their LQR's volume by the choice of V (docs/results.md). The other options are
+    :func:`~leoc.control.certify_controller`'s, as the controller's proof got them.
+    """
+    from leoc.policies.hybrid import saturated_lqr
+
+    if lyapunov not in LYAPUNOV_CHOICES:
+        raise ValueError(f"lyapunov: expected one of {LYAPUNOV_CHOICES}, found {lyapunov!r}")
+    candidates = {} if lyapunov == "own" else {"lqr": riccati}
+    if lyapunov != "lqr":
+        own = certify_controller(
+            system,
+            saturated_lqr(system, design, saturation),
+            None,
+            action_repeat=int(design.action_repeat),
+            lyapunov="own",
+            samples=samples,
+            seed=seed,
+            max_seconds=max_seconds,
+            device=device,
+            max_boxes=max_boxes,
+        )
+        candidates[own.lyapunov] = own.certificate
+    names = list(candidates)
+    volumes = [log_volume(candidates[name]) for name in names]
+    kept = names[int(np.argmax(volumes))]
+    summary = {
+        name: {"rho": entry.rho, "log_volume": log_volume(entry)}
+        for name, entry in candidates.items()
+    }
+    return LQRReference(candidates[kept], kept, summary)
+
+
 def _comparison(
     system: System,
-    proved: ControllerCertificate,
-    lqr: LyapunovCertificate,
+    share: float,
+    own_log_volume: float,
+    reference: LQRReference,
     box: np.ndarray,
     seed: int,
 ) -> dict[str, Any]:
-    """Box shares of the controller's and the LQR's proved sets, and their ratios."""
+    """The LQR's share of the box and the ratios of the controller's (``share``, its proved
+    set's; ``own_log_volume``, :func:`~leoc.control.trained.log_volume`) to the LQR's."""
     operating = np.asarray(system.operating_state, dtype=float)
-    share, error = box_fraction(proved.certificate, box, seed=seed, centre=operating)
-    lqr_share, _ = box_fraction(lqr, box, seed=seed, centre=operating)
-    own, reference = log_volume(proved.certificate), log_volume(lqr)
+    lqr_share, _ = box_fraction(reference.certificate, box, seed=seed, centre=operating)
+    own, lqr_volume = own_log_volume, log_volume(reference.certificate)
     volume_ratio = (
-        math.exp(own - reference) if math.isfinite(own) and math.isfinite(reference) else None
+        math.exp(own - lqr_volume) if math.isfinite(own) and math.isfinite(lqr_volume) else None
     )
-    if not math.isfinite(own) and math.isfinite(reference):
+    if not math.isfinite(own) and math.isfinite(lqr_volume):
         volume_ratio = 0.0
     return {
-        "box_share": share,
-        "box_share_stderr": error,
         "lqr_box_share": lqr_share,
         "box_share_ratio": _ratio(share, lqr_share),
         "volume_ratio": volume_ratio,
-        "lqr_rho": lqr.rho,
+        "lqr_rho": reference.certificate.rho,
+        REFERENCE_KEY: reference.lyapunov,
+        "lqr_candidates": reference.candidates,
     }
 
 
@@ -113,6 +203,7 @@ def proved_region(
     lqr: LyapunovCertificate,
     box: Any,
     *,
+    saturation: str = "clip",
     lyapunov: str = "best",
     samples: int = DEFAULT_SAMPLES,
     seed: int = 0,
@@ -129,37 +220,46 @@ def proved_region(
     controller : callable
         A loaded controller (float64 observations -> actions, at its own control period).
     design, lqr : LQRDesign, LyapunovCertificate
-        Its LQR (the ``lqr`` candidate V) and the LQR's certificate (the ratios' reference).
+        Its LQR (the ``lqr`` candidate V) and the LQR's Riccati certificate (with the LQR's own
+        V, the reference: :func:`lqr_reference`).
     box : (S,) half-widths
         The box around a the shares are measured on.
+    saturation : str
+        How the controller's output is saturated (PILCO's ``sin``, else ``clip``): the LQR of
+        the reference is saturated so.
     lyapunov, samples, seed, max_seconds, device, max_boxes :
-        :func:`leoc.control.certify_controller`'s options; ``seed`` also seeds the box shares.
+        :func:`leoc.control.certify_controller`'s options, the controller's and the
+        reference's; ``seed`` also seeds the box shares.
 
     Returns
     -------
     dict
         :meth:`~leoc.control.ControllerCertificate.summary` with the comparison
-        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``), the flat
-        top (``flat_top_rho``, ``flat_top_cover``: :func:`flat_top_cover`; None without an
-        ROA relevance), ``seconds`` and the ``device`` of the box search.
+        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``, the
+        reference's ``lqr_rho``, ``lqr_lyapunov`` and ``lqr_candidates``), the flat top
+        (``flat_top_rho``, ``flat_top_cover``: :func:`flat_top_cover`; None without an ROA
+        relevance), ``seconds`` and the ``device`` of the box search.
     """
-    proved = certify_controller(
-        system,
-        controller,
-        design,
-        lyapunov=lyapunov,
-        samples=samples,
-        seed=seed,
-        max_seconds=max_seconds,
-        device=device,
-        max_boxes=max_boxes,
-    )
+    options = {
+        "lyapunov": lyapunov,
+        "samples": samples,
+        "seed": seed,
+        "max_seconds": max_seconds,
+        "device": device,
+        "max_boxes": max_boxes,
+    }
+    proved = certify_controller(system, controller, design, **options)
+    reference = lqr_reference(system, design, lqr, saturation, **options)
     half = np.asarray(box, dtype=float)
     summary = proved.summary(system)
     found = _flat_top(controller)
+    operating = np.asarray(system.operating_state, dtype=float)
+    share, error = box_fraction(proved.certificate, half, seed=seed, centre=operating)
     return {
         **summary,
-        **_comparison(system, proved, lqr, half, seed),
+        "box_share": share,
+        "box_share_stderr": error,
+        **_comparison(system, share, summary["log_volume"], reference, half, seed),
         "flat_top_rho": None if found is None else found[0],
         "flat_top_cover": flat_top_cover(controller, proved, summary["offset"]),
         "seconds": proved.seconds,
@@ -167,8 +267,41 @@ def proved_region(
     }
 
 
+def refresh_lqr_reference(
+    system: System,
+    entry: dict[str, Any],
+    design: Any,
+    lqr: LyapunovCertificate,
+    box: Any,
+    *,
+    seed: int = 0,
+    samples: int = DEFAULT_SAMPLES,
+) -> dict[str, Any]:
+    """``entry`` (a :func:`proved_region` result written before the reference kept the LQR's
+    own V) with its comparison remade against :func:`lqr_reference`, at the entry's
+    ``saturation``, ``budget_seconds`` and ``budget_boxes``: the controller's proof and share
+    are kept as they are (they do not depend on the reference), only the LQR's side is
+    proved. An entry that already names its reference's V is returned unchanged."""
+    if REFERENCE_KEY in entry:
+        return entry
+    budget = {
+        "max_seconds": entry.get("budget_seconds") or MAX_SECONDS,
+        "max_boxes": entry.get("budget_boxes") or MAX_BOXES,
+    }
+    saturation = entry.get("saturation", "clip")
+    reference = lqr_reference(system, design, lqr, saturation, samples=samples, seed=seed, **budget)
+    half = np.asarray(box, dtype=float)
+    comparison = _comparison(system, entry["box_share"], entry["log_volume"], reference, half, seed)
+    return {**entry, **comparison}
+
+
 def _ratio_text(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3g}x"
+
+
+def _reference_v(entry: dict[str, Any]) -> str:
+    """The V the LQR's reference kept, for people (:data:`OLD_REFERENCE` for an old entry)."""
+    return entry.get(REFERENCE_KEY, OLD_REFERENCE)
 
 
 def describe_proved_region(system: System, label: str, entry: dict[str, Any]) -> list[str]:
@@ -192,5 +325,6 @@ def describe_proved_region(system: System, label: str, entry: dict[str, Any]) ->
         f"  {label}: {proved}",
         f"    equilibrium {where}",
         f"    proved set: {share:.1%} of the box (LQR's {lqr_share:.1%}, ratio {ratios[0]}); "
-        f"volume {ratios[1]} the LQR's; {entry['seconds']:.0f} s",
+        f"volume {ratios[1]} the LQR's (LQR's V: {_reference_v(entry)}); "
+        f"{entry['seconds']:.0f} s",
     ]

@@ -58,6 +58,8 @@ __all__ = [
     "evaluate_roa",
     "evaluate_swing_up",
     "hybrid_claims_of",
+    "refresh_lqr_references",
+    "refreshed_proved_region",
     "region_of_attraction",
 ]
 
@@ -310,6 +312,7 @@ def evaluate_proved_region(context: EvaluationContext) -> dict[str, Any] | None:
         design,
         lqr_certificate(system, design, saturation),
         default_basin_box(system),
+        saturation=saturation,
         seed=PROOF_SEED,
         max_seconds=context.budget.proof_seconds,
         max_boxes=context.budget.proof_boxes,
@@ -320,6 +323,53 @@ def evaluate_proved_region(context: EvaluationContext) -> dict[str, Any] | None:
         "budget_seconds": context.budget.proof_seconds,
         "budget_boxes": context.budget.proof_boxes,
     }
+
+
+def refreshed_proved_region(record: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``proved_region`` entry of one run's ``evaluation.json`` (``record``) with its LQR
+    reference remade as :func:`evaluate_proved_region` now makes it (the LQR's best V,
+    :func:`leoc.evaluation.proved_regions.refresh_lqr_reference`); None when the record has
+    no entry or its entry already names its reference's V. Needs no trained model: the
+    controller's side of the entry is kept."""
+    from leoc.evaluation.basins import default_basin_box
+    from leoc.evaluation.proved_regions import REFERENCE_KEY, refresh_lqr_reference
+    from leoc.experiments.variants import get_variant
+    from leoc.policies.hybrid import lqr_certificate
+
+    entry = record.get("proved_region")
+    if not isinstance(entry, dict) or REFERENCE_KEY in entry:
+        return None
+    variant = get_variant(record["variant"])
+    system = variant.system(record["spec"]["system"])
+    design = certified_lqr(system, int(record["action_repeat"]), variant.lqr_method).design
+    saturation = entry.get("saturation", "clip")
+    riccati = lqr_certificate(system, design, saturation)
+    box = default_basin_box(system)
+    return refresh_lqr_reference(system, entry, design, riccati, box, seed=PROOF_SEED)
+
+
+def refresh_lqr_references(folder: Any, echo: Callable[[str], None] = print) -> int:
+    """Rewrite (atomically) every ``evaluation.json`` under ``folder/runs`` whose proved
+    region was compared with the LQR's Riccati certificate alone
+    (:func:`refreshed_proved_region`); returns how many were rewritten."""
+    import json
+    from pathlib import Path
+
+    from leoc.experiments.layout import EVALUATION_FILE
+    from leoc.io import write_json_atomic
+
+    rewritten = 0
+    for path in sorted(Path(folder).glob(f"runs/*/*/seed*/{EVALUATION_FILE}")):
+        record = json.loads(path.read_text())
+        entry = refreshed_proved_region(record)
+        if entry is None:
+            continue
+        record["proved_region"] = entry
+        write_json_atomic(path, record)
+        rewritten += 1
+        where = path.parent.relative_to(folder)
+        echo(f"{where}: the LQR reference now keeps its {entry['lqr_lyapunov']} V")
+    return rewritten
 
 
 def evaluate_robustness_protocol(context: EvaluationContext) -> dict[str, Any] | None:

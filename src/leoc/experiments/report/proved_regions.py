@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from leoc.evaluation.proved_regions import OLD_REFERENCE, REFERENCE_KEY
 from leoc.experiments.claims_report import BY_CONSTRUCTION, EVIDENCE
 from leoc.experiments.layout import Evaluations
 from leoc.experiments.markdown import markdown_table
@@ -50,6 +51,7 @@ HEADERS = (
     "proved rho",
     "share of the box",
     "LQR's share",
+    "LQR's V",
     "ratio to the LQR's share",
     "volume / the LQR's",
     "x* - a",
@@ -93,6 +95,7 @@ def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[st
         else None,
         "equilibria_found": len(found),
         "lyapunov": dict(Counter(e["lyapunov"] for e in entries)),
+        "lqr_lyapunov": dict(Counter(e.get(REFERENCE_KEY, OLD_REFERENCE) for e in entries)),
         "limited_by": dict(Counter(e["limited_by"] for e in entries)),
         "by_construction": [_by_construction(e) for e in entries],
         "seconds_median": float(np.median([e["seconds"] for e in entries])),
@@ -218,6 +221,7 @@ def _cells(row: dict[str, Any]) -> list[str]:
         _span(row["rho"]),
         _span(row["box_share"], percent),
         _span(row["lqr_box_share"], percent),
+        _counts(row.get("lqr_lyapunov", {OLD_REFERENCE: row["n_runs"]}), row["n_runs"]),
         _span(row["box_share_ratio"], lambda value: f"{FMT.format(value)}x"),
         _span(row["volume_ratio"], lambda value: f"{FMT.format(value)}x"),
         _offset(row),
@@ -265,7 +269,9 @@ METHOD = (
     "Lyapunov matrix of its own linearisation (`own`), whichever proves the larger ellipsoid "
     "('V kept'); rho is the proved level, in the units of that V. Beside it, the proved region "
     "of its LQR (at the controller's period, saturated as the controller's output is: PILCO's "
-    "sin, else the clip) on the same seeded samples of the basin box of the region-of-"
+    "sin, else the clip), proved with the same two candidate V, the larger kept ('LQR's V'; a "
+    "hybrid's linearisation at a is its LQR's, so a V the LQR could use earns the hybrid "
+    "nothing), on the same seeded samples of the basin box of the region-of-"
     "attraction section: the share of the box inside each proved set, and their ratio; and the "
     "proved ellipsoid's volume over the LQR's (exact, from rho and det P; it tells apart "
     "controllers whose proved sets both cover the whole box, and counts states outside it). "
