@@ -294,42 +294,41 @@ def _same_episodes(hybrid: ProtocolResult, lqr: ProtocolResult, kind: str) -> bo
     )
 
 
-def _lost(
-    hybrid: ProtocolResult, lqr: ProtocolResult, name: str, start_kind: str | None = None
-) -> tuple[int, int] | None:
-    """Episodes ``hybrid`` lost from ``start_kind`` starts (None: every start) in category
-    ``name`` (or every category), and how many of those were at levels where ``lqr`` lost an
-    operating-region episode too; None where the two did not run the same sweep."""
+LOST_COUNTS = ("lost", "where_lqr_loses", "operating_lost", "operating_where_lqr_loses")
+"""The lost-episode counts of :func:`_lost_where_lqr_loses`, every start first, then those from
+the operating region."""
+
+
+def _lost(hybrid: ProtocolResult, lqr: ProtocolResult, name: str) -> tuple[int, ...] | None:
+    """Episodes ``hybrid`` lost in category ``name`` (or every category) and how many of those
+    were at levels where ``lqr`` lost an operating-region episode too, from every start and
+    then from the operating region (:data:`LOST_COUNTS`, one walk of the levels); None where
+    the two did not run the same sweep."""
     pairs = _matched_levels(hybrid, lqr, name)
     if pairs is None:
         return None
-    lost = where = 0
+    counts = [0, 0, 0, 0]
     for mine, its in pairs:
-        held, total = mine.held_count(start_kind)
         lqr_held, lqr_total = its.held_count(OPERATING)
-        lost += total - held
-        where += (total - held) if lqr_held < lqr_total else 0
-    return lost, where
+        lqr_loses = lqr_held < lqr_total
+        for offset, start_kind in ((0, None), (2, OPERATING)):
+            held, total = mine.held_count(start_kind)
+            counts[offset] += total - held
+            counts[offset + 1] += (total - held) if lqr_loses else 0
+    return tuple(counts)
 
 
 def _lost_where_lqr_loses(
     results: list[ProtocolResult], lqr: list[ProtocolResult], name: str
 ) -> dict[str, int] | None:
-    """``{"lost": N, "where_lqr_loses": M}`` summed over the hybrid's seeds (:func:`_lost`),
-    and the same of the episodes from the operating region (``operating_lost``,
-    ``operating_where_lqr_loses``); None without a single LQR run on the same sweep."""
+    """:data:`LOST_COUNTS` summed over the hybrid's seeds (:func:`_lost`); None without a
+    single LQR run on the same sweep."""
     if len(lqr) != 1:
         return None
     counts = [_lost(result, lqr[0], name) for result in results]
-    near = [_lost(result, lqr[0], name, OPERATING) for result in results]
-    if any(count is None for count in counts + near):
+    if any(count is None for count in counts):
         return None
-    return {
-        "lost": sum(count[0] for count in counts),
-        "where_lqr_loses": sum(count[1] for count in counts),
-        "operating_lost": sum(count[0] for count in near),
-        "operating_where_lqr_loses": sum(count[1] for count in near),
-    }
+    return {key: sum(count[index] for count in counts) for index, key in enumerate(LOST_COUNTS)}
 
 
 def protocol_verdicts(evaluations: Evaluations) -> Rows:
