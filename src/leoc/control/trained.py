@@ -61,6 +61,7 @@ from leoc.systems.rollout import control_period
 __all__ = [
     "ControllerCertificate",
     "Equilibrium",
+    "best_candidate",
     "certify_controller",
     "find_equilibrium",
 ]
@@ -294,9 +295,10 @@ def _candidate_matrices(
     return matrices
 
 
-def _best(candidates: dict[str, LyapunovCertificate]) -> str:
+def best_candidate(candidates: dict[str, LyapunovCertificate]) -> str:
     """The candidate with the largest proved volume (the first on a tie, ``lqr`` before
-    ``own``)."""
+    ``own``): the V a controller's proof keeps (``best``), and its LQR reference's
+    (:func:`leoc.evaluation.proved_regions.lqr_reference`)."""
     names = list(candidates)
     volumes = [log_volume(candidates[name]) for name in names]
     return names[int(np.argmax(volumes))] if max(volumes) > -math.inf else names[0]
@@ -360,7 +362,7 @@ def certify_controller(
         )
         for name, matrix in matrices.items()
     }
-    chosen = _best(candidates)
+    chosen = best_candidate(candidates)
     return ControllerCertificate(
         candidates[chosen], chosen, equilibrium, candidates, time.perf_counter() - started
     )

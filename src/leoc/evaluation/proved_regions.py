@@ -31,7 +31,12 @@ import numpy as np
 
 from leoc.control.proof import MAX_BOXES, MAX_SECONDS
 from leoc.control.roa import DEFAULT_SAMPLES, LyapunovCertificate
-from leoc.control.trained import ControllerCertificate, certify_controller, log_volume
+from leoc.control.trained import (
+    ControllerCertificate,
+    best_candidate,
+    certify_controller,
+    log_volume,
+)
 from leoc.evaluation.basins import box_fraction
 from leoc.names import LYAPUNOV_CHOICES
 from leoc.systems.base import System
@@ -119,9 +124,7 @@ def lqr_reference(
             max_boxes=max_boxes,
         )
         candidates[own.lyapunov] = own.certificate
-    names = list(candidates)
-    volumes = [log_volume(candidates[name]) for name in names]
-    kept = names[int(np.argmax(volumes))]
+    kept = best_candidate(candidates)
     summary = {
         name: {"rho": entry.rho, "log_volume": log_volume(entry)}
         for name, entry in candidates.items()
