@@ -81,3 +81,57 @@ def test_the_readme_table_is_the_records_median_over_seeds(study: str) -> None:
         if not any(OPERATING_HEADER in line for line in lines if line.startswith("| ")):
             del found[-2], expected[-2]  # a table without the operating-region score
         assert found == expected, label
+
+
+def _kind_runs(study: str, suffix: str) -> list[dict]:
+    system, learner = STUDIES[study]
+    return _runs(RESULTS / study, system, learner + suffix)
+
+
+LOST_AT_40 = ("certified-mountaincar-ddpg", "_hybrid_roa", 3)
+"""The one mountain-car hybrid that already loses the impulse of size 40.6."""
+MOUNTAIN_CAR = sorted(study for study, (system, _) in STUDIES.items() if system == "mountaincar")
+
+
+@pytest.mark.parametrize("study", MOUNTAIN_CAR)
+def test_no_mountain_car_hybrid_proves_more_than_its_lqr(study: str) -> None:
+    """The READMEs' and docs/results.md's claim, against the LQR proved with its best V: the
+    default-relevance hybrids prove their LQR's volume (1x, own V), the ROA hybrids less."""
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    for run in _kind_runs(study, "_hybrid"):
+        proved = run["proved_region"]
+        assert proved["lqr_lyapunov"] == proved["lyapunov"] == "own"
+        assert proved["volume_ratio"] == pytest.approx(1.0, rel=1e-6)
+    roa = [run["proved_region"]["volume_ratio"] for run in _kind_runs(study, "_hybrid_roa")]
+    assert 0.6 < min(roa) and max(roa) < 1.0
+
+
+@pytest.mark.parametrize("study", MOUNTAIN_CAR)
+def test_mountain_car_hybrids_lose_the_impulse_their_lqr_holds(study: str) -> None:
+    """The claim that every hybrid holds the impulse sweep up to size 40.6 and none at 140,
+    which the LQR holds, with its relevance below 1e-4 along that response (the ROA hybrid of
+    the DDPG study's seed 3 already loses 40.6)."""
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    for suffix in ("_hybrid", "_hybrid_roa"):
+        for seed, run in enumerate(_kind_runs(study, suffix)):
+            sweep = run["hybrid_claims"]["impulse_sweep"]
+            sizes = [round(point["size"], 1) for point in sweep["hybrid"]]
+            at = {size: index for index, size in enumerate(sizes)}
+            hybrid, lqr = sweep["hybrid"][at[139.6]], sweep["lqr"][at[139.6]]
+            assert lqr["held"] and not hybrid["held"], (suffix, seed)
+            assert hybrid["min_relevance"] < 1e-4
+            lost_early = (study, suffix, seed) == LOST_AT_40
+            assert all(p["held"] for p in sweep["hybrid"][: at[40.6]]), (suffix, seed)
+            assert sweep["hybrid"][at[40.6]]["held"] is not lost_early, (suffix, seed)
+
+
+def test_every_sac_mountain_car_baseline_has_a_stable_equilibrium_and_a_proof() -> None:
+    study = "certified-mountaincar-sac"
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    proved = [run["proved_region"] for run in _kind_runs(study, "_baseline")]
+    assert all(p["equilibrium_found"] and p["spectral_radius"] < 1.0 for p in proved)
+    assert all(p["rho"] > 0.0 for p in proved)
+    assert sorted(round(p["volume_ratio"], 2) for p in proved)[-2:] == [1.03, 1.26]
