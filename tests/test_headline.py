@@ -16,12 +16,15 @@ from leoc.experiments.headline import (
     PROVED_END,
     ROBUSTNESS_BEGIN,
     ROBUSTNESS_END,
+    VERDICTS_BEGIN,
+    VERDICTS_END,
     HeadlineClaim,
     claim_cell,
     headline_lines,
     load_results,
     proved_region_lines,
     robustness_lines,
+    robustness_verdict_lines,
     write_headline,
 )
 
@@ -278,3 +281,72 @@ def test_the_robustness_table_joins_the_studies_reports(monkeypatch) -> None:
         assert [row.split(" | ", 2)[2] for row in mine] == [row[2:] for row in own], study
         systems = {row.split(" | ")[1] for row in mine}
         assert systems == set(load_results(study)["meta"]["systems"]), study
+
+
+def _verdict_row(controller: str, category: str, lqr: str | None, baseline: str | None) -> dict:
+    """A row of the report's ``robustness_protocol_verdicts`` with the two verdicts only."""
+    return {
+        "system": "pendulum",
+        "controller": controller,
+        "category": category,
+        "versus_lqr": None if lqr is None else {"verdict": lqr},
+        "versus_baseline": None if baseline is None else {"verdict": baseline},
+    }
+
+
+def test_the_verdict_table_pivots_each_hybrid_s_categories_by_hand() -> None:
+    from leoc.experiments.report.robustness_protocol import verdict_summary_table
+
+    rows = [
+        _verdict_row("ddpg_hybrid", "push", "equal", "below"),
+        _verdict_row("ddpg_hybrid", "robustness", "unresolved", "above"),
+        _verdict_row("ddpg_hybrid_roa", "action_delay", None, "above (n < 3)"),
+    ]
+    lines = verdict_summary_table(rows, "results/x")
+    header = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    assert header[:3] == ["study", "system", "hybrid"] and header[-2:] == ["push", "robustness"]
+    assert len(header) == 3 + 9  # every category and the score, whatever the rows hold
+    first = dict(zip(header, (c.strip() for c in lines[2].strip("|").split("|")), strict=True))
+    assert first["hybrid"] == "DDPG hybrid"
+    assert first["push"] == "equal / below" and first["robustness"] == "unresolved / above"
+    assert first["action delay"] == "–"  # not in its rows
+    second = dict(zip(header, (c.strip() for c in lines[3].strip("|").split("|")), strict=True))
+    assert second["hybrid"] == "DDPG hybrid (ROA relevance)"
+    assert second["action delay"] == "- / above (n < 3)"  # no LQR to compare with
+    assert len(lines) == 4
+
+
+def test_the_verdict_table_is_each_study_s_report_verdicts(monkeypatch) -> None:
+    """The results page's verdict table is ``leoc headline --robustness-verdicts`` of every
+    certified study; each cell is the pair of verdicts of that study's report.md verdict table
+    (hybrid, category) row, read from the report's text."""
+    monkeypatch.chdir(ROOT)
+    studies = sorted(
+        p for p in Path("results").glob("certified-*") if (p / "results.json").is_file()
+    )
+    lines = robustness_verdict_lines(studies)
+    assert _between(ROOT / "docs/results.md", VERDICTS_BEGIN, VERDICTS_END) == lines
+    header = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    checked = 0
+    for study in studies:
+        report = (study / "report.md").read_text(encoding="utf-8").split("\n")
+        pairs = {}
+        for line in report:
+            cells = [cell.strip() for cell in line.strip("|").split("|")]
+            if len(cells) == 7 and cells[1] in {h for h in header[3:]}:
+                pairs[cells[0], cells[1]] = f"{cells[3]} / {cells[5]}"
+        for row in lines[2:]:
+            cells = dict(zip(header, (c.strip() for c in row.strip("|").split("|")), strict=True))
+            if cells["study"] != study.as_posix():
+                continue
+            for category in header[3:]:
+                if cells[category] != "–":
+                    assert cells[category] == pairs[cells["hybrid"], category], (study, category)
+                    checked += 1
+    assert checked >= 9 * 2 * 5  # nine cells per hybrid, two hybrids in most of the studies
+
+
+def test_one_cross_study_table_at_a_time(capsys) -> None:
+    assert main(["headline", "--robustness", "--robustness-verdicts"]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--robustness, --robustness-verdicts: expected one table at a time, found 2" in line

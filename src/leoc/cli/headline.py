@@ -1,6 +1,6 @@
 """``leoc headline``: the paper's claims, their verdicts in published studies, as a table; or
-the trained controllers' proved regions, or their robustness scores, of several studies in one
-table."""
+the trained controllers' proved regions, their robustness scores, or the hybrids' robustness
+verdicts, of several studies in one table."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ DEFAULT_STUDIES = (Path("results/paper"), Path("results/paper-authors"))
 CERTIFIED_STUDIES = "results/certified-*"
 """The published studies of the proved-region and robustness tables by default (those with a
 report)."""
+CROSS_STUDY_TABLES = ("proved_regions", "robustness", "robustness_verdicts")
+"""The flags (as argparse names them) of the tables across the certified studies."""
 
 
 def add_parser(commands: Any) -> None:
@@ -23,8 +25,10 @@ def add_parser(commands: Any) -> None:
         description="Read each study's results.json (written by 'leoc plot' or 'leoc publish') "
         "and print one row per claim of the paper: its verdict in each study (holds, partly, "
         "fails, not measured) with the number that decides it, from the report's own checks. "
-        "With --proved-regions (or --robustness), the trained controllers' proved regions (or "
-        "robustness scores) of every study in one table instead. With --write, put the table "
+        "With --proved-regions (or --robustness, --robustness-verdicts), the trained "
+        "controllers' proved regions (or robustness scores, or per category whether each "
+        "hybrid is at least as robust as its LQR and more than its baseline) of every study "
+        "in one table instead. With --write, put the table "
         "between its markers in a markdown file (the README's and the results page's tables "
         "are written so).",
     )
@@ -34,7 +38,7 @@ def add_parser(commands: Any) -> None:
         nargs="*",
         metavar="STUDY",
         help="published reproduce folders (default: results/paper results/paper-authors, one "
-        f"column each; with --proved-regions or --robustness every {CERTIFIED_STUDIES} folder "
+        f"column each; with a cross-study table every {CERTIFIED_STUDIES} folder "
         "with a report)",
     )
     headline.add_argument(
@@ -50,12 +54,20 @@ def add_parser(commands: Any) -> None:
         "controller, columns naming the study and the system) instead of the claims",
     )
     headline.add_argument(
+        "--robustness-verdicts",
+        action="store_true",
+        help="per robustness category, each hybrid's verdict against its LQR (from the "
+        "operating region) and against its baseline (every start), one row per study, system "
+        "and hybrid, instead of the claims",
+    )
+    headline.add_argument(
         "--write",
         type=Path,
         action="append",
         metavar="FILE",
         help="a markdown file with the table's begin and end markers ('<!-- headline: begin "
-        "...', '<!-- proved regions: begin ...' or '<!-- robustness scores: begin ...', and "
+        "...', '<!-- proved regions: begin ...', '<!-- robustness scores: begin ...' or "
+        "'<!-- robustness verdicts: begin ...', and "
         "'<!-- ...: end -->'): the table replaces what is between them (repeatable)",
     )
     headline.set_defaults(run=run)
@@ -64,14 +76,22 @@ def add_parser(commands: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from leoc.experiments import headline as tables
 
-    if args.proved_regions and args.robustness:
-        raise ValueError("--proved-regions, --robustness: expected one table at a time, found both")
-    if args.proved_regions:
-        lines = tables.proved_region_lines(args.studies or certified_studies())
-        begin, end = tables.PROVED_BEGIN, tables.PROVED_END
-    elif args.robustness:
-        lines = tables.robustness_lines(args.studies or certified_studies())
-        begin, end = tables.ROBUSTNESS_BEGIN, tables.ROBUSTNESS_END
+    chosen = [name for name in CROSS_STUDY_TABLES if getattr(args, name)]
+    if len(chosen) > 1:
+        flags = ", ".join("--" + name.replace("_", "-") for name in chosen)
+        raise ValueError(f"{flags}: expected one table at a time, found {len(chosen)}")
+    cross = {
+        "proved_regions": (tables.proved_region_lines, tables.PROVED_BEGIN, tables.PROVED_END),
+        "robustness": (tables.robustness_lines, tables.ROBUSTNESS_BEGIN, tables.ROBUSTNESS_END),
+        "robustness_verdicts": (
+            tables.robustness_verdict_lines,
+            tables.VERDICTS_BEGIN,
+            tables.VERDICTS_END,
+        ),
+    }
+    if chosen:
+        lines_of, begin, end = cross[chosen[0]]
+        lines = lines_of(args.studies or certified_studies())
     else:
         lines = tables.headline_lines(args.studies or list(DEFAULT_STUDIES))
         begin, end = tables.BEGIN, tables.END

@@ -34,6 +34,8 @@ __all__ = [
     "PROVED_END",
     "ROBUSTNESS_BEGIN",
     "ROBUSTNESS_END",
+    "VERDICTS_BEGIN",
+    "VERDICTS_END",
     "HeadlineClaim",
     "claim_cell",
     "headline_lines",
@@ -41,6 +43,7 @@ __all__ = [
     "markers",
     "proved_region_lines",
     "robustness_lines",
+    "robustness_verdict_lines",
     "study_heading",
     "write_headline",
 ]
@@ -58,6 +61,8 @@ PROVED_BEGIN, PROVED_END = markers("proved regions")
 """The cross-study proved-region table's lines (:func:`proved_region_lines`)."""
 ROBUSTNESS_BEGIN, ROBUSTNESS_END = markers("robustness scores")
 """The cross-study robustness-score table's lines (:func:`robustness_lines`)."""
+VERDICTS_BEGIN, VERDICTS_END = markers("robustness verdicts")
+"""The cross-study robustness-verdict table's lines (:func:`robustness_verdict_lines`)."""
 SHOWN_MISS = 1
 """Failures named per cell (the biggest; the study's report lists every one)."""
 IMPROVEMENT = "interaction time to first hold"
@@ -270,6 +275,15 @@ def robustness_lines(studies: Sequence[str | Path]) -> list[str]:
     from leoc.experiments.report.robustness_protocol import protocol_table
 
     return _stacked(protocol_table, "robustness_protocol", studies)
+
+
+def robustness_verdict_lines(studies: Sequence[str | Path]) -> list[str]:
+    """Per category, whether each hybrid of several published studies is at least as robust
+    as its LQR and more robust than its baseline, one row per study, system and hybrid
+    (:func:`leoc.experiments.report.robustness_protocol.verdict_summary_table`)."""
+    from leoc.experiments.report.robustness_protocol import verdict_summary_table
+
+    return _stacked(verdict_summary_table, "robustness_protocol_verdicts", studies)
 
 
 def _stacked(table: Any, name: str, studies: Sequence[str | Path]) -> list[str]:

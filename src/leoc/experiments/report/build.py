@@ -51,6 +51,7 @@ RESULTS_ENTRIES = (
     ("region_of_attraction", "roa"),
     ("proved_regions", "proved_regions"),
     ("robustness_protocol", "robustness_protocol"),
+    ("robustness_protocol_verdicts", "robustness_protocol_verdicts"),
     ("probability_of_improvement", "improvements"),
     ("learning_curves", "curves"),
 )

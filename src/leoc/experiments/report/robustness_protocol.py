@@ -425,6 +425,38 @@ def verdict_table(rows: Rows) -> list[str]:
     return markdown_table(headers, table)
 
 
+def _verdict_pair(row: dict[str, Any]) -> str:
+    """``against its LQR / against its baseline`` (``-`` where that reference is missing)."""
+    lqr, baseline = row["versus_lqr"], row["versus_baseline"]
+    return (
+        f"{'-' if lqr is None else lqr['verdict']} / "
+        f"{'-' if baseline is None else baseline['verdict']}"
+    )
+
+
+def verdict_summary_table(rows: Rows, study: str | None = None) -> list[str]:
+    """Markdown rows of :func:`protocol_verdicts`' verdicts in one line per system and hybrid:
+    every category's and the robustness score's cell is ``against its LQR / against its
+    baseline`` (from the operating region against the LQR, every start against the baseline;
+    ``–`` for a category the hybrid was not swept in). The columns are every category of
+    :data:`CATEGORY_NAMES` whatever ``rows`` hold, so several studies' tables stack; with
+    ``study``, a first column names it (:func:`leoc.experiments.markdown.stacked_tables`)."""
+    names = [*CATEGORY_NAMES, SCORE]
+    cells: dict[tuple[str, str], dict[str, str]] = {}
+    for row in rows:
+        cells.setdefault((row["system"], row["controller"]), {})[row["category"]] = _verdict_pair(
+            row
+        )
+    headers = ["system", "hybrid", *(name.replace("_", " ") for name in names)]
+    table = [
+        [system, label(controller), *(found.get(name, "–") for name in names)]
+        for (system, controller), found in cells.items()
+    ]
+    if study is None:
+        return markdown_table(headers, table)
+    return markdown_table(["study", *headers], [[study, *cells_] for cells_ in table])
+
+
 def _lost_cell(lost: dict[str, int] | None) -> str:
     """``M of N (m of n)``: of the hybrid's N lost episodes, the M at levels where its LQR lost
     too; in brackets the same of the n it lost from the operating region."""
