@@ -280,7 +280,7 @@ def robustness_lines(studies: Sequence[str | Path]) -> list[str]:
 def robustness_verdict_lines(studies: Sequence[str | Path]) -> list[str]:
     """Per category, whether each hybrid of several published studies is at least as robust
     as its LQR and more robust than its baseline, one row per study, system and hybrid
-    (:func:`leoc.experiments.report.robustness_protocol.verdict_summary_table`)."""
+    (``leoc.experiments.report.robustness_protocol.verdict_summary_table``)."""
     from leoc.experiments.report.robustness_protocol import verdict_summary_table
 
     return _stacked(verdict_summary_table, "robustness_protocol_verdicts", studies)
