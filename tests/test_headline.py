@@ -350,3 +350,23 @@ def test_one_cross_study_table_at_a_time(capsys) -> None:
     assert main(["headline", "--robustness", "--robustness-verdicts"]) == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "--robustness, --robustness-verdicts: expected one table at a time, found 2" in line
+
+
+def test_the_results_page_s_reading_of_the_verdicts_holds(monkeypatch) -> None:
+    """The sentences under the results page's verdict table: no DDPG, SAC or TD3 hybrid is
+    below its LQR in any cell, the PILCO hybrid is in five (four categories and the score),
+    and the overall score against the baseline is above only for the pendulum SAC ROA hybrid."""
+    monkeypatch.chdir(ROOT)
+    lines = _between(ROOT / "docs/results.md", VERDICTS_BEGIN, VERDICTS_END)
+    header = [cell.strip() for cell in lines[0].strip("|").split("|")]
+    below_lqr, above_overall = {}, []
+    for row in lines[2:]:
+        cells = dict(zip(header, (c.strip() for c in row.strip("|").split("|")), strict=True))
+        pairs = {name: cells[name].split(" / ") for name in header[3:]}
+        below_lqr[cells["hybrid"]] = below_lqr.get(cells["hybrid"], 0) + sum(
+            pair[0] == "below" for pair in pairs.values()
+        )
+        if pairs["robustness"][1] == "above":
+            above_overall.append((cells["study"], cells["hybrid"]))
+    assert {name: n for name, n in below_lqr.items() if n} == {"PILCO hybrid": 5}
+    assert above_overall == [("results/certified-pendulum-sac", "SAC hybrid (ROA relevance)")]
