@@ -132,6 +132,11 @@ def lqr_reference(
     return LQRReference(candidates[kept], kept, summary)
 
 
+def _operating(system: System) -> np.ndarray:
+    """The operating point a (float64): the centre of the box the shares are measured on."""
+    return np.asarray(system.operating_state, dtype=float)
+
+
 def _comparison(
     system: System,
     share: float,
@@ -142,8 +147,7 @@ def _comparison(
 ) -> dict[str, Any]:
     """The LQR's share of the box and the ratios of the controller's (``share``, its proved
     set's; ``own_log_volume``, :func:`~leoc.control.trained.log_volume`) to the LQR's."""
-    operating = np.asarray(system.operating_state, dtype=float)
-    lqr_share, _ = box_fraction(reference.certificate, box, seed=seed, centre=operating)
+    lqr_share, _ = box_fraction(reference.certificate, box, seed=seed, centre=_operating(system))
     own, lqr_volume = own_log_volume, log_volume(reference.certificate)
     volume_ratio = (
         math.exp(own - lqr_volume) if math.isfinite(own) and math.isfinite(lqr_volume) else None
@@ -218,18 +222,16 @@ def proved_region(
 
     Parameters
     ----------
-    system : System
-        The plant the controller was trained on.
-    controller : callable
-        A loaded controller (float64 observations -> actions, at its own control period).
+    system, controller : System, callable
+        The plant the controller was trained on; the loaded controller (float64 observations
+        -> actions, at its own control period).
     design, lqr : LQRDesign, LyapunovCertificate
         Its LQR (the ``lqr`` candidate V) and the LQR's Riccati certificate (with the LQR's own
         V, the reference: :func:`lqr_reference`).
     box : (S,) half-widths
         The box around a the shares are measured on.
     saturation : str
-        How the controller's output is saturated (PILCO's ``sin``, else ``clip``): the LQR of
-        the reference is saturated so.
+        The controller's output squash (PILCO's ``sin``, else ``clip``), the reference LQR's.
     lyapunov, samples, seed, max_seconds, device, max_boxes :
         :func:`leoc.control.certify_controller`'s options, the controller's and the
         reference's; ``seed`` also seeds the box shares.
@@ -237,27 +239,19 @@ def proved_region(
     Returns
     -------
     dict
-        :meth:`~leoc.control.ControllerCertificate.summary` with the comparison
-        (``box_share``, ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``, the
-        reference's ``lqr_rho``, ``lqr_lyapunov`` and ``lqr_candidates``), the flat top
-        (``flat_top_rho``, ``flat_top_cover``: :func:`flat_top_cover`; None without an ROA
-        relevance), ``seconds`` and the ``device`` of the box search.
+        :meth:`~leoc.control.ControllerCertificate.summary` with ``box_share``, the
+        comparison (:func:`lqr_reference`'s ``lqr_rho``, ``lqr_lyapunov``, ``lqr_candidates``;
+        ``lqr_box_share``, ``box_share_ratio``, ``volume_ratio``), the flat top
+        (:func:`flat_top_cover`), ``seconds`` and the ``device`` of the box search.
     """
-    options = {
-        "lyapunov": lyapunov,
-        "samples": samples,
-        "seed": seed,
-        "max_seconds": max_seconds,
-        "device": device,
-        "max_boxes": max_boxes,
-    }
+    options = {"lyapunov": lyapunov, "samples": samples, "seed": seed}
+    options.update(max_seconds=max_seconds, device=device, max_boxes=max_boxes)
     proved = certify_controller(system, controller, design, **options)
     reference = lqr_reference(system, design, lqr, saturation, **options)
     half = np.asarray(box, dtype=float)
     summary = proved.summary(system)
     found = _flat_top(controller)
-    operating = np.asarray(system.operating_state, dtype=float)
-    share, error = box_fraction(proved.certificate, half, seed=seed, centre=operating)
+    share, error = box_fraction(proved.certificate, half, seed=seed, centre=_operating(system))
     return {
         **summary,
         "box_share": share,
