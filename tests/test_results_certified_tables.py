@@ -16,6 +16,7 @@ STUDIES = {
     "certified-mountaincar-ddpg": ("mountaincar", "ddpg"),
     "certified-mountaincar-sac": ("mountaincar", "sac"),
     "certified-mountaincar-pilco": ("mountaincar", "pilco"),
+    "certified-mountaincar-td3": ("mountaincar", "td3"),
 }
 """Study folder -> its system and learner; each README has one row per learned controller."""
 KINDS = {"baseline": "_baseline", "hybrid": "_hybrid", "ROA hybrid": "_hybrid_roa"}
@@ -91,7 +92,11 @@ def _kind_runs(study: str, suffix: str) -> list[dict]:
 
 LOST_AT_40 = ("certified-mountaincar-ddpg", "_hybrid_roa", 3)
 """The one mountain-car hybrid that already loses the impulse of size 40.6."""
-MOUNTAIN_CAR = ["certified-mountaincar-ddpg", "certified-mountaincar-sac"]
+MOUNTAIN_CAR = [
+    "certified-mountaincar-ddpg",
+    "certified-mountaincar-sac",
+    "certified-mountaincar-td3",
+]
 """The model-free mountain-car studies, whose READMEs make the same claims."""
 
 
@@ -160,3 +165,17 @@ def test_the_pilco_mountain_car_hybrid_loses_its_lqr_s_region_on_two_seeds() -> 
     for suffix in ("_hybrid", "_hybrid_roa"):
         for run in _kind_runs(study, suffix):
             assert run["proved_region"]["volume_ratio"] <= 1.0 + 1e-9
+
+
+def test_td3_s_mountain_car_hybrids_learn_where_its_baseline_does_not() -> None:
+    """The TD3 study's README: both hybrids hold every swing-up episode on 5 of 5 seeds, the
+    baseline on 2 of 5, and the three failing baselines score below 0.1 in the protocol."""
+    study = "certified-mountaincar-td3"
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    for suffix in ("_hybrid", "_hybrid_roa"):
+        assert all(run["swing_up"]["held_fraction"] == 1.0 for run in _kind_runs(study, suffix))
+    baselines = _kind_runs(study, "_baseline")
+    failed = [run for run in baselines if run["swing_up"]["held_fraction"] < 1.0]
+    assert len(failed) == 3
+    assert all(run["robustness_protocol"]["scores"]["all"]["robustness"] < 0.1 for run in failed)
