@@ -13,8 +13,6 @@ DEFAULT_STUDIES = (Path("results/paper"), Path("results/paper-authors"))
 CERTIFIED_STUDIES = "results/certified-*"
 """The published studies of the proved-region and robustness tables by default (those with a
 report)."""
-CROSS_STUDY_TABLES = ("proved_regions", "robustness", "robustness_verdicts")
-"""The flags (as argparse names them) of the tables across the certified studies."""
 
 
 def add_parser(commands: Any) -> None:
@@ -76,21 +74,12 @@ def add_parser(commands: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from leoc.experiments import headline as tables
 
-    chosen = [name for name in CROSS_STUDY_TABLES if getattr(args, name)]
+    chosen = [name for name in tables.CROSS_STUDY_TABLES if getattr(args, name)]
     if len(chosen) > 1:
         flags = ", ".join("--" + name.replace("_", "-") for name in chosen)
         raise ValueError(f"{flags}: expected one table at a time, found {len(chosen)}")
-    cross = {
-        "proved_regions": (tables.proved_region_lines, tables.PROVED_BEGIN, tables.PROVED_END),
-        "robustness": (tables.robustness_lines, tables.ROBUSTNESS_BEGIN, tables.ROBUSTNESS_END),
-        "robustness_verdicts": (
-            tables.robustness_verdict_lines,
-            tables.VERDICTS_BEGIN,
-            tables.VERDICTS_END,
-        ),
-    }
     if chosen:
-        lines_of, begin, end = cross[chosen[0]]
+        lines_of, begin, end = tables.CROSS_STUDY_TABLES[chosen[0]]
         lines = lines_of(args.studies or certified_studies())
     else:
         lines = tables.headline_lines(args.studies or list(DEFAULT_STUDIES))

@@ -331,6 +331,7 @@ def refreshed_proved_region(record: dict[str, Any]) -> dict[str, Any] | None:
     :func:`leoc.evaluation.proved_regions.refresh_lqr_reference`); None when the record has
     no entry or its entry already names its reference's V. Needs no trained model: the
     controller's side of the entry is kept."""
+    from leoc.control import design_lqr
     from leoc.evaluation.basins import default_basin_box
     from leoc.evaluation.proved_regions import REFERENCE_KEY, refresh_lqr_reference
     from leoc.experiments.variants import get_variant
@@ -341,7 +342,10 @@ def refreshed_proved_region(record: dict[str, Any]) -> dict[str, Any] | None:
         return None
     variant = get_variant(record["variant"])
     system = variant.system(record["spec"]["system"])
-    design = certified_lqr(system, int(record["action_repeat"]), variant.lqr_method).design
+    # the design alone: certified_lqr would also prove the clipped LQR, which is not needed
+    design = design_lqr(
+        system, method=variant.lqr_method, action_repeat=int(record["action_repeat"])
+    )
     saturation = entry.get("saturation", "clip")
     riccati = lqr_certificate(system, design, saturation)
     box = default_basin_box(system)

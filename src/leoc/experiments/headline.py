@@ -29,6 +29,7 @@ from leoc.names import LINEAR, parse_controller
 __all__ = [
     "BEGIN",
     "CLAIMS",
+    "CROSS_STUDY_TABLES",
     "END",
     "PROVED_BEGIN",
     "PROVED_END",
@@ -291,6 +292,15 @@ def _stacked(table: Any, name: str, studies: Sequence[str | Path]) -> list[str]:
     in front (:func:`~leoc.experiments.markdown.stacked_tables`)."""
     groups = {Path(folder).as_posix(): load_results(folder)[name] for folder in studies}
     return stacked_tables(table, groups)
+
+
+CROSS_STUDY_TABLES: dict[str, tuple[Callable[[Sequence[str | Path]], list[str]], str, str]] = {
+    "proved_regions": (proved_region_lines, PROVED_BEGIN, PROVED_END),
+    "robustness": (robustness_lines, ROBUSTNESS_BEGIN, ROBUSTNESS_END),
+    "robustness_verdicts": (robustness_verdict_lines, VERDICTS_BEGIN, VERDICTS_END),
+}
+"""The tables across several studies by name (``leoc headline``'s flag, ``-`` for ``_``):
+the function writing its lines from the study folders, and its begin and end markers."""
 
 
 def write_headline(
