@@ -18,7 +18,13 @@ import numpy as np
 import pytest
 import torch
 
-from leoc.control import certify_level, certify_lqr, design_lqr, lqr_closed_loop
+from leoc.control import (
+    certify_controller,
+    certify_level,
+    certify_lqr,
+    design_lqr,
+    lqr_closed_loop,
+)
 from leoc.control.intervals import Jet, UnsupportedOperation, box_jet
 from leoc.control.proof import (
     BATCH,
@@ -31,9 +37,11 @@ from leoc.control.proof import (
     _enclose,
     _Enclosure,
     _frame,
+    _image_bound,
     _initial_cover,
     _split,
     prove_level,
+    prove_practical,
 )
 from leoc.control.roa import _closed_loop, describe_certificate
 from leoc.systems import make_system
@@ -616,3 +624,128 @@ def test_unsupported_operations_raise():
     with pytest.raises(UnsupportedOperation, match="exponents"):
         jet**0.5
     assert isinstance(jet * 2.0 + torch.ones(1, dtype=torch.float64), Jet)
+
+
+# ---- practical stability: a loop that oscillates about an unstable centre -------------------
+
+ANTI_DAMPING = 3.0  # N m per rad/s of extra torque along the speed, near the top only
+BUMP_WIDTH = 0.3  # where that torque acts: exp(-(sin^2 + speed^2) / width^2)
+SETTLE_STEPS = 3000  # 150 s: the numpy loop from a nudge has reached its limit cycle
+PRACTICAL_STEPS = 400  # 20 s: every state of the proved set is inside the ultimate set by then
+
+
+class _AntiDamped:
+    """The pendulum's LQR plus a torque along the speed near the top: the upright position is
+    an unstable fixed point (a repelling focus) and the loop settles on a limit cycle about it,
+    as a baseline that chatters about its hold point. Torch, so it runs on interval jets."""
+
+    action_repeat = 1
+
+    def __init__(self, design) -> None:
+        self.W, self.b = torch.as_tensor(design.W), torch.as_tensor(design.b)
+
+    def __call__(self, obs):
+        sin, speed = obs[..., 1:2], obs[..., 2:3]
+        bump = torch.exp(-(sin * sin + speed * speed) / BUMP_WIDTH**2)
+        return obs @ self.W.T + self.b + ANTI_DAMPING * speed * bump
+
+
+def _anti_damped_numpy(design, z: np.ndarray) -> np.ndarray:
+    """The same loop's next deviation (N, 2), written here from the equations of motion."""
+    system = make_system("pendulum")
+    sin, speed = np.sin(z[:, 0]), z[:, 1]
+    bump = np.exp(-(sin * sin + speed * speed) / BUMP_WIDTH**2)
+    action = _pendulum_action(design, z) + ANTI_DAMPING * speed * bump
+    return _pendulum(z, action, system.params)[0]
+
+
+def _value(P: np.ndarray, z: np.ndarray) -> np.ndarray:
+    return np.einsum("bi,ij,bj->b", z, P, z)
+
+
+@functools.cache
+def _practical():
+    system = make_system("pendulum")
+    design = design_lqr(system)
+    return system, design, certify_controller(system, _AntiDamped(design), design)
+
+
+def test_a_limit_cycle_about_an_unstable_centre_is_proved_practically_stable():
+    # The claim: {V <= rho} invariant, V decreasing outside the inner set (V <= excluded_level),
+    # and every trajectory from it inside {V <= ultimate_level} for good. Checked on the numpy
+    # loop: the unstable centre and the cycle, 10^5 uniform and 2 x 10^4 boundary states.
+    system, design, proved = _practical()
+    step = 1e-7
+    jacobian = np.stack(
+        [_anti_damped_numpy(design, step * np.eye(2)[[k]])[0] / step for k in range(2)], 1
+    )
+    assert np.abs(np.linalg.eigvals(jacobian)).max() > 1.0  # no asymptotic claim can exist
+    summary = proved.summary(system)
+    assert proved.claim == "practical" and summary["claim"] == "practical"
+    assert proved.rho > 0.0 and 0.0 < summary["ultimate_level"] < 0.5 * proved.rho
+    z = np.array([[0.01, 0.0]])
+    cycle = []
+    for _ in range(SETTLE_STEPS + 200):
+        z = _anti_damped_numpy(design, z)
+        cycle.append(z[0])
+    cycle_values = _value(design.P, np.array(cycle[SETTLE_STEPS:]))
+    # A genuine cycle, inside the ultimate set, which is not absurdly larger than it.
+    assert cycle_values.min() > 0.05 * cycle_values.max() > 0.0
+    assert cycle_values.max() <= summary["ultimate_level"] < 20.0 * cycle_values.max()
+    rng = np.random.default_rng(5)
+    inside = _ellipsoid(design.P, proved.rho, 100_000, rng, surface=False)
+    boundary = _ellipsoid(design.P, proved.rho, 20_000, rng, surface=True)
+    for z in (inside, boundary):
+        value, following = _value(design.P, z), _value(design.P, _anti_damped_numpy(design, z))
+        assert np.all(following <= proved.rho)
+        outer = value > summary["excluded_level"]
+        assert np.all(following[outer] < value[outer])
+    z = inside[:20_000]
+    for _ in range(PRACTICAL_STEPS):
+        z = _anti_damped_numpy(design, z)
+    assert np.all(_value(design.P, z) <= summary["ultimate_level"])
+
+
+def test_a_practical_target_that_the_inner_set_leaves_is_not_claimed():
+    # Aim just past the cycle: states of the inner set map beyond the target (Monte Carlo
+    # shows {V <= target} is not invariant), so the proof must not claim it; whatever smaller
+    # level it does claim is invariant under the numpy loop.
+    system, design, _ = _practical()
+    controller = _AntiDamped(design)
+    z = np.array([[0.01, 0.0]])
+    for _ in range(SETTLE_STEPS):
+        z = _anti_damped_numpy(design, z)
+    inner = float(_value(design.P, z)[0]) * 1.2
+    target = 1.05 * inner
+    rng = np.random.default_rng(6)
+    states = _ellipsoid(design.P, target, 100_000, rng, surface=False)
+    assert (_value(design.P, _anti_damped_numpy(design, states)) > target).any()
+    proof = prove_practical(system, design.P, controller, 1, target, inner)
+    assert proof.claim == "practical"
+    if proof.proved:
+        claimed = _ellipsoid(design.P, proof.rho, 100_000, rng, surface=False)
+        assert np.all(_value(design.P, _anti_damped_numpy(design, claimed)) <= proof.rho)
+    else:
+        assert proof.limited_by in ("inner image", "decrease")
+
+
+def test_image_bound_contains_the_numpy_images_of_pendulum_boxes():
+    # The bound of V(F) over a box against a 41 x 41 grid of the box through the numpy loop
+    # (a lower bound of the true maximum), and not far above it on small boxes.
+    system = make_system("pendulum")
+    design = design_lqr(system)
+    controller, frame = _AntiDamped(design), _frame(system, design.P)
+    centre, radius = _pendulum_boxes(600, np.random.default_rng(23))
+    c, h = torch.as_tensor(centre), torch.as_tensor(radius)
+    with torch.no_grad():
+        box = _enclose(system, controller, 1, frame, c, h)
+        point = _enclose(system, controller, 1, frame, c, None)
+        bound = _image_bound(box, point, h).numpy()
+    axis = np.linspace(-1.0, 1.0, SAMPLES_PER_AXIS)
+    grid = np.stack(np.meshgrid(axis, axis), -1).reshape(-1, 2)
+    z = (centre[:, None] + grid[None] * radius[:, None]).reshape(-1, 2) @ frame.inverse.numpy().T
+    images = _value(design.P, _anti_damped_numpy(design, z)).reshape(len(centre), -1)
+    highest = images.max(1)
+    assert np.all(bound >= highest - BOUND_ROUNDING * (1.0 + highest))
+    small = radius[:, 0] == BOX_HALF_WIDTHS[0]
+    assert np.median(bound[small] / highest[small]) < 1.05

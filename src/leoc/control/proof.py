@@ -54,6 +54,24 @@ distance from a is below ``resolution`` (``RESOLUTION``); boxes
 inside the inner ball or outside the target ball are skipped. The proved level is the
 smallest :math:`\min_{\text{box}} |w|^2` of the boxes left unproved (or the target).
 
+**Practical stability** (:func:`prove_practical`, inner level :math:`\eta`): for a centre that is no
+stable fixed point (a baseline whose loop oscillates about an unstable equilibrium, or has
+none near a), no inner ball contracts. Instead a box that fails the decrease passes if it
+reaches within :math:`\eta` of the centre (:math:`\min_{\text{box}} |w|^2 \le \eta`, up to
+the frame error) and its image is proved below a ceiling (at most the target; a lower one
+bisects these boxes finer): :math:`V(F(z)) = |\tilde F(w)|^2 \le U_{\text{box}}`, with
+:math:`|\tilde F_i|` bounded by the smaller of the plain enclosure and the mean-value form
+:math:`|f_i| + f_{r,i} + ((|J_c| + R) h)_i`. Let :math:`I` be the union of the boxes passed
+so, :math:`U = \max U_{\text{box}}` and :math:`\rho` the level proved as above. The claim is
+kept only if :math:`U \le \rho` (else ``limited_by = "inner image"``); then
+:math:`\{V \le \rho\}` is positively invariant (a state of :math:`I` maps below :math:`U`,
+any other decreases), every trajectory from it enters :math:`I` in finite time (on the
+finitely many decrease boxes the bound is at most some :math:`-\delta < 0`, and
+:math:`V \ge 0`), and from then on :math:`V \le \max(\sup_I V, U)`, reported as
+``ultimate_level`` (``excluded_level`` is :math:`\sup_I V \le (1 + e)^2
+\max_{\text{box}} |w|^2`). This is uniform ultimate boundedness (Khalil 2002, sec. 4.8),
+proved on the exact sampled-data loop; the centre need not be a fixed point at all.
+
 Floating point: the interval evaluator rounds outward (:mod:`leoc.control.intervals`); the
 few dense operations on S x S matrices of the bound (products, ``eigvalsh``) get a relative
 slack ``BOUND_SLACK`` of their magnitudes, many orders above their rounding errors.
@@ -88,7 +106,7 @@ from torch import Tensor
 from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet
 from leoc.systems.base import DTYPE, System
 
-__all__ = ["LevelProof", "check_device", "prove_level"]
+__all__ = ["LevelProof", "check_device", "prove_level", "prove_practical"]
 
 Controller = Callable[[Tensor], Tensor]
 
@@ -123,6 +141,16 @@ NO_BALL = (
     "the rigorous linearisation proves no ball: the Jacobian enclosure is no contraction in the "
     "V-norm"
 )
+CLAIMS = ("asymptotic", "practical")
+"""What a proof shows: convergence to the centre (its inner ball by the rigorous
+linearisation), or practical stability (an invariant level set attracted to a small inner set
+whose image stays inside it: :func:`prove_practical`)."""
+INNER_IMAGE = "inner image"
+"""``limited_by`` of a practical proof whose inner set maps past the level proved outside it."""
+NO_GAP = "no sampled gap"
+"""``limited_by`` of a practical proof with no target: among the samples at every scale, no
+split of the violations left a target ``PRACTICAL_RATIO`` times the inner level
+(:func:`leoc.control.roa.certify_level`)."""
 STATUS_PROVED = "proved"
 STATUS_NOT_PROVED = "not proved"
 DEVICE_TYPES = ("cpu", "cuda")
@@ -202,6 +230,13 @@ class LevelProof(NamedTuple):
     seconds : float
     reason : str
         One line for people.
+    claim : str
+        ``asymptotic`` (the inner ball by the rigorous linearisation) or ``practical`` (an
+        inner set passed by its image: ``CLAIMS``, module docstring).
+    ultimate_level : float
+        Every trajectory from ``{V <= rho}`` enters ``{V <= ultimate_level}`` in finite time
+        and stays there (``excluded_level`` for the asymptotic claim, where that ball maps
+        into itself; 0 when nothing was proved).
     """
 
     rho: float
@@ -214,6 +249,8 @@ class LevelProof(NamedTuple):
     resolution: float
     seconds: float
     reason: str
+    claim: str = "asymptotic"
+    ultimate_level: float = 0.0
 
     @property
     def proved(self) -> bool:
@@ -477,6 +514,27 @@ class _Search(NamedTuple):
     boxes: int
     unproved: int
     limited_by: str
+    image_level: float = 0.0  # largest bound of V(F) over the boxes passed by their image
+    inner_reach: float = 0.0  # largest |w|^2 over those boxes
+
+
+class _Inner(NamedTuple):
+    """The practical-stability inner set of a search: a failing box with ``|w| <= radius``
+    somewhere passes if its image's V is at most ``ceiling`` (module docstring)."""
+
+    radius: float
+    ceiling: float
+
+
+def _image_bound(box: _Enclosure, point: _Enclosure, h: Tensor) -> Tensor:
+    """Upper bound (B,) of ``|F~(w)|^2`` (= V(F(z))) over boxes: per coordinate the smaller of
+    the plain enclosure and the mean-value form ``f +/- (f_r + (|J_c| + R) h)``."""
+    spread = torch.einsum("bis,bs->bi", box.jac_mid.abs() + box.jac_rad, h)
+    mean_value = point.mid.abs() + point.rad + spread
+    plain = box.mid.abs() + box.rad
+    reach = torch.minimum(mean_value, plain)
+    total = (reach * reach).sum(-1)
+    return total * (1.0 + BOUND_SLACK) + BOUND_SLACK
 
 
 def _annulus(
@@ -488,45 +546,82 @@ def _annulus(
     cover: float,
     resolution: float,
     budget: _Budget,
+    practical: _Inner | None = None,
 ) -> _Search:
-    """Best-first adaptive verification of the boxes between the inner ball and the cover."""
+    """Best-first adaptive verification of the boxes between the inner ball and the cover
+    (with ``practical``, boxes near a may pass by their image instead: module docstring)."""
     centre, radius = _initial_cover(frame.factor.shape[0], cover)
     depth = torch.zeros(centre.shape[0], dtype=torch.long)
-    best, reason, evaluated, unproved = math.inf, "target", 0, 0
+    floor = inner if practical is None else max(inner, practical.radius)
+    search = _Search(math.inf, 0, 0, "target")
     while centre.shape[0]:
         nearest, farthest = _levels(centre, radius)
-        keep = (nearest <= cover**2) & (farthest > inner**2) & (nearest < best)
+        keep = (nearest <= cover**2) & (farthest > inner**2) & (nearest < search.level)
         centre, radius, depth, nearest = centre[keep], radius[keep], depth[keep], nearest[keep]
         if not centre.shape[0]:
             break
-        if evaluated >= budget.max_boxes or time.perf_counter() > budget.deadline:
-            best, reason = min(best, float(nearest.min())), "budget"
-            unproved += int(centre.shape[0])
-            break
+        if search.boxes >= budget.max_boxes or time.perf_counter() > budget.deadline:
+            level = min(search.level, float(nearest.min()))
+            unproved = search.unproved + int(centre.shape[0])
+            return search._replace(level=level, unproved=unproved, limited_by="budget")
         order = torch.argsort(nearest)
         take, rest = order[: budget.batch], order[budget.batch :]
         c, h, d, near = centre[take], radius[take], depth[take], nearest[take]
-        box = _enclose(system, controller, repeat, frame, c, h)
-        point = _enclose(system, controller, repeat, frame, c, None)
-        outside = box.outside | point.outside
-        bound = _box_bound(box, point, c, h, frame.error)
-        failed = outside | ~(bound < 0.0)
-        evaluated += int(c.shape[0])
-        scale = torch.clamp(near.sqrt(), min=inner)
+        failed, outside, search = _verdicts(
+            system, controller, repeat, frame, c, h, practical, search
+        )
+        scale = torch.clamp(near.sqrt(), min=floor)
         final = failed & ((h.max(-1).values <= resolution * scale) | (d >= MAX_DEPTH))
         if bool(final.any()):
-            level = float(near[final].min())
-            if level < best:
-                best = level
-                first = int(torch.nonzero(final & (near == level))[0, 0])
-                reason = "region" if bool(outside[first]) else "decrease"
-            unproved += int(final.sum())
+            search = _unproved(search, near, final, outside)
         again = failed & ~final
         children, halves = _split(c[again], h[again])
         centre = torch.cat([centre[rest], children])
         radius = torch.cat([radius[rest], halves])
         depth = torch.cat([depth[rest], (d[again] + 1).repeat(2)])
-    return _Search(best, evaluated, unproved, reason)
+    return search
+
+
+def _verdicts(
+    system: System,
+    controller: Controller,
+    repeat: int,
+    frame: _Frame,
+    c: Tensor,
+    h: Tensor,
+    practical: _Inner | None,
+    search: _Search,
+) -> tuple[Tensor, Tensor, _Search]:
+    """One batch of boxes ``c +/- h``: (failed, possibly outside) (B,) each, and the search's
+    counts updated (boxes, and the inner set's image level and reach)."""
+    box = _enclose(system, controller, repeat, frame, c, h)
+    point = _enclose(system, controller, repeat, frame, c, None)
+    outside = box.outside | point.outside
+    passed = ~outside & (_box_bound(box, point, c, h, frame.error) < 0.0)
+    search = search._replace(boxes=search.boxes + int(c.shape[0]))
+    if practical is not None:
+        nearest, farthest = _levels(c, h)
+        image = _image_bound(box, point, h)
+        by_image = ~outside & ~passed & (nearest <= practical.radius**2)
+        by_image &= image <= practical.ceiling
+        if bool(by_image.any()):
+            search = search._replace(
+                image_level=max(search.image_level, float(image[by_image].max())),
+                inner_reach=max(search.inner_reach, float(farthest[by_image].max())),
+            )
+        passed = passed | by_image
+    return ~passed, outside, search
+
+
+def _unproved(search: _Search, near: Tensor, final: Tensor, outside: Tensor) -> _Search:
+    """The search once the boxes ``final`` (failing at the resolution) count as unproved: its
+    level the smallest of theirs, and what limited it there."""
+    search = search._replace(unproved=search.unproved + int(final.sum()))
+    level = float(near[final].min())
+    if level >= search.level:
+        return search
+    first = int(torch.nonzero(final & (near == level))[0, 0])
+    return search._replace(level=level, limited_by="region" if bool(outside[first]) else "decrease")
 
 
 def prove_level(
@@ -572,11 +667,62 @@ def prove_level(
         depend on it).
     device : str or torch.device
         Where the boxes are evaluated (module docstring, **Device**; :func:`check_device`).
-
     Returns
     -------
     LevelProof
     """
+    options = (resolution, max_boxes, max_seconds, equilibrium, batch, device)
+    return _run(system, P, controller, repeat, target, *options)
+
+
+def prove_practical(
+    system: System,
+    P: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    target: float,
+    inner_level: float,
+    ceiling: float | None = None,
+    **options: Any,
+) -> LevelProof:
+    """Prove practical stability of the loop about the centre (module docstring, **Practical
+    stability**): ``{V <= rho}`` invariant, up to ``target``, every trajectory from it entering
+    and staying in ``{V <= ultimate_level}``; for a centre that is no stable fixed point.
+
+    Parameters
+    ----------
+    system, P, controller, repeat, target :
+        As :func:`prove_level`.
+    inner_level : float
+        A box within this level of V (0: a box holding the centre) that fails the decrease
+        may pass by its image.
+    ceiling : float, optional
+        The V its image must stay below (default and at most ``target``): a lower one bisects
+        the inner boxes finer and tightens ``ultimate_level``.
+    **options
+        :func:`prove_level`'s ``resolution``, ``max_boxes``, ``max_seconds``, ``equilibrium``,
+        ``batch``, ``device``.
+    """
+    practical = _practical_aims(target, inner_level, ceiling)
+    return _run(system, P, controller, repeat, target, **options, practical=practical)
+
+
+def _run(
+    system: System,
+    P: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    target: float,
+    resolution: float | None = None,
+    max_boxes: int = MAX_BOXES,
+    max_seconds: float = MAX_SECONDS,
+    equilibrium: np.ndarray | None = None,
+    batch: int = BATCH,
+    device: Any = "cpu",
+    practical: tuple[float, float] | None = None,
+) -> LevelProof:
+    """:func:`prove_level` or, with ``practical`` = (inner level, ceiling),
+    :func:`prove_practical`."""
     started = time.perf_counter()
     size = P.shape[0]
     fine = RESOLUTION.get(size, DEFAULT_RESOLUTION) if resolution is None else float(resolution)
@@ -586,8 +732,25 @@ def prove_level(
     place = check_device(device)
     with _default_device(place):
         frame = _frame(system, P, equilibrium)
-        outcome = _prove(system, frame, _on_device(controller, place), repeat, target, fine, budget)
+        moved = _on_device(controller, place)
+        if practical is None:
+            outcome = _prove(system, frame, moved, repeat, target, fine, budget)
+        else:
+            outcome = _prove_practical(
+                system, frame, moved, repeat, target, *practical, fine, budget
+            )
     return _level_proof(outcome, target, fine, time.perf_counter() - started)
+
+
+def _practical_aims(
+    target: float, level: float | None, ceiling: float | None
+) -> tuple[float, float] | None:
+    """``(inner_level, ceiling)`` of a practical proof, checked (None: an asymptotic one)."""
+    if level is None:
+        return None
+    if not 0.0 <= level < math.inf:
+        raise ValueError(f"inner_level: expected a non-negative finite level, found {level!r}")
+    return level, target if ceiling is None else ceiling
 
 
 def _level_proof(outcome: _Outcome, target: float, fine: float, seconds: float) -> LevelProof:
@@ -603,6 +766,8 @@ def _level_proof(outcome: _Outcome, target: float, fine: float, seconds: float) 
         fine,
         seconds,
         outcome.reason,
+        outcome.claim,
+        outcome.ultimate if outcome.rho > 0.0 else 0.0,
     )
 
 
@@ -612,6 +777,8 @@ class _Outcome(NamedTuple):
     excluded: float
     search: _Search
     reason: str
+    claim: str = "asymptotic"
+    ultimate: float = 0.0
 
 
 _NO_SEARCH = _Search(math.inf, 0, 0, "target")
@@ -651,4 +818,47 @@ def _prove(
         f"decrease proved on {excluded:.3g} < V <= {rho:.6g} ({search.boxes} boxes); "
         f"limited by {search.limited_by}"
     )
-    return _Outcome(rho, inner_level, excluded, search, reason)
+    return _Outcome(rho, inner_level, excluded, search, reason, "asymptotic", excluded)
+
+
+def _prove_practical(
+    system: System,
+    frame: _Frame,
+    controller: Controller,
+    repeat: int,
+    target: float,
+    practical_level: float,
+    ceiling: float,
+    fine: float,
+    budget: _Budget,
+) -> _Outcome:
+    """:func:`prove_level`'s practical-stability claim: every box out to ``target`` decreases
+    V or, within ``practical_level`` of it, maps into ``{V <= min(ceiling, target)}``; the
+    level proved is kept only if it holds the inner set's image (module docstring)."""
+    if not target > 0.0:
+        reason = "no target level (no sampled gap between an inner set and the violations)"
+        return _Outcome(0.0, 0.0, 0.0, _NO_SEARCH._replace(limited_by=NO_GAP), reason, "practical")
+    shrink, grow = (1.0 - frame.error) ** 2, (1.0 + frame.error) ** 2
+    cover = math.sqrt(target) / (1.0 - frame.error)
+    inner = _Inner(math.sqrt(practical_level) / (1.0 - frame.error), min(ceiling, target))
+    with torch.no_grad():
+        try:
+            search = _annulus(system, controller, repeat, frame, 0.0, cover, fine, budget, inner)
+        except UnsupportedOperation as error:
+            unsupported = _NO_SEARCH._replace(limited_by="unsupported")
+            return _Outcome(0.0, 0.0, 0.0, unsupported, str(error), "practical")
+    rho = min(target, shrink * min(search.level, cover**2) * (1.0 - LEVEL_MARGIN))
+    excluded = grow * search.inner_reach
+    ultimate = max(excluded, search.image_level)
+    if search.image_level > rho:
+        failed = search._replace(limited_by=INNER_IMAGE)
+        reason = (
+            f"the inner set's image reaches V = {search.image_level:.6g}, past the level "
+            f"{rho:.6g} proved outside it (limited there by {search.limited_by})"
+        )
+        return _Outcome(0.0, 0.0, excluded, failed, reason, "practical")
+    reason = (
+        f"{{V <= {rho:.6g}}} invariant, every trajectory from it enters and stays in "
+        f"{{V <= {ultimate:.3g}}} ({search.boxes} boxes); limited by {search.limited_by}"
+    )
+    return _Outcome(rho, 0.0, excluded, search, reason, "practical", ultimate)

@@ -73,6 +73,7 @@ import math
 import os
 import pickle
 import sys
+import time
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -82,7 +83,14 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.control.proof import MAX_BOXES, LevelProof, prove_level
+from leoc.control.proof import (
+    INNER_IMAGE,
+    MAX_BOXES,
+    MAX_SECONDS,
+    LevelProof,
+    prove_level,
+    prove_practical,
+)
 from leoc.io import write_bytes_atomic
 from leoc.systems.base import DTYPE, System, check_repeat, wrap_angle
 from leoc.systems.rollout import control_period
@@ -116,6 +124,20 @@ SYMMETRY_RTOL = 1e-9
 """Allowed asymmetry of P, relative to its largest entry."""
 LINEAR_DECREASE_TOL = 0.0
 """The linear check needs max eig(A_cl^T P A_cl - P) < this (strictly negative definite)."""
+PRACTICAL_RATIO = 4.0
+"""A practical-stability claim is aimed at only where its target level is at least this
+multiple of the inner level and of the inner set's sampled image (less says little more than
+an invariant set)."""
+INNER_MARGIN = 2.0
+"""The practical inner level: this multiple of the largest V of the sampled violations it
+holds (each retry multiplies it by ``INNER_GROWTH``)."""
+INNER_GROWTH = 4.0
+PRACTICAL_ATTEMPTS = 3
+"""Proofs tried with a growing inner level while the box search finds decrease fail outside
+the sampled one (they share the wall-clock budget)."""
+PRACTICAL_SPAN = 1e-8
+"""The practical estimate's samples have V log-uniform from this fraction of the initial level
+up to it: the inner set can be orders of magnitude below the target."""
 
 
 class LyapunovCertificate(NamedTuple):
@@ -383,6 +405,7 @@ def certify_level(
     prove: bool = True,
     max_boxes: int = MAX_BOXES,
     equilibrium: Any = None,
+    practical: bool = False,
     **proof_options: Any,
 ) -> LyapunovCertificate:
     r"""The certificate of the largest rho with V(F(x)) < V(x) on 0 < V <= rho (module docs).
@@ -393,25 +416,26 @@ def certify_level(
     P : (S, S) array
         Symmetric positive definite matrix of :math:`V(x) = z^\top P z`.
     controller : callable
-        Observation (B, O) float64 -> action (B, A): the closed loop certified (e.g.
-        :math:`G(o) = W o + b`; the step clips it to the actuator limit).
+        Observation (B, O) float64 -> action (B, A) (e.g. :math:`G(o) = W o + b`, clipped).
     action_repeat : int, optional
         Control period (default the controller's ``action_repeat`` or 1).
     samples, seed : int
         Uniform samples per round (the last, clean, round's count sets the confidence), seed.
     confidence : float in (0, 1)
-        :math:`1 - \delta` of the violating-volume bound :math:`\ln(1/\delta)/n`.
+        :math:`1 - \delta` of the bound :math:`\ln(1/\delta)/n` on the violating volume.
     search_box, rho_max : (S,) half-widths, float, optional
         Start: the largest ellipsoid in ``search_box`` (default ``SEARCH_BOX_FACTOR *
         system.operating_region``) and in the angle chart, at most ``rho_max``.
     linear_check : bool
-        Check the linearised decrease first (rho = 0 if it fails); off only to test sampling.
+        Check the linearised decrease first (rho = 0 if it fails); off to test sampling.
     prove, max_boxes : bool, int
         Prove the level (:func:`leoc.control.proof.prove_level`, aiming at the sampled
         estimate, with this box budget); off: ``rho`` is the sampled estimate.
     equilibrium : (S,) array, optional
-        Centre of V (default a; the certificate's ``operating_state``): a controller's own
-        fixed point (:func:`leoc.control.certify_controller`).
+        Centre of V (default a): a controller's own (:func:`leoc.control.certify_controller`).
+    practical : bool
+        Certify practical stability instead (:func:`leoc.control.proof.prove_practical`;
+        target and inner level sampled at every scale: :func:`_practical_levels`).
     **proof_options
         Further keywords of :func:`~leoc.control.proof.prove_level` (``max_seconds``, ``batch``).
     """
@@ -419,14 +443,26 @@ def certify_level(
     matrix, centre = _check_matrix(P, system.state_dim), _check_centre(system, equilibrium)
     initial = _initial_level(system, matrix, search_box, rho_max)
     linear = _linear_check(system, matrix, controller, repeat, centre)
-    sampled = _Sampled(0.0, 0)
-    if linear[0] or not linear_check:
-        sampled = _sampled_level(system, matrix, controller, repeat, initial, samples, seed, centre)
+    search = (system, matrix, controller, repeat, initial, samples, seed, centre)
     kw = {**proof_options, "max_boxes": max_boxes, "equilibrium": centre}
-    proof = prove_level(system, matrix, controller, repeat, sampled.rho, **kw) if prove else None
+    sample = linear[0] or not linear_check
+    sampled, proof = _estimate_and_proof(search, sample, practical, prove, kw)
     return _certificate(
         system, matrix, repeat, samples, confidence, initial, linear, sampled, proof, centre
     )
+
+
+def _estimate_and_proof(
+    search: tuple, sample: bool, practical: bool, prove: bool, options: dict[str, Any]
+) -> tuple[_Sampled, LevelProof | None]:
+    """:func:`certify_level`'s sampled estimate and proof (None when ``prove`` is off) for
+    ``search`` = (system, P, controller, repeat, initial level, samples, seed, centre): the
+    practical claim's, else the asymptotic one's (its estimate only if ``sample``)."""
+    if practical:
+        aims = _practical_levels(*search)
+        return aims.sampled, _practical_proof(*search[:4], aims, options) if prove else None
+    sampled = _sampled_level(*search) if sample else _Sampled(0.0, 0)
+    return sampled, prove_level(*search[:4], sampled.rho, **options) if prove else None
 
 
 def _check_centre(system: System, equilibrium: Any) -> np.ndarray:
@@ -499,6 +535,87 @@ def _sampled_level(
     return _Sampled(0.0, MAX_ROUNDS)
 
 
+class _Practical(NamedTuple):
+    """The sampled aims of a practical-stability proof (:func:`_practical_levels`)."""
+
+    sampled: _Sampled  # its rho: the target level
+    inner: float  # the inner level
+    reach: float  # the largest V of the inner samples' images
+
+
+def _practical_levels(
+    system: System,
+    matrix: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    initial: float,
+    samples: int,
+    seed: int,
+    centre: np.ndarray,
+) -> _Practical:
+    """The practical claim's target and inner level from ``samples`` states whose V spreads
+    log-uniformly over ``[PRACTICAL_SPAN, 1] * initial``: for each split of the sorted
+    violations into an inner group and the rest, the inner level is ``INNER_MARGIN`` times the
+    group's largest V and the target lies just below the next violation (the initial level if
+    none); a split counts if its target is ``PRACTICAL_RATIO`` times its inner level and the
+    sampled image of the inner set; the largest target is kept (target 0: none)."""
+    rng = np.random.default_rng(seed)
+    unit = _uniform_ellipsoid(matrix, 1.0, samples, rng)
+    unit /= np.sqrt(np.einsum("bi,ij,bj->b", unit, matrix, unit))[:, None]
+    scale = initial * PRACTICAL_SPAN ** rng.uniform(size=samples)
+    states = torch.as_tensor(np.sqrt(scale)[:, None] * unit + centre, dtype=DTYPE)
+    P_t = torch.as_tensor(matrix, dtype=DTYPE)
+    with torch.no_grad():
+        following, left = _closed_loop(system, controller, repeat, states)
+        value = lyapunov_value(P_t, _deviation(states, centre, system.angle_indices)).numpy()
+        image = lyapunov_value(P_t, _deviation(following, centre, system.angle_indices)).numpy()
+    image = np.where(np.isfinite(image) & ~left.numpy(), image, np.inf)
+    order = np.argsort(value)
+    value, image = value[order], image[order]
+    failing = value[~(image < value)]
+    if not failing.size:
+        return _Practical(_Sampled(initial, 1), INNER_MARGIN * float(value[0]), float(image[0]))
+    inner = INNER_MARGIN * failing
+    target = np.append(np.nextafter(failing[1:], 0.0), initial)
+    reach = np.maximum.accumulate(image)[np.searchsorted(value, inner, side="right") - 1]
+    usable = target >= PRACTICAL_RATIO * np.maximum(inner, reach)
+    if not usable.any():
+        return _Practical(_Sampled(0.0, 1), 0.0, 0.0)
+    best = int(np.argmax(np.where(usable, target, -np.inf)))
+    return _Practical(_Sampled(float(target[best]), 1), float(inner[best]), float(reach[best]))
+
+
+def _practical_proof(
+    system: System,
+    matrix: np.ndarray,
+    controller: Controller,
+    repeat: int,
+    aims: _Practical,
+    options: dict[str, Any],
+) -> LevelProof:
+    """The practical claim's proof aimed at the sampled target, the inner boxes' images held
+    below ``INNER_MARGIN`` times the sampled reach (a tight ultimate level); while the boxes
+    find the decrease or an image fail, retried with the inner level and that ceiling grown by
+    ``INNER_GROWTH`` (up to ``PRACTICAL_ATTEMPTS`` tries, the ceiling at most the target, the
+    target ``PRACTICAL_RATIO`` times the inner level); the tries share ``max_seconds``."""
+    deadline = time.perf_counter() + float(options.get("max_seconds", MAX_SECONDS))
+    target, inner = aims.sampled.rho, aims.inner
+    ceiling = min(target, INNER_MARGIN * max(aims.reach, inner))
+    proof = None
+    for attempt in range(PRACTICAL_ATTEMPTS):
+        left = max(0.0, deadline - time.perf_counter()) / (PRACTICAL_ATTEMPTS - attempt)
+        tries = {**options, "max_seconds": left}
+        trial = prove_practical(system, matrix, controller, repeat, target, inner, ceiling, **tries)
+        proof = trial if proof is None or trial.rho > proof.rho else proof
+        if trial.proved or trial.limited_by not in ("decrease", INNER_IMAGE):
+            break
+        if ceiling >= target and PRACTICAL_RATIO * inner * INNER_GROWTH > target:
+            break
+        ceiling = min(target, ceiling * INNER_GROWTH)
+        inner = min(inner * INNER_GROWTH, target / PRACTICAL_RATIO)
+    return proof
+
+
 def _certificate(
     system: System,
     matrix: np.ndarray,
@@ -543,6 +660,14 @@ def describe_certificate(system: System, certificate: LyapunovCertificate) -> li
         lines.append(
             f"rho = {certificate.rho:.6g} (SAMPLED estimate, not proved: the proof was switched "
             "off)"
+        )
+    elif proof.proved and proof.claim == "practical":
+        lines.append(
+            f"rho = {certificate.rho:.6g} (PROVED PRACTICALLY STABLE: {{V <= rho}} is invariant "
+            f"and every trajectory from it enters and stays in {{V <= "
+            f"{proof.ultimate_level:.3g}}}: V decreases outside an inner set within V <= "
+            f"{proof.excluded_level:.3g}, whose image stays in the set; {proof.boxes} verified "
+            f"boxes; limited by {proof.limited_by}; {proof.seconds:.1f} s)"
         )
     elif proof.proved:
         lines.append(

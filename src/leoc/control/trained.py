@@ -23,12 +23,18 @@ and attracted to :math:`x^*`:
    centred on :math:`x^*`: sampled estimate, then the interval proof
    (:func:`leoc.control.proof.prove_level`). The one whose proved ellipsoid has the larger
    volume is kept (``best``); both are reported.
-3. **Practical stability.** The proof shows :math:`V(F(x)) < V(x)` for
+3. **Practical stability.** The asymptotic proof shows :math:`V(F(x)) < V(x)` for
    :math:`\varepsilon^2 < V(x) \le \rho`, with :math:`\varepsilon` set by the residual
-   :math:`|F(x^*) - x^*|` (0 for an exact fixed point of the floating-point loop). The inner-ball
-   argument of the proof maps :math:`\{V \le \varepsilon^2\}` into itself, so
-   :math:`\{V \le \rho\}` is invariant and every trajectory from it enters and stays in
-   :math:`\{V \le \varepsilon^2\}`: both levels are reported (``rho``, ``excluded_level``).
+   :math:`|F(x^*) - x^*|` (0 for an exact fixed point of the floating-point loop); its inner
+   ball maps into itself, so every trajectory from :math:`\{V \le \rho\}` converges to
+   :math:`x^*` (or enters :math:`\{V \le \varepsilon^2\}`). Where no such claim can exist (no
+   equilibrium near a, or one whose linearisation is unstable: a baseline oscillating about
+   its hold point), the proof of practical stability is tried with the first V (the LQR's P
+   when a design is given; :data:`PRACTICAL`): :math:`\{V \le \rho\}` invariant and every
+   trajectory from it entering :math:`\{V \le u\}` in finite time and staying there, u the
+   ``ultimate_level`` (:func:`leoc.control.certify_level` with ``practical=True``; the
+   argument is in :mod:`leoc.control.proof`). ``claim`` says which was proved; every level is
+   reported (``rho``, ``excluded_level``, ``ultimate_level``).
 
 The proof needs interval rules for every operation of the controller
 (:mod:`leoc.control.intervals`): leoc's MLP actors, RBF networks, every relevance and
@@ -81,6 +87,9 @@ ACCELERATOR_BATCH = 16_384
 """Boxes per batched call on a GPU: a 400x300 hybrid's enclosures ran at 0.65 million boxes/s
 in batches of 16384 on an H200, 0.17 million in batches of 4096 (a search of large batches
 also evaluates boxes a smaller one would prune: docs/user_guide/roa.md, "On a GPU")."""
+PRACTICAL = "practical"
+"""The candidate of :func:`certify_controller`'s practical-stability proof (tried with the
+first V when no asymptotic claim can exist: no equilibrium, or an unstable one)."""
 STABLE_RADIUS = 1.0
 """The own-linearisation V needs the spectral radius of J below this."""
 
@@ -103,6 +112,11 @@ class Equilibrium(NamedTuple):
         ``dF/dx`` at ``x*``.
     spectral_radius : float
         Of ``jacobian``: below 1, the linearisation at ``x*`` is stable.
+    rejected : tuple of float, optional
+        Where the Newton search ended when that point was not accepted, as ``x - a`` (angles
+        wrapped): a fixed point outside the operating region (its residual
+        ``rejected_residual`` within the tolerance), or where the search stalled.
+    rejected_residual : float, optional
     """
 
     state: np.ndarray
@@ -111,6 +125,8 @@ class Equilibrium(NamedTuple):
     iterations: int
     jacobian: np.ndarray
     spectral_radius: float
+    rejected: tuple[float, ...] | None = None
+    rejected_residual: float | None = None
 
     def offset(self, system: System) -> np.ndarray:
         """``x* - a`` (S,), angles wrapped: the steady-state error of the controller."""
@@ -182,13 +198,14 @@ def _equilibrium(
     region = np.asarray(system.operating_region, dtype=float)
     offset = state_deviation(system, torch.as_tensor(x, dtype=DTYPE).unsqueeze(0))[0].numpy()
     found = size <= EQUILIBRIUM_TOL and bool(np.all(np.abs(offset) <= region))
+    rejected = None if found else (tuple(float(v) for v in offset), size)
     if not found:
         x = operating.copy()
         size = _scaled_size(system, _residual(system, closed, x))
     jacobian = torch.autograd.functional.jacobian(closed, torch.as_tensor(x, dtype=DTYPE))
     jacobian = jacobian.numpy()
     radius = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
-    return Equilibrium(x, found, size, iterations, jacobian, radius)
+    return Equilibrium(x, found, size, iterations, jacobian, radius, *(rejected or (None, None)))
 
 
 def own_lyapunov_matrix(system: System, equilibrium: Equilibrium) -> np.ndarray | None:
@@ -232,6 +249,13 @@ class ControllerCertificate(NamedTuple):
         return self.certificate.rho
 
     @property
+    def claim(self) -> str:
+        """``asymptotic`` (trajectories converge to ``equilibrium.state``) or ``practical``
+        (they enter and stay in ``{V <= certificate.proof.ultimate_level}``)."""
+        proof = self.certificate.proof
+        return "asymptotic" if proof is None else proof.claim
+
+    @property
     def limited_by(self) -> str:
         """What set ``rho``: the proof's ``limited_by``, or ``no equilibrium``/``unstable
         linearisation`` when no proof could start."""
@@ -248,20 +272,32 @@ class ControllerCertificate(NamedTuple):
         return {
             "rho": self.rho,
             "excluded_level": 0.0 if proof is None else proof.excluded_level,
+            "claim": self.claim,
+            "ultimate_level": 0.0 if proof is None else proof.ultimate_level,
             "lyapunov": self.lyapunov,
             "limited_by": self.limited_by,
             "log_volume": log_volume(self.certificate),
             "equilibrium": self.equilibrium.state.tolist(),
             "equilibrium_found": self.equilibrium.found,
             "equilibrium_residual": self.equilibrium.residual,
+            "rejected_offset": _listed(self.equilibrium.rejected),
+            "rejected_residual": self.equilibrium.rejected_residual,
             "offset": self.equilibrium.offset(system).tolist(),
             "spectral_radius": self.equilibrium.spectral_radius,
             "certificate": self.certificate.summary(),
             "candidates": {
-                name: {"rho": entry.rho, "log_volume": log_volume(entry)}
+                name: {
+                    "rho": entry.rho,
+                    "log_volume": log_volume(entry),
+                    "limited_by": "sampled" if entry.proof is None else entry.proof.limited_by,
+                }
                 for name, entry in self.candidates.items()
             },
         }
+
+
+def _listed(values: tuple[float, ...] | None) -> list[float] | None:
+    return None if values is None else list(values)
 
 
 def log_volume(certificate: LyapunovCertificate) -> float:
@@ -329,8 +365,7 @@ def certify_controller(
     system : System
         The plant the controller runs on.
     controller : callable
-        Observation (B, O) float64 -> action (B, A), runnable on interval jets (leoc's loaded
-        controllers are).
+        Observation (B, O) float64 -> action (B, A), runnable on interval jets (leoc's are).
     design : LQRDesign, optional
         Its ``P`` is the ``lqr`` candidate V (left out: only the ``own`` V).
     action_repeat : int, optional
@@ -345,24 +380,33 @@ def certify_controller(
     """
     started = time.perf_counter()
     repeat = control_period(controller, action_repeat)
-    proof = {"max_boxes": max_boxes, "batch": _batch(device), "device": device}
+    options = {"action_repeat": repeat, "samples": samples, "seed": seed}
+    options.update(max_boxes=max_boxes, batch=_batch(device), device=device)
     equilibrium = find_equilibrium(system, controller, repeat)
+    options["equilibrium"] = equilibrium.state
     matrices = _candidate_matrices(system, equilibrium, design, lyapunov)
+    share = max_seconds / len(matrices)
     candidates = {
-        name: certify_level(
-            system,
-            matrix,
-            controller,
-            action_repeat=repeat,
-            samples=samples,
-            seed=seed,
-            max_seconds=max_seconds / len(matrices),
-            equilibrium=equilibrium.state,
-            **proof,
-        )
+        name: certify_level(system, matrix, controller, max_seconds=share, **options)
         for name, matrix in matrices.items()
     }
     chosen = best_candidate(candidates)
+    certificate = candidates[chosen]
+    if certificate.rho == 0.0 and not _stable_equilibrium(equilibrium):
+        # No asymptotic claim can exist: try practical stability with the first V.
+        chosen = next(iter(matrices))
+        left = max(0.0, max_seconds - (time.perf_counter() - started))
+        practical = certify_level(
+            system, matrices[chosen], controller, max_seconds=left, practical=True, **options
+        )
+        candidates[PRACTICAL] = practical
+        certificate = practical if practical.rho > 0.0 else certificate
     return ControllerCertificate(
-        candidates[chosen], chosen, equilibrium, candidates, time.perf_counter() - started
+        certificate, chosen, equilibrium, candidates, time.perf_counter() - started
     )
+
+
+def _stable_equilibrium(equilibrium: Equilibrium) -> bool:
+    """Whether an asymptotic proof about ``equilibrium`` can exist: one was found and its
+    linearisation is stable (else :func:`certify_controller` tries practical stability)."""
+    return equilibrium.found and equilibrium.spectral_radius < STABLE_RADIUS

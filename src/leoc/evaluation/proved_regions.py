@@ -32,6 +32,8 @@ import numpy as np
 from leoc.control.proof import MAX_BOXES, MAX_SECONDS
 from leoc.control.roa import DEFAULT_SAMPLES, LyapunovCertificate
 from leoc.control.trained import (
+    EQUILIBRIUM_TOL,
+    PRACTICAL,
     ControllerCertificate,
     best_candidate,
     certify_controller,
@@ -301,6 +303,31 @@ def _reference_v(entry: dict[str, Any]) -> str:
     return entry.get(REFERENCE_KEY, OLD_REFERENCE)
 
 
+def _rejected(system: System, entry: dict[str, Any]) -> str:
+    """Where the equilibrium search ended instead, for people (nothing for old entries)."""
+    offset, residual = entry.get("rejected_offset"), entry.get("rejected_residual")
+    if offset is None or residual is None:
+        return ""
+    pairs = ", ".join(
+        f"{name} {value:+.3g}" for name, value in zip(system.state_names, offset, strict=True)
+    )
+    kind = (
+        "a fixed point outside the operating region"
+        if residual <= EQUILIBRIUM_TOL
+        else (f"no fixed point: scaled residual {residual:.3g}")
+    )
+    return f"; the search ended at x - a = ({pairs}), {kind}"
+
+
+def _practical_note(entry: dict[str, Any]) -> str:
+    """``; practical stability: ...`` where a practical-stability proof was tried and failed
+    (nothing for old entries, which never tried one)."""
+    tried = entry.get("candidates", {}).get(PRACTICAL)
+    if tried is None:
+        return ""
+    return f"; practical stability tried: limited by {tried.get('limited_by', 'unknown')}"
+
+
 def describe_proved_region(system: System, label: str, entry: dict[str, Any]) -> list[str]:
     """Lines for people: the proved level, the equilibrium, the share of the box and the ratios
     to the LQR's, what limited the proof."""
@@ -308,14 +335,20 @@ def describe_proved_region(system: System, label: str, entry: dict[str, Any]) ->
     offset = ", ".join(f"{name} {value:+.3g}" for name, value in pairs)
     where = f"x* - a = ({offset})"
     if not entry["equilibrium_found"]:
-        where = "none found near a (V centred on a: practical stability at best)"
-    if entry["rho"] > 0.0:
+        where = f"none found near a{_rejected(system, entry)} (V centred on a)"
+    if entry["rho"] > 0.0 and entry.get("claim") == "practical":
+        proved = (
+            f"PROVED PRACTICALLY STABLE: {{V <= {entry['rho']:.6g}}} invariant (V from the "
+            f"{entry['lyapunov']} P), every trajectory from it enters and stays in "
+            f"{{V <= {entry['ultimate_level']:.3g}}}; limited by {entry['limited_by']}"
+        )
+    elif entry["rho"] > 0.0:
         proved = (
             f"PROVED rho = {entry['rho']:.6g} (V from the {entry['lyapunov']} P), decrease on "
             f"{entry['excluded_level']:.3g} < V <= rho; limited by {entry['limited_by']}"
         )
     else:
-        proved = f"NOTHING PROVED (limited by {entry['limited_by']})"
+        proved = f"NOTHING PROVED (limited by {entry['limited_by']}{_practical_note(entry)})"
     share, lqr_share = entry["box_share"], entry["lqr_box_share"]
     ratios = _ratio_text(entry["box_share_ratio"]), _ratio_text(entry["volume_ratio"])
     return [

@@ -75,6 +75,13 @@ def _by_construction(entry: dict[str, Any]) -> bool:
     return cover is not None and cover <= 1.0 + COVER_ROUNDING
 
 
+def _kept(entry: dict[str, Any]) -> str:
+    """The V kept, ``lqr (practical)`` where it proved practical stability only (an invariant
+    set attracted to an inner one: :mod:`leoc.control.trained`)."""
+    practical = entry.get("claim") == "practical" and entry["rho"] > 0.0
+    return f"{entry['lyapunov']} (practical)" if practical else entry["lyapunov"]
+
+
 def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
     """One controller's proved regions over its seeds (``entries``, seed order)."""
     ratios = [e["box_share_ratio"] for e in entries if e["box_share_ratio"] is not None]
@@ -94,7 +101,7 @@ def _row(system: str, controller: str, entries: list[dict[str, Any]]) -> dict[st
         if found
         else None,
         "equilibria_found": len(found),
-        "lyapunov": dict(Counter(e["lyapunov"] for e in entries)),
+        "lyapunov": dict(Counter(_kept(e) for e in entries)),
         "lqr_lyapunov": dict(Counter(e.get(REFERENCE_KEY, OLD_REFERENCE) for e in entries)),
         "limited_by": dict(Counter(e["limited_by"] for e in entries)),
         "by_construction": [_by_construction(e) for e in entries],
