@@ -555,10 +555,11 @@ def _practical_levels(
 ) -> _Practical:
     """The practical claim's target and inner level from ``samples`` states whose V spreads
     log-uniformly over ``[PRACTICAL_SPAN, 1] * initial``: for each split of the sorted
-    violations into an inner group and the rest, the inner level is ``INNER_MARGIN`` times the
-    group's largest V and the target lies just below the next violation (the initial level if
-    none); a split counts if its target is ``PRACTICAL_RATIO`` times its inner level and the
-    sampled image of the inner set; the largest target is kept (target 0: none)."""
+    violations into an inner group (possibly empty) and the rest, the inner level is
+    ``INNER_MARGIN`` times the group's largest V (the smallest sample's if empty) and the
+    target lies just below the next violation (the initial level if none); a split counts if
+    its target is ``PRACTICAL_RATIO`` times its inner level and the sampled image of the inner
+    set; the largest target is kept (target 0: none)."""
     rng = np.random.default_rng(seed)
     unit = _uniform_ellipsoid(matrix, 1.0, samples, rng)
     unit /= np.sqrt(np.einsum("bi,ij,bj->b", unit, matrix, unit))[:, None]
@@ -575,8 +576,9 @@ def _practical_levels(
     failing = value[~(image < value)]
     if not failing.size:
         return _Practical(_Sampled(initial, 1), INNER_MARGIN * float(value[0]), float(image[0]))
-    inner = INNER_MARGIN * failing
-    target = np.append(np.nextafter(failing[1:], 0.0), initial)
+    # Splits: nothing inner (the smallest sampled V), then each violation's V and below.
+    inner = INNER_MARGIN * np.append(value[0], failing)
+    target = np.append(np.nextafter(failing, 0.0), initial)
     reach = np.maximum.accumulate(image)[np.searchsorted(value, inner, side="right") - 1]
     usable = target >= PRACTICAL_RATIO * np.maximum(inner, reach)
     if not usable.any():

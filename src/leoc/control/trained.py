@@ -29,8 +29,10 @@ and attracted to :math:`x^*`:
    ball maps into itself, so every trajectory from :math:`\{V \le \rho\}` converges to
    :math:`x^*` (or enters :math:`\{V \le \varepsilon^2\}`). Where no such claim can exist (no
    equilibrium near a, or one whose linearisation is unstable: a baseline oscillating about
-   its hold point), the proof of practical stability is tried with the first V (the LQR's P
-   when a design is given; :data:`PRACTICAL`): :math:`\{V \le \rho\}` invariant and every
+   its hold point), a proof of practical stability is tried (:data:`PRACTICAL`): the first
+   V (the LQR's P when a design is given) and V fitted to sampled decrease about the loop's
+   attractor (:mod:`leoc.control.practical`) are sampled, and the one whose sampled target
+   has the largest volume is proved: :math:`\{V \le \rho\}` invariant and every
    trajectory from it entering :math:`\{V \le u\}` in finite time and staying there, u the
    ``ultimate_level`` (:func:`leoc.control.certify_level` with ``practical=True``; the
    argument is in :mod:`leoc.control.proof`). ``claim`` says which was proved; every level is
@@ -52,6 +54,7 @@ import numpy as np
 import scipy.linalg
 import torch
 
+from leoc.control.practical import practical_candidates
 from leoc.control.proof import MAX_BOXES, MAX_SECONDS, check_device
 from leoc.control.roa import (
     DEFAULT_SAMPLES,
@@ -229,12 +232,17 @@ class ControllerCertificate(NamedTuple):
         ``proof.excluded_level`` the practical-stability level).
     lyapunov : str
         Which V it is: ``lqr`` (the LQR's Riccati P), ``own`` (the discrete Lyapunov matrix
-        of the controller's linearisation at its equilibrium) or ``region`` (neither exists).
+        of the controller's linearisation at its equilibrium), ``region`` (neither exists) or,
+        for a practical claim, ``fitted`` about the attractor (``practical_v``; its centre is
+        ``certificate.operating_state``).
     equilibrium : Equilibrium
     candidates : dict
         Every V tried: name -> :class:`LyapunovCertificate` (``region``, ``diag(1 /
         region^2)``, only when neither other V exists).
     seconds : float
+    practical_v : str, optional
+        The V the practical-stability proof kept, in full (``fitted k=... outer=...``; None
+        where none was tried).
     """
 
     certificate: LyapunovCertificate
@@ -242,6 +250,7 @@ class ControllerCertificate(NamedTuple):
     equilibrium: Equilibrium
     candidates: dict[str, LyapunovCertificate]
     seconds: float
+    practical_v: str | None = None
 
     @property
     def rho(self) -> float:
@@ -275,6 +284,7 @@ class ControllerCertificate(NamedTuple):
             "claim": self.claim,
             "ultimate_level": 0.0 if proof is None else proof.ultimate_level,
             "lyapunov": self.lyapunov,
+            "practical_v": self.practical_v,
             "limited_by": self.limited_by,
             "log_volume": log_volume(self.certificate),
             "equilibrium": self.equilibrium.state.tolist(),
@@ -392,18 +402,49 @@ def certify_controller(
     }
     chosen = best_candidate(candidates)
     certificate = candidates[chosen]
+    proposed = None
     if certificate.rho == 0.0 and not _stable_equilibrium(equilibrium):
-        # No asymptotic claim can exist: try practical stability with the first V.
-        chosen = next(iter(matrices))
         left = max(0.0, max_seconds - (time.perf_counter() - started))
-        practical = certify_level(
-            system, matrices[chosen], controller, max_seconds=left, practical=True, **options
+        first = next(iter(matrices))
+        proposed, practical = _practical(
+            system, controller, (first, matrices[first], equilibrium.state), left, options
         )
         candidates[PRACTICAL] = practical
-        certificate = practical if practical.rho > 0.0 else certificate
-    return ControllerCertificate(
-        certificate, chosen, equilibrium, candidates, time.perf_counter() - started
+        if practical.rho > 0.0:
+            chosen, certificate = proposed.split(" ")[0], practical
+    seconds = time.perf_counter() - started
+    return ControllerCertificate(certificate, chosen, equilibrium, candidates, seconds, proposed)
+
+
+def _practical(
+    system: System,
+    controller: Any,
+    first: tuple[str, np.ndarray, np.ndarray],
+    max_seconds: float,
+    options: dict[str, Any],
+) -> tuple[str, LyapunovCertificate]:
+    """The practical-stability certificate (module docstring, 3) and its V's name: every
+    candidate V (:func:`leoc.control.practical.practical_candidates`) sampled, the one whose
+    sampled target has the largest volume proved."""
+    proposals = practical_candidates(
+        system, controller, options["action_repeat"], first, options["seed"]
     )
+    sampled = {
+        name: certify_level(
+            system, P, controller, practical=True, prove=False, **{**options, "equilibrium": c}
+        )
+        for name, (P, c) in proposals.items()
+    }
+    name = best_candidate(sampled)
+    P, centre = proposals[name]
+    certificate = certify_level(
+        system,
+        P,
+        controller,
+        practical=True,
+        **{**options, "equilibrium": centre, "max_seconds": max_seconds},
+    )
+    return name, certificate
 
 
 def _stable_equilibrium(equilibrium: Equilibrium) -> bool:

@@ -303,6 +303,20 @@ def _reference_v(entry: dict[str, Any]) -> str:
     return entry.get(REFERENCE_KEY, OLD_REFERENCE)
 
 
+def _ultimate_set(system: System, entry: dict[str, Any]) -> str:
+    """The practical claim's ultimate set in states, for people: its centre's offset from a
+    and its half-widths ``sqrt(u (P^-1)_ii)``."""
+    certificate = entry["certificate"]
+    P = np.asarray(certificate["P"], dtype=float)
+    half = np.sqrt(entry["ultimate_level"] * np.diag(np.linalg.inv(P)))
+    centre = np.asarray(certificate["operating_state"], dtype=float)
+    offset = centre - np.asarray(system.operating_state, dtype=float)
+    names = system.state_names
+    where = ", ".join(f"{name} {value:+.3g}" for name, value in zip(names, offset, strict=True))
+    reach = ", ".join(f"{name} +/- {value:.3g}" for name, value in zip(names, half, strict=True))
+    return f"about c - a = ({where}), within {reach}"
+
+
 def _rejected(system: System, entry: dict[str, Any]) -> str:
     """Where the equilibrium search ended instead, for people (nothing for old entries)."""
     offset, residual = entry.get("rejected_offset"), entry.get("rejected_residual")
@@ -339,8 +353,9 @@ def describe_proved_region(system: System, label: str, entry: dict[str, Any]) ->
     if entry["rho"] > 0.0 and entry.get("claim") == "practical":
         proved = (
             f"PROVED PRACTICALLY STABLE: {{V <= {entry['rho']:.6g}}} invariant (V from the "
-            f"{entry['lyapunov']} P), every trajectory from it enters and stays in "
-            f"{{V <= {entry['ultimate_level']:.3g}}}; limited by {entry['limited_by']}"
+            f"{entry.get('practical_v') or entry['lyapunov']} P), every trajectory from it "
+            f"enters and stays in {{V <= {entry['ultimate_level']:.3g}}}: "
+            f"{_ultimate_set(system, entry)}; limited by {entry['limited_by']}"
         )
     elif entry["rho"] > 0.0:
         proved = (
