@@ -354,9 +354,10 @@ def test_one_cross_study_table_at_a_time(capsys) -> None:
 
 def test_the_results_page_s_reading_of_the_verdicts_holds(monkeypatch) -> None:
     """The sentences under the results page's verdict table: no DDPG, SAC or TD3 hybrid is
-    below its LQR in any cell, every PILCO hybrid is (the pendulum's in four categories and the
-    score, the mountain car's under pushes and in the score), and the overall score against the
-    baseline is above only for the pendulum SAC ROA hybrid."""
+    below its LQR in any cell but the cart-pole DDPG hybrids under pushes, every PILCO hybrid
+    is (the pendulum's in four categories and the score, the mountain car's under pushes and in
+    the score), and the overall score against the baseline is above only for the pendulum SAC
+    ROA hybrid."""
     monkeypatch.chdir(ROOT)
     lines = _between(ROOT / "docs/results.md", VERDICTS_BEGIN, VERDICTS_END)
     header = [cell.strip() for cell in lines[0].strip("|").split("|")]
@@ -370,7 +371,9 @@ def test_the_results_page_s_reading_of_the_verdicts_holds(monkeypatch) -> None:
         if pairs["robustness"][1] == "above":
             above_overall.append((cells["study"], cells["hybrid"]))
     pilco = {key: names for key, names in below_lqr.items() if key[1].startswith("PILCO")}
-    assert not any(names for key, names in below_lqr.items() if key not in pilco)
+    others = {key: names for key, names in below_lqr.items() if key not in pilco and names}
+    cart_pole = {("cartpole", "DDPG hybrid"), ("cartpole", "DDPG hybrid (ROA relevance)")}
+    assert set(others) <= cart_pole and all(names == ["push"] for names in others.values())
     assert all(pilco.values())
     assert len(pilco[("pendulum", "PILCO hybrid")]) == 5
     for hybrid in ("PILCO hybrid", "PILCO hybrid (ROA relevance)"):

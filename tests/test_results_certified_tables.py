@@ -17,6 +17,7 @@ STUDIES = {
     "certified-mountaincar-sac": ("mountaincar", "sac"),
     "certified-mountaincar-pilco": ("mountaincar", "pilco"),
     "certified-mountaincar-td3": ("mountaincar", "td3"),
+    "certified-cartpole-ddpg": ("cartpole", "ddpg"),
 }
 """Study folder -> its system and learner; each README has one row per learned controller."""
 KINDS = {"baseline": "_baseline", "hybrid": "_hybrid", "ROA hybrid": "_hybrid_roa"}
@@ -179,3 +180,50 @@ def test_td3_s_mountain_car_hybrids_learn_where_its_baseline_does_not() -> None:
     failed = [run for run in baselines if run["swing_up"]["held_fraction"] < 1.0]
     assert len(failed) == 3
     assert all(run["robustness_protocol"]["scores"]["all"]["robustness"] < 0.1 for run in failed)
+
+
+def test_the_cart_pole_ddpg_proofs_are_budget_bound_and_no_baseline_is_proved() -> None:
+    """The cart-pole DDPG study's README: every hybrid's proof stopped at the budget below its
+    LQR's share (the ROA hybrid's well inside its flat top), no baseline proves more than a
+    sliver, seeds 0 and 2 hold equilibria about 0.18 m off centre with a spectral radius of at
+    least 1, and seeds 1 and 4 have none near the top."""
+    study = "certified-cartpole-ddpg"
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    for suffix in ("_hybrid", "_hybrid_roa"):
+        for run in _kind_runs(study, suffix):
+            proved = run["proved_region"]
+            assert proved["limited_by"] == "budget" and proved["box_share_ratio"] < 0.7
+    for run in _kind_runs(study, "_hybrid_roa"):
+        assert run["proved_region"]["rho"] < run["proved_region"]["flat_top_rho"]
+    baselines = [run["proved_region"] for run in _kind_runs(study, "_baseline")]
+    assert all(p["rho"] < 1e-3 for p in baselines)
+    for seed in (0, 2):
+        assert baselines[seed]["equilibrium_found"] and baselines[seed]["spectral_radius"] >= 1.0
+        assert 0.17 < abs(baselines[seed]["offset"][0]) < 0.19
+    assert [p["equilibrium_found"] for p in baselines] == [True, False, True, True, False]
+
+
+def test_the_cart_pole_ddpg_hybrids_are_below_their_lqr_under_pushes_only() -> None:
+    """The README's protocol claim: from the operating region, each hybrid's mean share held
+    over seeds is at least its LQR's in every category but pushes, and below it there."""
+    study = "certified-cartpole-ddpg"
+    if not (RESULTS / study).is_dir():
+        pytest.skip(f"{study} is not in this checkout")
+    (lqr,) = [
+        json.loads(path.read_text())["robustness_protocol"]["scores"]["operating_region"]
+        for path in (RESULTS / study / "runs" / "cartpole" / "linear").glob("seed*/evaluation.json")
+    ]
+    for suffix in ("_hybrid", "_hybrid_roa"):
+        scores = [
+            run["robustness_protocol"]["scores"]["operating_region"]
+            for run in _kind_runs(study, suffix)
+        ]
+        for category in lqr:
+            if category == "robustness":
+                continue
+            change = statistics.mean(score[category] for score in scores) - lqr[category]
+            if category == "push":
+                assert change < -0.03, suffix
+            else:
+                assert change > -0.005, (suffix, category)
