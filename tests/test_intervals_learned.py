@@ -717,6 +717,51 @@ def test_the_roa_relevance_is_exactly_one_with_zero_slope_on_its_flat_top():
     assert float(relevance.dmid.abs().max()) == 0.0 and float(relevance.drad.max()) < 1e-300
 
 
+class _Counting(nn.Module):
+    """A learned part that counts the boxes it is evaluated on."""
+
+    def __init__(self, inner: nn.Module) -> None:
+        super().__init__()
+        self.inner, self.boxes = inner, 0
+
+    def forward(self, x):
+        self.boxes += x.shape[0]
+        return self.inner(x)
+
+
+def test_the_roa_hybrid_skips_its_learned_part_on_flat_top_boxes():
+    """Boxes inside the flat top get G's enclosure exactly and never reach H (a proof there
+    costs what the LQR's does); in a mixed batch H sees only the other boxes, whose enclosures
+    are those of the plain blend r G + (1 - r) H."""
+    counting = _Counting(_learned_part())
+    hybrid = _hybrid("roa", "clip", counting)
+    point = torch.as_tensor(_pendulum()[0].operating_obs, dtype=DTYPE)[None]
+    inside = point.repeat(4, 1) + torch.as_tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01]] * 2)
+    outside = point.repeat(3, 1) + torch.as_tensor([[0.0, 0.0, 2.0]] * 3)
+    radius = torch.full((7, 3), 1e-3, dtype=DTYPE)
+    boxes = box_jet(torch.cat([inside, outside]), radius)
+    counting.boxes = 0  # building the hybrid probed its learned part
+    with torch.no_grad():
+        blended = hybrid.blend(boxes)
+        linear = hybrid.linear(boxes)
+        r = hybrid.relevance(boxes)
+        plain = r * linear + (1.0 - r) * counting.inner(boxes)
+    assert counting.boxes == 3
+    assert torch.equal(blended.mid[:4], linear.mid[:4]) and torch.equal(
+        blended.rad[:4], linear.rad[:4]
+    )
+    assert torch.equal(blended.dmid[:4], linear.dmid[:4])
+    assert torch.equal(blended.mid[4:], plain.mid[4:]) and torch.equal(
+        blended.rad[4:], plain.rad[4:]
+    )
+    assert torch.equal(blended.drad[4:], plain.drad[4:])
+    # The skipped boxes are really in the flat top: r == 1 at dense samples of each.
+    offsets = torch.as_tensor(np.random.default_rng(3).uniform(-1, 1, (500, 3)))
+    for row in range(4):
+        samples = inside[row] + offsets * 1e-3
+        assert torch.all(hybrid.relevance(samples) == 1.0)
+
+
 # ---- SB3 actors built by leoc: their float64 physical policies -----------------------------
 
 SB3_CASES = {

@@ -85,7 +85,17 @@ from typing import Any
 import torch
 from torch import Tensor
 
-__all__ = ["SMOOTHERSTEP", "Jet", "UnsupportedOperation", "box_jet", "point_jet", "smootherstep"]
+__all__ = [
+    "SMOOTHERSTEP",
+    "Jet",
+    "UnsupportedOperation",
+    "box_jet",
+    "exact_rows",
+    "pinned_rows",
+    "point_jet",
+    "smootherstep",
+    "with_rows",
+]
 
 UNIT_ROUNDOFF = 2.0**-53
 ROUNDING = 4.0 * UNIT_ROUNDOFF
@@ -782,6 +792,46 @@ def box_jet(centre: Tensor, radius: Tensor, basis: Tensor | None = None) -> Jet:
     gradient = basis.expand(*centre.shape[:-1], size, size)
     # The real map xi -> basis @ xi has exactly this gradient; only its values are rounded.
     return Jet(image.mid, image.rad, gradient, torch.zeros_like(gradient))
+
+
+def exact_rows(jet: Jet, value: float) -> Tensor:
+    """Rows (the first dimension, B) of a (B, ...) enclosure that are exactly ``value`` with a
+    zero derivative in every entry: the function is that constant on the whole box (B,)."""
+    rows = jet.shape[0]
+    exact = (jet.mid.reshape(rows, -1) == value).all(-1) & (jet.rad.reshape(rows, -1) == 0).all(-1)
+    if jet.dmid is not None:
+        exact &= (jet.dmid.reshape(rows, -1) == 0).all(-1) & (jet.drad.reshape(rows, -1) == 0).all(
+            -1
+        )
+    return exact
+
+
+def pinned_rows(jet: Jet, rows: Tensor, value: float) -> Jet:
+    """``jet`` with its rows ``rows`` (B,) bool set to exactly ``value``, derivative 0: for
+    boxes on which the function is known to be that constant (e.g. the ROA relevance's flat
+    top, where t is exactly 0 on the box and r = 1 - S(0) = 1 in every rounding)."""
+    keep = ~rows.reshape(-1, *([1] * (jet.ndim - 1)))
+    mid = torch.where(keep, jet.mid, torch.full_like(jet.mid, value))
+    rad = torch.where(keep, jet.rad, torch.zeros_like(jet.rad))
+    if jet.dmid is None:
+        return Jet(mid, rad, None, None)
+    grad_keep = keep.unsqueeze(-1)
+    zero = torch.zeros_like(jet.dmid)
+    return Jet(
+        mid, rad, torch.where(grad_keep, jet.dmid, zero), torch.where(grad_keep, jet.drad, zero)
+    )
+
+
+def with_rows(whole: Jet, rows: Tensor, part: Jet) -> Jet:
+    """``whole`` (B, ...) with the rows ``rows`` (B,) bool replaced by ``part`` (rows.sum(),
+    ...), derivatives included (``whole`` must carry one if ``part`` does)."""
+    mid, rad = whole.mid.clone(), whole.rad.clone()
+    mid[rows], rad[rows] = part.mid, part.rad
+    if whole.dmid is None:
+        return Jet(mid, rad, None, None)
+    dmid, drad = whole.dmid.clone(), whole.drad.clone()
+    dmid[rows], drad[rows] = part.dmid, part.drad
+    return Jet(mid, rad, dmid, drad)
 
 
 def point_jet(value: Tensor) -> Jet:

@@ -62,6 +62,8 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from leoc.control.intervals import Jet, exact_rows, with_rows
+
 from ._checks import (
     as_float_tensor,
     check_finite,
@@ -354,6 +356,8 @@ class HybridPolicy(nn.Module):
     def _blend(self, x: Tensor, r: Tensor) -> Tensor:
         # Written as r G + (1 - r) H rather than H + r (G - H): at x = a, r = 1 exactly and the
         # first form returns G(a) bit for bit, while the second would round G - H + H.
+        if isinstance(r, Jet) and r.ndim == 2:
+            return _blend_boxes(x, r, self.linear, self.nonlinear)
         return r * self.linear(x) + (1.0 - r) * self.nonlinear(x)
 
     def forward(self, x: Tensor, return_relevance: bool = False) -> Tensor | HybridOutput:
@@ -490,3 +494,18 @@ class _Callable(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         return self.function(x)
+
+
+def _blend_boxes(x: Jet, r: Jet, linear: nn.Module, nonlinear: nn.Module) -> Jet:
+    """``r G + (1 - r) H`` on interval enclosures of boxes (B, D), H evaluated only on the
+    boxes where r is not exactly 1: on the others (the ROA relevance's flat top) the blend is
+    G, exactly, whatever H is (a proof inside the flat top then costs what the LQR's does)."""
+    g = linear(x)
+    flat = exact_rows(r, 1.0)
+    if not bool(flat.any()):
+        return r * g + (1.0 - r) * nonlinear(x)
+    live = ~flat
+    if not bool(live.any()):
+        return g
+    part = r[live] * g[live] + (1.0 - r[live]) * nonlinear(x[live])
+    return with_rows(g, live, part)

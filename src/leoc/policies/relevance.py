@@ -133,7 +133,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from leoc.control.intervals import smootherstep
+from leoc.control.intervals import Jet, pinned_rows, smootherstep
 from leoc.names import RELEVANCE_NAMES
 from leoc.systems.observation import as_observation_map
 
@@ -544,7 +544,14 @@ class ROARelevance(nn.Module):
         t = torch.clamp((level - 1.0) / self.width, min=0.0, max=1.0)
         # Horner form of S(t) = 10 t^3 - 15 t^4 + 6 t^5 (Perlin 2002; on interval enclosures its
         # own tight rule); at t = 0 every term is an exact 0, so r = 1 exactly on the flat top.
-        return 1.0 - smootherstep(t)
+        r = 1.0 - smootherstep(t)
+        if isinstance(level, Jet) and level.ndim == 2:
+            # A box whose level's enclosure stays below 1 (with a margin far above the rounding
+            # of its upper end) lies in the flat top: t is 0 and r is 1 on all of it, exactly
+            # (the interval rules would widen both by an ulp); the hybrid then skips H there.
+            inside = (level.high < 1.0 - FLAT_TOP_MARGIN).reshape(level.shape[0], -1).all(-1)
+            r = pinned_rows(r, inside, 1.0)
+        return r
 
     def extra_repr(self) -> str:
         learned = isinstance(self.width_param, nn.Parameter)
@@ -552,6 +559,12 @@ class ROARelevance(nn.Module):
             f"state_dim={self.deviation.state_dim}, rho_in={float(self.rho_in):.6g}, "
             f"max_width={self.max_width:.6g}, learn_width={learned}"
         )
+
+
+FLAT_TOP_MARGIN = 1e-9
+"""On interval enclosures a box counts as inside the ROA relevance's flat top when its level
+``V / rho_in`` is below ``1 - FLAT_TOP_MARGIN`` everywhere (a margin far above the rounding of
+the enclosure's upper end)."""
 
 
 def _positive_number(value: object, name: str) -> float:
