@@ -91,8 +91,9 @@ ACCELERATOR_BATCH = 16_384
 in batches of 16384 on an H200, 0.17 million in batches of 4096 (a search of large batches
 also evaluates boxes a smaller one would prune: docs/user_guide/roa.md, "On a GPU")."""
 PRACTICAL = "practical"
-"""The candidate of :func:`certify_controller`'s practical-stability proof (tried with the
-first V when no asymptotic claim can exist: no equilibrium, or an unstable one)."""
+"""The candidate of :func:`certify_controller`'s practical-stability proof (tried when no
+asymptotic claim can exist: no equilibrium, or an unstable one; its V the first candidate's or
+one fitted about the attractor, :mod:`leoc.control.practical`)."""
 STABLE_RADIUS = 1.0
 """The own-linearisation V needs the spectral radius of J below this."""
 
