@@ -313,6 +313,24 @@ def _closed_loop(system: System, controller: Controller, repeat: int, states: Te
     return states, left
 
 
+def _values(
+    system: System,
+    P: Tensor,
+    controller: Controller,
+    repeat: int,
+    states: Tensor,
+    centre: np.ndarray,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """``(V(x), V(F(x)), left)`` (B,) each for states x (B, S), V centred on ``centre``, F the
+    held closed loop; ``left``: F left the allowed region on a held step."""
+    angles = system.angle_indices
+    with torch.no_grad():
+        following, left = _closed_loop(system, controller, repeat, states)
+        value = lyapunov_value(P, _deviation(states, centre, angles))
+        value_next = lyapunov_value(P, _deviation(following, centre, angles))
+    return value, value_next, left
+
+
 def _decrease(
     system: System,
     P: Tensor,
@@ -323,11 +341,7 @@ def _decrease(
 ) -> tuple[Tensor, Tensor]:
     """``(V(x), violates)`` (B,) each, V centred on ``centre``: violation = no strict decrease,
     a non-finite value, or leaving the allowed region."""
-    angles = system.angle_indices
-    with torch.no_grad():
-        following, left = _closed_loop(system, controller, repeat, states)
-        value = lyapunov_value(P, _deviation(states, centre, angles))
-        value_next = lyapunov_value(P, _deviation(following, centre, angles))
+    value, value_next, left = _values(system, P, controller, repeat, states, centre)
     # The condition is on 0 < V <= rho: the operating point itself (V = 0) is a fixed point.
     violates = (value > 0.0) & (left | ~torch.isfinite(value_next) | ~(value_next < value))
     return value, violates
@@ -566,11 +580,10 @@ def _practical_levels(
     scale = initial * PRACTICAL_SPAN ** rng.uniform(size=samples)
     states = torch.as_tensor(np.sqrt(scale)[:, None] * unit + centre, dtype=DTYPE)
     P_t = torch.as_tensor(matrix, dtype=DTYPE)
-    with torch.no_grad():
-        following, left = _closed_loop(system, controller, repeat, states)
-        value = lyapunov_value(P_t, _deviation(states, centre, system.angle_indices)).numpy()
-        image = lyapunov_value(P_t, _deviation(following, centre, system.angle_indices)).numpy()
-    image = np.where(np.isfinite(image) & ~left.numpy(), image, np.inf)
+    value, image, left = (
+        t.numpy() for t in _values(system, P_t, controller, repeat, states, centre)
+    )
+    image = np.where(np.isfinite(image) & ~left, image, np.inf)
     order = np.argsort(value)
     value, image = value[order], image[order]
     failing = value[~(image < value)]
