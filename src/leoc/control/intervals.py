@@ -113,12 +113,54 @@ class UnsupportedOperation(TypeError):
     """A torch function or operand that the interval evaluator has no sound rule for."""
 
 
-def _widen(mid: Tensor, rad: Tensor) -> Tensor:
-    return rad * (1.0 + ROUNDING) + ROUNDING * mid.abs() + TINY
+def _holds(shape: torch.Size, *others: torch.Size) -> bool:
+    """Whether a tensor of ``shape`` holds the broadcast of itself with ``others`` (an
+    in-place result fits); equal shapes are answered without torch's broadcasting."""
+    if all(other == shape for other in others):
+        return True
+    return torch.broadcast_shapes(shape, *others) == shape
+
+
+def _fills(shape: torch.Size, first: torch.Size, second: torch.Size) -> bool:
+    """Whether the broadcast of ``first`` and ``second`` is exactly ``shape``."""
+    if first == shape:
+        return _holds(shape, second)
+    if second == shape:
+        return _holds(shape, first)
+    return torch.broadcast_shapes(first, second) == shape
+
+
+def _widen(mid: Tensor, rad: Tensor, fresh: bool = False) -> Tensor:
+    """``rad (1 + ROUNDING) + ROUNDING |mid| + TINY``: the radius widened for the rounding of
+    a result with midpoint ``mid``. ``fresh``: ``rad`` is a temporary that nothing else holds,
+    and is overwritten (same operations in the same order, so the same bits, without the
+    temporaries of the large gradient enclosures that dominate a proof's time on the CPU)."""
+    if not _holds(rad.shape, mid.shape):
+        return rad * (1.0 + ROUNDING) + ROUNDING * mid.abs() + TINY
+    rad = rad.mul_(1.0 + ROUNDING) if fresh else rad * (1.0 + ROUNDING)
+    return rad.add_(mid.abs().mul_(ROUNDING)).add_(TINY)
 
 
 def _mul_rad(am: Tensor, ar: Tensor, bm: Tensor, br: Tensor) -> Tensor:
-    return am.abs() * br + ar * bm.abs() + ar * br
+    """Radius ``|am| br + ar |bm| + ar br`` of a product (before rounding)."""
+    first = am.abs() * br
+    if not _holds(first.shape, ar.shape, bm.shape):
+        return first + ar * bm.abs() + ar * br
+    second = bm.abs()
+    if second.shape != first.shape:
+        second = second.expand(first.shape).clone()
+    first.add_(second.mul_(ar))
+    if not _fills(second.shape, ar.shape, br.shape):
+        return first.add_(ar * br)
+    return first.add_(torch.mul(ar, br, out=second))
+
+
+def _plus_scaled_abs(rad: Tensor, mid: Tensor, factor: float) -> Tensor:
+    """``rad + factor |mid|`` as a fresh tensor (the midpoint's rounding added to a radius)."""
+    scaled = mid.abs().mul_(factor)
+    if not _holds(scaled.shape, rad.shape):
+        return rad + scaled
+    return scaled.add_(rad)
 
 
 def _hull_with_zero(mid: Tensor, rad: Tensor) -> tuple[Tensor, Tensor]:
@@ -394,7 +436,7 @@ def _scale_grad(factor: Jet, dmid: Tensor, drad: Tensor) -> tuple[Tensor, Tensor
     """Interval product of a value enclosure (...,) with a gradient enclosure (..., S)."""
     fm, fr = factor.mid.unsqueeze(-1), factor.rad.unsqueeze(-1)
     mid = fm * dmid
-    return mid, _widen(mid, _mul_rad(fm, fr, dmid, drad))
+    return mid, _widen(mid, _mul_rad(fm, fr, dmid, drad), fresh=True)
 
 
 def _sum_grads(terms: list[tuple[Tensor, Tensor]]) -> tuple[Tensor | None, Tensor | None]:
@@ -403,7 +445,7 @@ def _sum_grads(terms: list[tuple[Tensor, Tensor]]) -> tuple[Tensor | None, Tenso
     mid, rad = terms[0]
     for other_mid, other_rad in terms[1:]:
         mid = mid + other_mid
-        rad = _widen(mid, rad + other_rad)
+        rad = _widen(mid, rad + other_rad, fresh=True)
     return mid, rad
 
 
@@ -562,12 +604,25 @@ def _clamp(x: Any, min: Any = None, max: Any = None) -> Jet:  # noqa: A002
     mid, rad = _from_ends(low, high)
     if jet.dmid is None:
         return Jet(mid, rad, None, None)
-    hull_mid, hull_rad = _hull_with_zero(jet.dmid, jet.drad)
-    constant = (below | above).unsqueeze(-1)
-    smooth = inside.unsqueeze(-1)
-    dmid = torch.where(constant, 0.0, torch.where(smooth, jet.dmid, hull_mid))
-    drad = torch.where(constant, 0.0, torch.where(smooth, jet.drad, hull_rad))
-    return Jet(mid, rad, dmid, drad)
+    return Jet(mid, rad, *_kinked_grad(jet, below | above, inside))
+
+
+def _kinked_grad(jet: Jet, constant: Tensor, smooth: Tensor) -> tuple[Tensor, Tensor]:
+    """The gradient enclosure of a clamp (value shape masks): zero where ``constant``, the
+    jet's where ``smooth``, else (the box straddles a kink) its hull with zero, computed on
+    those entries only (few in small boxes)."""
+    shape = (*constant.shape, jet.dmid.shape[-1])  # type: ignore[union-attr]
+    # a mask of the gradient's full shape: selection by a mask broadcast along the last
+    # (short) dimension is several times slower
+    constant_full = constant.unsqueeze(-1).expand(shape).contiguous()
+    zero = torch.zeros((), dtype=jet.dtype, device=jet.device)
+    dmid = torch.where(constant_full, zero, jet.dmid)  # type: ignore[arg-type]
+    drad = torch.where(constant_full, zero, jet.drad)  # type: ignore[arg-type]
+    kinked = ~(constant | smooth)
+    if bool(kinked.any()):
+        hull_mid, hull_rad = _hull_with_zero(dmid[kinked], drad[kinked])
+        dmid[kinked], drad[kinked] = hull_mid, hull_rad
+    return dmid, drad
 
 
 def _minimum(x: Any, y: Any) -> Jet:
@@ -661,13 +716,13 @@ def _matmul_right(x: Jet, matrix: Tensor) -> Jet:
     magnitude = matrix.abs()
     mid = x.mid @ matrix
     # (r + gamma |m|) |M|, over 1 - gamma: radius and midpoint rounding (module docstring)
-    spread = ((x.rad + gamma * x.mid.abs()) @ magnitude) / (1.0 - gamma)
-    rad = _widen(mid, spread)
+    spread = (_plus_scaled_abs(x.rad, x.mid, gamma) @ magnitude).div_(1.0 - gamma)
+    rad = _widen(mid, spread, fresh=True)
     if x.dmid is None:
         return Jet(mid, rad, None, None)
     dmid = torch.einsum("...ds,df->...fs", x.dmid, matrix)
-    dspread = torch.einsum("...ds,df->...fs", x.drad + gamma * x.dmid.abs(), magnitude)
-    return Jet(mid, rad, dmid, _widen(dmid, dspread / (1.0 - gamma)))
+    dspread = torch.einsum("...ds,df->...fs", _plus_scaled_abs(x.drad, x.dmid, gamma), magnitude)
+    return Jet(mid, rad, dmid, _widen(dmid, dspread.div_(1.0 - gamma), fresh=True))
 
 
 def _matmul(x: Any, y: Any) -> Jet:
