@@ -133,7 +133,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from leoc.control.intervals import Jet, pinned_rows, smootherstep
+from leoc.control.intervals import Jet, pinned_rows, quadratic_form, smootherstep
 from leoc.names import RELEVANCE_NAMES
 from leoc.systems.observation import as_observation_map
 
@@ -535,8 +535,7 @@ class ROARelevance(nn.Module):
 
     def lyapunov(self, x: Tensor) -> Tensor:
         r""":math:`V(z(x)) = z^\top P z` of observations (..., D) -> (..., 1)."""
-        z = self.deviation(x)
-        return ((z @ self.lyapunov_matrix) * z).sum(dim=-1, keepdim=True)
+        return quadratic_form(self.deviation(x), self.lyapunov_matrix)
 
     def forward(self, x: Tensor) -> Tensor:
         """Relevance (..., 1) of observations ``x`` (..., D)."""
