@@ -18,6 +18,7 @@ STUDIES = {
     "certified-mountaincar-pilco": ("mountaincar", "pilco"),
     "certified-mountaincar-td3": ("mountaincar", "td3"),
     "certified-cartpole-ddpg": ("cartpole", "ddpg"),
+    "certified-cartpole-sac-study": ("cartpole", "sac"),
 }
 """Study folder -> its system and learner; each README has one row per learned controller."""
 KINDS = {"baseline": "_baseline", "hybrid": "_hybrid", "ROA hybrid": "_hybrid_roa"}
