@@ -767,8 +767,9 @@ def test_the_roa_hybrid_skips_its_learned_part_on_flat_top_boxes():
 
 def _cartpole_level_boxes(half: float, count: int = 200, seed: int = 0):
     """Boxes of half-width ``half`` in the coordinates w = L^T (x - a) of the cart-pole LQR's
-    V (as a proof makes them), centres at |w| <= 3, and the ROA relevance's V of the
-    observation of a box's state: (function of w, centres, P, frame inverse)."""
+    V (as a proof makes them), centres at |w| <= 3; returns the ROA relevance's V of the
+    observation of a box's state (a function of w), the centres, and that V's plain interval
+    product ``((z P) z).sum()`` on the boxes (the enclosure the relevance had before)."""
     system = make_system("cartpole")
     P = torch.as_tensor(design_lqr(system).P, dtype=DTYPE)
     inverse = torch.linalg.inv(torch.linalg.cholesky(P)).T  # z = L^-T w
@@ -779,14 +780,15 @@ def _cartpole_level_boxes(half: float, count: int = 200, seed: int = 0):
     length = 3.0 * torch.rand(count, 1, generator=generator, dtype=DTYPE)
     centre = direction / direction.norm(dim=1, keepdim=True) * length
 
-    def level(w):
+    def observation(w):
         if isinstance(w, Jet):
-            states = box_jet(w.mid, w.rad, inverse) + operating
-        else:
-            states = w @ inverse.T + operating
-        return relevance.lyapunov(system.observation.observe(states))
+            return system.observation.observe(box_jet(w.mid, w.rad, inverse) + operating)
+        return system.observation.observe(w @ inverse.T + operating)
 
-    return level, centre, P, inverse
+    with torch.no_grad():
+        z = relevance.deviation(observation(Jet(centre, torch.full_like(centre, half), None, None)))
+        plain = ((z @ P) * z).sum(-1)
+    return (lambda w: relevance.lyapunov(observation(w))), centre, plain
 
 
 @pytest.mark.parametrize("half", [0.35, 0.1, 0.02])
@@ -796,19 +798,9 @@ def test_the_level_enclosure_holds_and_beats_the_plain_product_on_proof_boxes(ha
     is at most 0.75 times that of the plain interval product ((z P) z).sum() (measured 0.63,
     0.42 and 0.28 at half-widths 0.35, 0.1 and 0.02: the sum of exact squares of L^T z keeps
     the dependency the product loses); the plain rule itself gives 1."""
-    level, centre, P, inverse = _cartpole_level_boxes(half)
-    radius = torch.full_like(centre, half)
-    enclosure, values, _ = _check_sound(level, centre, radius, count=500)
+    level, centre, plain = _cartpole_level_boxes(half)
+    enclosure, values, _ = _check_sound(level, centre, torch.full_like(centre, half), count=500)
     sampled_max = values.amax(dim=(1, 2))
-    with torch.no_grad():
-        box = box_jet(centre, radius, inverse) + torch.as_tensor(
-            make_system("cartpole").operating_state, dtype=DTYPE
-        )
-        relevance = ROARelevance(
-            make_system("cartpole").obs_layout, [0.0, 0.0, 0.0, 0.0], P, 18.0, 1.0, False
-        )
-        z = relevance.deviation(make_system("cartpole").observation.observe(box))
-        plain = ((z @ P) * z).sum(-1)
     excess = (enclosure.mid + enclosure.rad)[:, 0] - sampled_max
     plain_excess = plain.high - sampled_max
     assert torch.all(excess >= 0.0)
