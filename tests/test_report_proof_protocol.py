@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from leoc.evaluation.plots.robustness_protocol import protocol_caption
 from leoc.evaluation.robustness_protocol import CategoryResult, LevelResult, ProtocolResult
 from leoc.experiments.profiles import EvaluationBudget, get_profile
 from leoc.experiments.report import PROVED_REGION_CHECK, Report, Study
@@ -209,6 +210,14 @@ def test_the_protocol_table_is_the_held_episodes_counted_by_hand() -> None:
     pooled = protocol_section.pooled(results)
     assert pooled.episodes == 4
     assert pooled.scores() == pytest.approx({"observation_noise": 6 / 16, "push": 5 / 16})
+    # its caption counts one run's episodes and says the bars pool the seeds' runs; the seed it
+    # names is the protocol's, not a training seed
+    caption = protocol_caption({"DDPG hybrid": pooled}, {"DDPG hybrid": 2})
+    assert "with 2 episodes per level and start kind in each run" in caption
+    assert "pools the episodes of its runs" in caption
+    assert f"(protocol seed {results[0].seed})" in caption
+    alone = protocol_caption({"DDPG hybrid": results[0]})
+    assert "with 2 episodes per level and start kind;" in alone and "pools" not in alone
     lines = protocol_section.render(_report(evaluations, {"robustness_protocol": rows}))
     assert "Sweeps up to: observation noise 0.5, push 2 (parameter errors of mass" in "\n".join(
         lines

@@ -36,16 +36,26 @@ SCORE_LIMITS = (0.0, 1.25)  # room above 1.0 for an upright score label
 ROBUSTNESS = "robustness"
 
 
-def protocol_caption(results: Mapping[str, Any]) -> str:
-    """What each bar is."""
-    first = next(iter(results.values()))
+def protocol_caption(results: Mapping[str, Any], runs: Mapping[str, int] | None = None) -> str:
+    """What each bar is. ``runs`` maps a label to the number of runs its result pools (its
+    training seeds, by :func:`leoc.experiments.report.robustness_protocol.pooled`; 1 where a
+    label is missing): a pooled result holds that many times one run's episodes per level."""
+    runs = dict(runs or {})
+    first_label, first = next(iter(results.items()))
+    per_run = first.episodes // max(1, runs.get(first_label, 1))
+    pooling = max(runs.values(), default=1) > 1
     return (
-        f"Robustness protocol on {first.system} (seed {first.seed}): each bar is the share of "
-        f"the episodes held (leoc's hold test) over the category's levels, up to "
+        f"Robustness protocol on {first.system} (protocol seed {first.seed}): each bar is the "
+        f"share of the episodes held (leoc's hold test) over the category's levels, up to "
         f"{first.level_count} from none to the level at which the LQR fails, with "
-        f"{first.episodes} episode{'s' if first.episodes != 1 else ''} per level and start "
-        f"kind; '{ROBUSTNESS}' is the mean of "
-        "the categories."
+        f"{per_run} episode{'s' if per_run != 1 else ''} per level and start kind"
+        + (
+            " in each run; a controller trained on several seeds pools the episodes of its "
+            "runs (one per seed)"
+            if pooling
+            else ""
+        )
+        + f"; '{ROBUSTNESS}' is the mean of the categories."
     )
 
 
@@ -86,7 +96,11 @@ def _draw_panel(axis: Any, results: Mapping[str, Any], keys: Mapping[str, str], 
     axis.grid(axis="y", alpha=0.3)
 
 
-def draw_protocol_scores(results: Mapping[str, Any], keys: Mapping[str, str] | None = None):
+def draw_protocol_scores(
+    results: Mapping[str, Any],
+    keys: Mapping[str, str] | None = None,
+    runs: Mapping[str, int] | None = None,
+):
     """The figure of :func:`plot_protocol_scores` (not saved)."""
     keys = dict(keys or {})
     first = next(iter(results.values()))
@@ -95,20 +109,25 @@ def draw_protocol_scores(results: Mapping[str, Any], keys: Mapping[str, str] | N
     figure, axes = new_figure(len(kinds), 1, (PANEL_WIDTH_PER_GROUP * groups, PANEL_HEIGHT))
     for row, kind in enumerate(kinds):
         _draw_panel(axes[row][0], results, keys, kind)
-    legend_below(figure, axes_handles(axes), protocol_caption(results))
+    legend_below(figure, axes_handles(axes), protocol_caption(results, runs))
     return figure
 
 
 def plot_protocol_scores(
-    results: Mapping[str, Any], path: str | Path, keys: Mapping[str, str] | None = None
+    results: Mapping[str, Any],
+    path: str | Path,
+    keys: Mapping[str, str] | None = None,
+    runs: Mapping[str, int] | None = None,
 ) -> Path:
     """Write the scores of ``results`` to ``path`` as a PNG: bars per category and controller,
     the controllers side by side in the order given, coloured by ``keys``.
 
     ``results`` maps a label to its
     :class:`~leoc.evaluation.robustness_protocol.ProtocolResult` (one system); ``keys`` maps a
-    label to a controller name such as ``linear`` or ``ddpg_hybrid`` (default the label).
+    label to a controller name such as ``linear`` or ``ddpg_hybrid`` (default the label);
+    ``runs`` maps a label to the number of runs its result pools (default 1, see
+    :func:`protocol_caption`).
     """
     if not results:
         raise ValueError("results: expected at least one controller's result, found none")
-    return save_figure(draw_protocol_scores(results, keys), path)
+    return save_figure(draw_protocol_scores(results, keys, runs), path)

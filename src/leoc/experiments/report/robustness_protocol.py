@@ -129,7 +129,8 @@ def write_protocol_figures(study: Study) -> list[Path]:
     for system, by_controller in protocol_results(study.evaluations).items():
         results = {label(c): pooled(runs) for c, runs in by_controller.items()}
         keys = {label(c): c for c in by_controller}
-        written.append(plot_protocol_scores(results, study.out / figure_name(system), keys))
+        runs = {label(c): len(seeds) for c, seeds in by_controller.items()}
+        written.append(plot_protocol_scores(results, study.out / figure_name(system), keys, runs))
     return written
 
 
