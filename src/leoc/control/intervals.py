@@ -86,6 +86,7 @@ import torch
 from torch import Tensor
 
 __all__ = [
+    "QUADRATIC_CORNER_DIM",
     "SMOOTHERSTEP",
     "Jet",
     "UnsupportedOperation",
@@ -961,6 +962,11 @@ def _smootherstep_slope(t: Tensor) -> Tensor:
     return 30.0 * (t * (1.0 - t)).square()
 
 
+QUADRATIC_CORNER_DIM = 6
+"""Largest dimension S for which :func:`quadratic_form` bounds a box's largest level by the
+:math:`2^S` corners of the box of ``z`` (64 corners at S = 6)."""
+
+
 def quadratic_form(z: Any, matrix: Tensor) -> Any:
     r""":math:`z^\top P z` over the last dimension, kept: (..., S) -> (..., 1), ``matrix`` P
     (S, S) symmetric positive definite.
@@ -970,7 +976,11 @@ def quadratic_form(z: Any, matrix: Tensor) -> Any:
     :math:`|L^\top z|^2` (P = L L^T, Cholesky), which keeps the dependency between the factors
     that the plain product loses (several times tighter on the boxes of a proof), plus the
     factorisation's error :math:`|z^\top (P - L L^\top) z| \le e\,|z|^2`
-    (:func:`_factor_error`); the derivative is the plain formula's.
+    (:func:`_factor_error`). Up to :data:`QUADRATIC_CORNER_DIM` dimensions its upper end is
+    also at most the largest value at the corners of the enclosure of ``z`` (outward rounded,
+    each evaluated in interval arithmetic): a convex function's maximum over a box is at a
+    corner, so that end is the exact maximum over the box of ``z`` up to rounding. The
+    derivative is the plain formula's.
     """
     plain = ((z @ matrix) * z).sum(-1, keepdim=True)
     if not isinstance(z, Jet):
@@ -983,8 +993,26 @@ def quadratic_form(z: Any, matrix: Tensor) -> Any:
     (plain_low, plain_high), (low, high) = _outer_ends(plain), _outer_ends(squares)
     low = torch.nextafter(low - slack, torch.full_like(low, -math.inf))
     high = torch.nextafter(high + slack, torch.full_like(high, math.inf))
-    mid, rad = _from_ends(torch.maximum(plain_low, low), torch.minimum(plain_high, high))
+    high = torch.minimum(plain_high, high)
+    if matrix.shape[0] <= QUADRATIC_CORNER_DIM:
+        high = torch.minimum(high, _corner_high(z, matrix))
+    mid, rad = _from_ends(torch.maximum(plain_low, low), high)
     return Jet(mid, rad, plain.dmid, plain.drad)
+
+
+def _corner_high(z: Jet, matrix: Tensor) -> Tensor:
+    r"""An upper bound (..., 1) of :math:`z^\top P z` over the box of ``z``'s value enclosure
+    (P positive semidefinite): the largest interval evaluation at the :math:`2^S` corners of
+    that box, its ends rounded outward (floats, so each corner is a point enclosure). A NaN
+    (an infinite end times a zero) counts as unbounded."""
+    ends = torch.stack(_outer_ends(z), dim=-2)  # (..., 2, S): low, high
+    size = ends.shape[-1]
+    pick = (torch.arange(2**size).unsqueeze(-1) >> torch.arange(size)) & 1  # (2^S, S)
+    index = pick.to(ends.device).expand(*ends.shape[:-2], 2**size, size)
+    corners = point_jet(torch.gather(ends, -2, index))  # (..., 2^S, S)
+    values = ((corners @ matrix) * corners).sum(-1)  # (..., 2^S)
+    top = _outer_ends(values)[1].amax(-1, keepdim=True)
+    return torch.nan_to_num(top, nan=math.inf)
 
 
 def _factor_error(matrix: Tensor, factor: Tensor) -> float:
