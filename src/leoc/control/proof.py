@@ -54,6 +54,18 @@ distance from a is below ``resolution`` (``RESOLUTION``); boxes
 inside the inner ball or outside the target ball are skipped. The proved level is the
 smallest :math:`\min_{\text{box}} |w|^2` of the boxes left unproved (or the target).
 
+**Flat regions.** A controller with a ``flat_region()`` method returning a
+:class:`~leoc.policies.relevance.FlatRegion` (or None) says where it equals a simpler
+controller exactly: an ROA hybrid is its linear part on its relevance's flat top
+:math:`\{V_r \le \rho_{in}\}` (r = 1 there). On a box whose every state lies there the
+simpler controller is evaluated instead, which is the same map, so every claim above is
+unchanged. The test is exact up to rounding: x is affine in w, so :math:`V_r` (a convex
+quadratic) is largest over a box at one of its :math:`2^S` corners, each evaluated in
+interval arithmetic; an angle deviation must also stay in :math:`(-\pi, \pi)` on the box,
+where the relevance's wrap is the identity. The relevance's own interval enclosure of its
+level cannot do this: it sees the box only through the state's intervals, the hull of the
+box's image, which overestimates :math:`V_r` several times (docs, ``roa.md``).
+
 **Practical stability** (:func:`prove_practical`, inner level :math:`\eta`): for a centre that is no
 stable fixed point (a baseline whose loop oscillates about an unstable equilibrium, or has
 none near a), no inner ball contracts. Instead a box that fails the decrease passes if it
@@ -103,7 +115,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet
+from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet, with_rows
 from leoc.systems.base import DTYPE, System
 
 __all__ = ["LevelProof", "check_device", "prove_level", "prove_practical"]
@@ -326,6 +338,7 @@ def _enclose(
         z = point_jet(centre) @ frame.inverse.T
     else:
         z = box_jet(centre, radius, frame.inverse)
+        controller = _with_flat_region(controller, frame, centre, radius, z + frame.operating)
     following, outside = _closed_loop_jet(system, controller, repeat, z + frame.operating)
     image = (following - frame.operating) @ frame.factor
     finite = torch.isfinite(image.mid).all(-1) & torch.isfinite(image.rad).all(-1)
@@ -334,6 +347,55 @@ def _enclose(
             (-1, -2)
         )
     return _Enclosure(image.mid, image.rad, image.dmid, image.drad, outside | ~finite)
+
+
+def _with_flat_region(
+    controller: Controller, frame: _Frame, centre: Tensor, radius: Tensor, states: Jet
+) -> Controller:
+    """``controller``, except on the boxes inside its flat region (module docstring, **Flat
+    regions**), where its simpler controller runs instead (the same map there)."""
+    method = getattr(controller, "flat_region", None)
+    region = method() if callable(method) else None
+    if region is None:
+        return controller
+    flat = _flat_rows(region, frame, centre, radius, states)
+    if not bool(flat.any()):
+        return controller
+    live = ~flat
+
+    def split(obs: Jet) -> Jet:
+        inner = region.inner(obs)
+        if not bool(live.any()):
+            return inner
+        return with_rows(inner, live, controller(obs[live]))
+
+    return split
+
+
+def _flat_rows(region: Any, frame: _Frame, centre: Tensor, radius: Tensor, states: Jet) -> Tensor:
+    r"""Boxes (B,) ``centre +/- radius`` in w on which the region's :math:`V \le` level holds
+    everywhere: V is a convex quadratic of w (x is affine in w), so its largest value over a
+    box is at one of the :math:`2^S` corners (ends rounded outward, values in interval
+    arithmetic); and every angle deviation of ``states`` stays in :math:`(-\pi, \pi)`."""
+    size = centre.shape[-1]
+    low = torch.nextafter(centre - radius, torch.full_like(centre, -math.inf))
+    high = torch.nextafter(centre + radius, torch.full_like(centre, math.inf))
+    pick = (
+        (
+            torch.arange(2**size, device=centre.device)[:, None]
+            >> torch.arange(size, device=centre.device)
+        )
+        & 1
+    ).bool()  # (2^S, S)
+    corners = torch.where(pick, high[:, None, :], low[:, None, :])  # (B, 2^S, S)
+    deviation = point_jet(corners) @ frame.inverse.T + frame.operating - region.operating_state
+    level = ((deviation @ region.lyapunov) * deviation).sum(-1)  # (B, 2^S)
+    top = torch.nextafter(level.high, torch.full_like(level.high, math.inf)).amax(-1)
+    inside = top <= region.level
+    for index in region.angle_indices:
+        angle = states[:, index] - region.operating_state[index]
+        inside &= (angle.low > -math.pi) & (angle.high < math.pi)
+    return inside
 
 
 def _spectral_upper(matrix: Tensor) -> Tensor:

@@ -10,6 +10,8 @@ actions exactly as the wrapped policy does.
 
 from __future__ import annotations
 
+from typing import Any
+
 from torch import Tensor, nn
 
 from leoc.systems.base import check_repeat
@@ -50,6 +52,12 @@ class HeldPolicy(nn.Module):
     def relevance(self, x: Tensor) -> Tensor:
         """r(x) of the wrapped hybrid."""
         return self.policy.relevance(x)
+
+    def flat_region(self) -> Any:
+        """The wrapped policy's :class:`~leoc.policies.relevance.FlatRegion` (None if it has
+        none): holding the action changes nothing about where it is its linear part."""
+        method = getattr(self.policy, "flat_region", None)
+        return method() if callable(method) else None
 
     def forward(self, x: Tensor, *args: object, **kwargs: object) -> Tensor:
         return self.policy(x, *args, **kwargs)

@@ -75,7 +75,7 @@ from ._checks import (
     shape_str,
 )
 from .linear import LinearController
-from .relevance import paper_relevance
+from .relevance import FlatRegion, ROARelevance, paper_relevance
 from .saturation import apply_saturation, check_saturation_mode
 
 __all__ = [
@@ -352,6 +352,20 @@ class HybridPolicy(nn.Module):
         Shapes: ``x`` (..., D) -> (..., F).
         """
         return self._blend(x, self.relevance(x))
+
+    def flat_region(self, saturated: bool = True) -> FlatRegion | None:
+        """Where this hybrid is its linear part G exactly (saturated as its output is, unless
+        ``saturated`` is off): the ROA relevance's flat top, where r = 1 and the blend is G
+        whatever H is (:class:`~leoc.policies.relevance.FlatRegion`); None for any other
+        relevance."""
+        if not isinstance(self.relevance_module, ROARelevance):
+            return None
+        if not saturated or self.action_limit is None:
+            return self.relevance_module.flat_region(self.linear)
+        return self.relevance_module.flat_region(self._saturated_linear)
+
+    def _saturated_linear(self, x: Tensor) -> Tensor:
+        return apply_saturation(self.linear(x), self.action_limit, self.saturation)
 
     def _blend(self, x: Tensor, r: Tensor) -> Tensor:
         # Written as r G + (1 - r) H rather than H + r (G - H): at x = a, r = 1 exactly and the

@@ -127,7 +127,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -151,6 +151,7 @@ __all__ = [
     "DEFAULT_ROA_WIDTH",
     "FLOOR_MARGIN",
     "RELEVANCE_KINDS",
+    "FlatRegion",
     "FlooredRelevance",
     "LyapunovRelevance",
     "ObservationDeviation",
@@ -453,6 +454,35 @@ def chart_width_limit(P: np.ndarray, angle_indices: Sequence[int], rho_in: float
     return cut / rho_in - 1.0
 
 
+class FlatRegion(NamedTuple):
+    r"""Where a controller is a simpler one, exactly: on the states :math:`x` with
+    :math:`V(x) = z^\top P z \le` ``level`` (:math:`z = x - a`, angle entries wrapped; only where
+    every angle deviation is in :math:`(-\pi, \pi)` is the wrap the identity), the controller
+    equals ``inner`` in real arithmetic. The ROA relevance's flat top, where r = 1 and a hybrid
+    is its linear part whatever its learned part is; a proof
+    (:mod:`leoc.control.proof`) evaluates ``inner`` on the boxes it shows to lie inside.
+
+    Attributes
+    ----------
+    lyapunov : Tensor (S, S)
+        P, symmetric positive definite.
+    operating_state : Tensor (S,)
+        a.
+    level : float
+        The level bound (the relevance's ``rho_in``).
+    angle_indices : tuple of int
+        State entries whose deviation is wrapped.
+    inner : callable
+        Observation -> action, the controller there.
+    """
+
+    lyapunov: Tensor
+    operating_state: Tensor
+    level: float
+    angle_indices: tuple[int, ...]
+    inner: Any
+
+
 class ROARelevance(nn.Module):
     r"""Relevance that is exactly 1 on a certified sublevel set :math:`\{V \le \rho_{in}\}`.
 
@@ -536,6 +566,17 @@ class ROARelevance(nn.Module):
     def lyapunov(self, x: Tensor) -> Tensor:
         r""":math:`V(z(x)) = z^\top P z` of observations (..., D) -> (..., 1)."""
         return quadratic_form(self.deviation(x), self.lyapunov_matrix)
+
+    def flat_region(self, inner: Any) -> FlatRegion:
+        r"""The flat top :math:`\{V \le \rho_{in}\}`, where r = 1 exactly, as a
+        :class:`FlatRegion` whose controller is ``inner`` (the hybrid's linear part)."""
+        return FlatRegion(
+            self.lyapunov_matrix,
+            self.deviation.operating_state,
+            float(self.rho_in),
+            self.deviation.angle_indices,
+            inner,
+        )
 
     def forward(self, x: Tensor) -> Tensor:
         """Relevance (..., 1) of observations ``x`` (..., D)."""

@@ -32,6 +32,7 @@ from stable_baselines3.td3.policies import Actor, TD3Policy
 from torch import Tensor, nn
 
 from leoc.policies import HybridPolicy, LinearController, PrecisionRelevance
+from leoc.policies.relevance import FlatRegion
 from leoc.sb3.common import HybridActorMixin, action_box
 from leoc.sb3.sac import SquashedMean
 
@@ -99,7 +100,19 @@ class PhysicalPolicy(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Physical action ``(B, F)`` of float64 observations ``(B, D)``."""
         unsaturated = self.hybrid.blend(x) if self.hybrid is not None else self.core(x)
-        return torch.minimum(torch.maximum(unsaturated, self.low), self.high)
+        return self._clip(unsaturated)
+
+    def flat_region(self) -> FlatRegion | None:
+        """The hybrid's :meth:`~leoc.policies.HybridPolicy.flat_region`, its controller clipped
+        to the action box as this policy's output is; None for a baseline."""
+        region = None if self.hybrid is None else self.hybrid.flat_region(saturated=False)
+        if region is None:
+            return None
+        linear = region.inner
+        return region._replace(inner=lambda x: self._clip(linear(x)))
+
+    def _clip(self, action: Tensor) -> Tensor:
+        return torch.minimum(torch.maximum(action, self.low), self.high)
 
     def relevance(self, x: Tensor) -> Tensor:
         """Relevance ``r(x)`` (B, 1) of the linear part; zeros for a baseline policy."""
