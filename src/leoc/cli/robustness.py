@@ -353,7 +353,7 @@ def _print_scores(report: dict, results: dict) -> None:
     / from the swing-up start), then the robustness score."""
     first = next(iter(results.values()))
     print(
-        f"Robustness protocol on {report['system']} (seed {report['seed']}; up to "
+        f"Robustness protocol on {report['system']} (protocol seed {report['seed']}; up to "
         f"{report['levels']} levels per category, {report['episodes']} episodes per level from "
         "the operating region and as many from the swing-up start; held: leoc's hold test)"
     )
