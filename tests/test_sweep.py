@@ -261,6 +261,36 @@ def test_the_eta_comes_from_the_expected_costs_from_the_first_report(tmp_path) -
     assert "[0s] 0 done, 1 running, 3 queued; ETA 5s" in first
 
 
+def resuming_runner(spec: str, out_dir: Path) -> dict[str, object]:
+    """``resumed`` only has its last step left (it returns at once); the others run."""
+    return {"spec": spec} if spec == "resumed" else slow_runner(spec, out_dir)
+
+
+def test_a_run_begun_before_does_not_time_the_eta(tmp_path) -> None:
+    """A run whose folder an earlier invocation began finishes in a fraction of its expected
+    1000 s; the ETA of the next run, on the same worker, must not take that for speed: it
+    stays near its expected 1000 s (timed on it, the factor would be about 60/1060 and the ETA
+    about a minute)."""
+    begun = default_run_dir(tmp_path, "resumed")
+    begun.mkdir(parents=True)
+    (begun / "checkpoint.pt").write_bytes(b"an earlier invocation's work")
+    messages: list[str] = []
+    sweep(
+        ["resumed", "a"],
+        resuming_runner,
+        tmp_path,
+        jobs=1,
+        progress_interval_s=0.3,
+        echo=messages.append,
+        expected_seconds=lambda spec: 1000.0,
+    )
+    assert any("1 begun by an earlier invocation" in m for m in messages)
+    lines = [m for m in messages if "1 done, 1 running, 0 queued; ETA " in m]
+    assert lines, messages
+    eta = lines[-1].split("ETA ")[1]
+    assert eta.startswith("16m") or eta.startswith("15m"), eta
+
+
 def test_last_log_line_reads_progress_bars_and_missing_files(tmp_path) -> None:
     log = tmp_path / "train.log"
     assert last_log_line(log) == "starting"

@@ -123,6 +123,7 @@ class _Attempt(NamedTuple):
     key: str
     number: int
     started: float
+    resumed: bool = False  # it starts from an earlier attempt's files (its wall time is partial)
 
 
 # ----------------------------------------------------------------------------------- helpers
@@ -669,10 +670,11 @@ class _Driver:
             outcome = self._write(run_dir, outcome)
         if outcome.kind == "ok":
             self.results[attempt.key] = outcome.result
-            self.durations.append(wall)
             expected = self._expected(attempt.spec)
-            if expected is not None:
-                self.finished.append(Finished(expected, wall, self.kind_of(attempt.spec)))
+            if not attempt.resumed:  # a resumed run's wall time is only part of its work
+                self.durations.append(wall)
+                if expected is not None:
+                    self.finished.append(Finished(expected, wall, self.kind_of(attempt.spec)))
             self.echo(f"[{len(self.results)}/{total}] {attempt.key} done ({wall:.0f} s)")
             if self.on_finished is not None:
                 self.on_finished(attempt.key)
@@ -683,7 +685,7 @@ class _Driver:
                 f"  {attempt.key}: {outcome.message}; retrying "
                 f"(attempt {attempt.number + 1} of {self.max_retries + 1})"
             )
-            return attempt._replace(number=attempt.number + 1)
+            return attempt._replace(number=attempt.number + 1, resumed=True)
         self.failed[attempt.key] = outcome.message
         self.echo(f"  {attempt.key} FAILED: {outcome.message}")
         if self.log_file is not None:
@@ -714,8 +716,9 @@ class _Driver:
             expected = self._expected(attempt.spec)
             fraction = self.progress_of(lines[attempt.key]) if self.progress_of else None
             kind = self.kind_of(attempt.spec)
+            elapsed = now - attempt.started
             running.append(
-                (expected, Running(expected or 0.0, now - attempt.started, fraction, kind))
+                (expected, Running(expected or 0.0, elapsed, fraction, kind, not attempt.resumed))
             )
         if any(cost is None for cost, _ in costs) or any(e is None for e, _ in running):
             return "ETA after the first run"
@@ -910,7 +913,8 @@ class Sweep:
             if _finished(self.run_dir(out, spec) / self.done_file, echo):
                 skipped.append(key)
             else:
-                pending.append(_Attempt(spec, key, 1, 0.0))
+                started = _has_files(self.run_dir(out, spec))
+                pending.append(_Attempt(spec, key, 1, 0.0, started))
         out.mkdir(parents=True, exist_ok=True)
         if not pending:
             echo(f"{len(keys)} runs: {len(skipped)} already done, 0 to run")
@@ -930,6 +934,9 @@ class Sweep:
             self.kind_of,
         )
         counts = f"{len(keys)} runs: {len(skipped)} already done, {len(pending)} to run"
+        resumed = sum(attempt.resumed for attempt in pending)
+        if resumed:
+            counts += f" ({resumed} begun by an earlier invocation: the ETA is not timed on them)"
         _drive(driver, engine, pending, self.progress_interval_s, terminal, counts)
         return SweepResult(
             driver.results, tuple(skipped), driver.failed, driver.retried, time.monotonic() - begun
@@ -958,6 +965,11 @@ class Sweep:
             self.address,
             self.shared_out_dir,
         )
+
+
+def _has_files(run_dir: Path) -> bool:
+    """Whether a run's folder holds anything yet (an earlier invocation began the run)."""
+    return run_dir.is_dir() and any(run_dir.iterdir())
 
 
 def _unique_keys(specs: Sequence[Any]) -> list[str]:
