@@ -452,10 +452,6 @@ def certify_level(
         target and inner level sampled at every scale: :func:`_practical_levels`).
     **proof_options
         Further keywords of :func:`~leoc.control.proof.prove_level` (``max_seconds``, ``batch``).
-        On the CPU pass ``batch=512`` to 2048 for a network controller: the default batch
-        suits linear controllers (cart-pole, one busy core: the LQR ran 16, 42 and 69
-        thousand boxes/s at batches 512, 2048 and 16384; a 400x300 DDPG hybrid 1.9, 1.8 and
-        0.8 thousand), and :func:`~leoc.control.certify_controller` chooses by itself.
     """
     repeat = _check_options(controller, action_repeat, samples, seed, confidence, max_boxes)
     matrix, centre = _check_matrix(P, system.state_dim), _check_centre(system, equilibrium)
