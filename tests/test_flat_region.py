@@ -51,13 +51,20 @@ def _states(frame, centre, radius) -> torch.Tensor:
 
 def test_in_v_own_coordinates_a_box_is_flat_exactly_when_its_farthest_corner_is():
     """V_r = V (the frame's P and centre a): a box is flat iff sum (|c| + h)^2 <= level, up to
-    1e-9 relative (the frame's rounding), on the cart-pole (4 dimensions, one angle)."""
+    1e-9 relative (the frame's rounding), on the cart-pole (4 dimensions, one angle), with a
+    box in every orthant that only its farthest corner keeps from being flat."""
     system = make_system("cartpole")
     P = design_lqr(system).P
     frame = _frame(system, P)
     region = _region(P, system.operating_state, tuple(system.angle_indices))
     centre, radius = _boxes(4, seed=0)
+    # and in each of the 16 orthants a box whose farthest corner alone lies outside the level
+    signs = torch.tensor(np.array(np.meshgrid(*[[-1.0, 1.0]] * 4)).reshape(4, -1).T)
+    near, far = 0.99 * np.sqrt(LEVEL / 4), np.sqrt(1.01 * LEVEL / 4)
+    centre = torch.cat([centre, near * signs])
+    radius = torch.cat([radius, torch.full_like(signs, far - near)])
     flat = _flat_rows(region, frame, centre, radius, _states(frame, centre, radius))
+    assert not torch.any(flat[-16:])
     farthest = ((centre.abs() + radius) ** 2).sum(-1)
     assert torch.all(flat[farthest <= LEVEL * (1.0 - 1e-9)])
     assert not torch.any(flat[farthest >= LEVEL * (1.0 + 1e-9)])

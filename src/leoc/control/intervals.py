@@ -90,7 +90,9 @@ __all__ = [
     "SMOOTHERSTEP",
     "Jet",
     "UnsupportedOperation",
+    "box_corners",
     "box_jet",
+    "corner_quadratic_high",
     "exact_rows",
     "pinned_rows",
     "point_jet",
@@ -1002,16 +1004,28 @@ def quadratic_form(z: Any, matrix: Tensor) -> Any:
 
 def _corner_high(z: Jet, matrix: Tensor) -> Tensor:
     r"""An upper bound (..., 1) of :math:`z^\top P z` over the box of ``z``'s value enclosure
-    (P positive semidefinite): the largest interval evaluation at the :math:`2^S` corners of
-    that box, its ends rounded outward (floats, so each corner is a point enclosure). A NaN
-    (an infinite end times a zero) counts as unbounded."""
-    ends = torch.stack(_outer_ends(z), dim=-2)  # (..., 2, S): low, high
-    size = ends.shape[-1]
-    pick = (torch.arange(2**size).unsqueeze(-1) >> torch.arange(size)) & 1  # (2^S, S)
-    index = pick.to(ends.device).expand(*ends.shape[:-2], 2**size, size)
-    corners = point_jet(torch.gather(ends, -2, index))  # (..., 2^S, S)
-    values = ((corners @ matrix) * corners).sum(-1)  # (..., 2^S)
-    top = _outer_ends(values)[1].amax(-1, keepdim=True)
+    (P positive semidefinite): :func:`corner_quadratic_high` at the corners of that box, its
+    ends rounded outward."""
+    return corner_quadratic_high(point_jet(box_corners(*_outer_ends(z))), matrix).unsqueeze(-1)
+
+
+def box_corners(low: Tensor, high: Tensor) -> Tensor:
+    """The :math:`2^S` corners (..., 2^S, S) of the boxes ``[low, high]`` (..., S): corner k
+    takes ``high`` on the coordinates i where bit i of k is set, ``low`` elsewhere."""
+    size = low.shape[-1]
+    bits = torch.arange(size, device=low.device)
+    pick = ((torch.arange(2**size, device=low.device)[:, None] >> bits) & 1).bool()
+    return torch.where(pick, high.unsqueeze(-2), low.unsqueeze(-2))
+
+
+def corner_quadratic_high(corners: Jet, matrix: Tensor) -> Tensor:
+    r"""An upper bound (...,) of :math:`c^\top P c` over the corners (..., K, S), P (S, S)
+    positive semidefinite: the largest upper end of the interval evaluations, rounded outward.
+    When the corners are those of a box (:func:`box_corners`) and c is affine in the box, the
+    convex quadratic's maximum over the box is at a corner, so this bounds it over the whole
+    box. A NaN (an infinite end times a zero) counts as unbounded."""
+    values = ((corners @ matrix) * corners).sum(-1)  # (..., K)
+    top = _outer_ends(values)[1].amax(-1)
     return torch.nan_to_num(top, nan=math.inf)
 
 

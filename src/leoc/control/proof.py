@@ -115,7 +115,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from leoc.control.intervals import Jet, UnsupportedOperation, box_jet, point_jet, with_rows
+from leoc.control.intervals import (
+    Jet,
+    UnsupportedOperation,
+    box_corners,
+    box_jet,
+    corner_quadratic_high,
+    point_jet,
+    with_rows,
+)
 from leoc.systems.base import DTYPE, System
 
 __all__ = ["LevelProof", "check_device", "prove_level", "prove_practical"]
@@ -377,20 +385,10 @@ def _flat_rows(region: Any, frame: _Frame, centre: Tensor, radius: Tensor, state
     everywhere: V is a convex quadratic of w (x is affine in w), so its largest value over a
     box is at one of the :math:`2^S` corners (ends rounded outward, values in interval
     arithmetic); and every angle deviation of ``states`` stays in :math:`(-\pi, \pi)`."""
-    size = centre.shape[-1]
     low = torch.nextafter(centre - radius, torch.full_like(centre, -math.inf))
     high = torch.nextafter(centre + radius, torch.full_like(centre, math.inf))
-    pick = (
-        (
-            torch.arange(2**size, device=centre.device)[:, None]
-            >> torch.arange(size, device=centre.device)
-        )
-        & 1
-    ).bool()  # (2^S, S)
-    corners = torch.where(pick, high[:, None, :], low[:, None, :])  # (B, 2^S, S)
-    deviation = point_jet(corners) @ frame.inverse.T + frame.operating - region.operating_state
-    level = ((deviation @ region.lyapunov) * deviation).sum(-1)  # (B, 2^S)
-    top = torch.nextafter(level.high, torch.full_like(level.high, math.inf)).amax(-1)
+    corners = point_jet(box_corners(low, high)) @ frame.inverse.T  # (B, 2^S, S)
+    top = corner_quadratic_high(corners + frame.operating - region.operating_state, region.lyapunov)
     inside = top <= region.level
     for index in region.angle_indices:
         angle = states[:, index] - region.operating_state[index]
