@@ -279,12 +279,26 @@ def test_the_end_of_run_summary_is_one_line_per_check_and_sums_the_invocations(t
     ]
 
 
+def test_a_flagged_response_smaller_than_one_percent_of_the_peak_is_not_called_zero():
+    """The cart-pole PILCO hybrid's step overshoot, 1.27 against its LQR's 1.29 (1.6% of the
+    overshoot, so flagged), is 0.6% of the peak deviation 3.22: the summary said 'off by 0%'."""
+    from leoc.experiments.report.responses import _size_text
+
+    assert [_size_text(s) for s in (0.02 / 3.22, 0.0004, 0.03, 0.5, 32.4)] == [
+        "0.62%",
+        "0.04%",
+        "3%",
+        "50%",
+        "32x",
+    ]
+
+
 # ------------------------------------------------------------------------------ the summary
 def _sizes_in_order(line: str) -> list[float]:
     """The response sizes a summary line names, in its order (``off by 50%``)."""
     import re
 
-    return [float(found) for found in re.findall(r"off by (\d+)%", line)]
+    return [float(found) for found in re.findall(r"off by ([\d.]+)%", line)]
 
 
 def test_the_summary_says_what_worked_and_what_failed_biggest_first():

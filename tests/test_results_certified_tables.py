@@ -20,6 +20,7 @@ STUDIES = {
     "certified-cartpole-ddpg": ("cartpole", "ddpg"),
     "certified-cartpole-sac-study": ("cartpole", "sac"),
     "certified-pendulum-pilco-roa": ("pendulum", "pilco"),
+    "certified-cartpole-pilco": ("cartpole", "pilco"),
 }
 """Study folder -> its system and learner; each README has one row per learned controller."""
 KINDS = {"baseline": "_baseline", "hybrid": "_hybrid", "ROA hybrid": "_hybrid_roa"}

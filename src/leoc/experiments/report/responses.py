@@ -101,8 +101,12 @@ def _differs(value: float, reference: float, peak: float) -> bool:
 
 
 def _size_text(size: float) -> str:
-    """A size as a percentage (``12%``), or as a multiple from ``MULTIPLE_FROM`` on (``32x``)."""
-    return f"{size:.0f}x" if size >= MULTIPLE_FROM else f"{size:.0%}"
+    """A size as a percentage (``12%``; two digits below 1%, ``0.62%``: a metric flagged
+    against its own value can be that small on the response's scale, and ``0%`` read as no
+    difference), or as a multiple from ``MULTIPLE_FROM`` on (``32x``)."""
+    if size >= MULTIPLE_FROM:
+        return f"{size:.0f}x"
+    return f"{100 * size:.2g}%" if size < 0.01 else f"{size:.0%}"
 
 
 def _response_size(metric: str, value: float, reference: dict[str, Any]) -> float:
