@@ -354,11 +354,11 @@ def test_one_cross_study_table_at_a_time(capsys) -> None:
 
 def test_the_results_page_s_reading_of_the_verdicts_holds(monkeypatch) -> None:
     """The sentences under the results page's verdict table: no DDPG, SAC or TD3 hybrid is
-    below its LQR in any cell but pushes on the cart-pole (the DDPG hybrids and the SAC ROA
-    hybrid, not the SAC default-relevance hybrid), every PILCO hybrid
-    is (the pendulum's in four categories and the score, the mountain car's under pushes and in
-    the score), and the overall score against the baseline is above only for the pendulum SAC
-    ROA hybrid."""
+    below its LQR in any cell but pushes on the cart-pole (the DDPG and TD3 hybrids and the SAC
+    ROA hybrid, not the SAC default-relevance hybrid; the TD3 default-relevance hybrid in the
+    score too), every PILCO hybrid is (the pendulum's in four categories and the score, the
+    mountain car's under pushes and in the score, the cart-pole's under pushes), and the
+    overall score against the baseline is above only for the pendulum SAC ROA hybrid."""
     monkeypatch.chdir(ROOT)
     lines = _between(ROOT / "docs/results.md", VERDICTS_BEGIN, VERDICTS_END)
     header = [cell.strip() for cell in lines[0].strip("|").split("|")]
@@ -377,11 +377,15 @@ def test_the_results_page_s_reading_of_the_verdicts_holds(monkeypatch) -> None:
         ("cartpole", "DDPG hybrid"),
         ("cartpole", "DDPG hybrid (ROA relevance)"),
         ("cartpole", "SAC hybrid (ROA relevance)"),
+        ("cartpole", "TD3 hybrid"),
+        ("cartpole", "TD3 hybrid (ROA relevance)"),
     }
-    assert set(others) <= cart_pole and all(names == ["push"] for names in others.values())
-    assert ("cartpole", "SAC hybrid") not in others
+    assert set(others) == cart_pole
+    assert others.pop(("cartpole", "TD3 hybrid")) == ["push", "robustness"]
+    assert all(names == ["push"] for names in others.values())
     assert all(pilco.values())
-    assert len(pilco[("pendulum", "PILCO hybrid")]) == 5
     for hybrid in ("PILCO hybrid", "PILCO hybrid (ROA relevance)"):
+        assert len(pilco[("pendulum", hybrid)]) == 5
         assert pilco[("mountaincar", hybrid)] == ["push", "robustness"]
+        assert pilco[("cartpole", hybrid)] == ["push"]
     assert above_overall == [("results/certified-pendulum-sac", "SAC hybrid (ROA relevance)")]

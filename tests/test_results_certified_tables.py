@@ -21,6 +21,7 @@ STUDIES = {
     "certified-cartpole-sac-study": ("cartpole", "sac"),
     "certified-pendulum-pilco-roa": ("pendulum", "pilco"),
     "certified-cartpole-pilco": ("cartpole", "pilco"),
+    "certified-cartpole-td3": ("cartpole", "td3"),
 }
 """Study folder -> its system and learner; each README has one row per learned controller."""
 KINDS = {"baseline": "_baseline", "hybrid": "_hybrid", "ROA hybrid": "_hybrid_roa"}
