@@ -5,6 +5,7 @@ robustness score are the medians [least, largest] of the five seeds' ``evaluatio
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from pathlib import Path
 
@@ -233,3 +234,42 @@ def test_the_cart_pole_ddpg_hybrids_are_below_their_lqr_under_pushes_only() -> N
                 assert change < -0.03, suffix
             else:
                 assert change > -0.005, (suffix, category)
+
+
+def _relevance_page_rows() -> list[list[str]]:
+    """The rows of the relevance page's table of cells completed by the certified studies."""
+    text = (RESULTS.parent / "docs" / "user_guide" / "relevance.md").read_text()
+    block = text.split("**Every cell, from the certified studies.**", 1)[1].splitlines()
+    start = next(n for n, line in enumerate(block) if line.startswith("|"))
+    end = next(n for n in range(start, len(block)) if not block[n].startswith("|"))
+    return [
+        [cell.strip() for cell in line.strip("|").split("|")] for line in block[start + 2 : end]
+    ]
+
+
+def test_the_relevance_page_s_certified_cells_are_the_records() -> None:
+    """Issue 40's (a) and (b) on the relevance page, for the cells the certified studies
+    complete: learns = seeds holding every swing-up episode, keeps = seeds whose impulse stays
+    within 2% of the LQR's peak with r < 1 along it (`lqr_agreement`), and the distance's median
+    and range, from each run's `evaluation.json`."""
+    rows = _relevance_page_rows()
+    assert len(rows) == 4
+    for system, hybrid, learns, _first, keeps, distance, study in rows:
+        learner = hybrid.split(",")[0].split(" ")[0].lower()
+        folder = RESULTS / study.strip("`") / "runs" / system.replace("-", "").replace(" ", "")
+        pattern = f"{learner}_hybrid/seed*/evaluation.json"
+        runs = [json.loads(path.read_text()) for path in sorted(folder.glob(pattern))]
+        assert len(runs) >= 5, (system, hybrid)
+        impulse = [run["lqr_agreement"]["impulse"] for run in runs]
+        held = sum(run["swing_up"]["held_fraction"] >= 1.0 for run in runs)
+        kept = sum(i["keeps_lqr"] and not i["by_construction"] for i in impulse)
+        assert learns == f"{held}/{len(runs)}" and keeps == f"{kept}/{len(runs)}", (system, hybrid)
+        values = sorted(i["distance_pct"] for i in impulse)
+        median = float(distance.split(" %")[0])
+        low, high = (float(v) for v in distance.split("[")[1].rstrip("]").split(","))
+        assert abs(statistics.median(values) - median) <= 0.5 * 10 ** math.floor(
+            math.log10(median)
+        ), (system, hybrid)
+        assert math.isclose(values[0], low, rel_tol=0.5) and math.isclose(
+            values[-1], high, rel_tol=0.5
+        ), (system, hybrid)
