@@ -270,8 +270,10 @@ ABLATION_ALL_SETTINGS = (
 ABLATION_TEST_EPISODES = 5
 """Held-out swing-up episodes of the ablation's success test, per evaluation."""
 
-GYM_STUDY_ENVS = ("InvertedPendulum-v5", "InvertedDoublePendulum-v5")
-"""The gymnasium envs of ``leoc gym-study`` by default (``leoc.experiments.gym_study``)."""
+GYM_STUDY_ENVS = ("InvertedPendulum-v5", "InvertedDoublePendulum-v5", "Pendulum-v1")
+"""The gymnasium envs of ``leoc gym-study`` by default (``leoc.experiments.gym_study``); the
+MuJoCo pair at every start noise, ``Pendulum-v1`` against leoc's own pendulum
+(``leoc.experiments.gym_pendulum``)."""
 GYM_STUDY_DEFAULT_NOISE = "default"
 """``leoc gym-study``'s word for the env's own ``reset_noise_scale`` (no keyword passed)."""
 GYM_STUDY_NOISES = (GYM_STUDY_DEFAULT_NOISE, "0.5", "0.8")

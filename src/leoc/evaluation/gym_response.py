@@ -38,7 +38,7 @@ keep its LQR.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -61,6 +61,7 @@ __all__ = [
     "GymRun",
     "gym_comparison",
     "gym_response",
+    "held_episodes",
     "load_gym_run",
     "lqr_controller",
     "main_coordinate",
@@ -300,3 +301,30 @@ def load_gym_run(run_dir: str | Path) -> GymRun:
     rho = (design.get("relevance_data") or {}).get("rho")
     sampled = None if rho is None else float(rho)
     return GymRun(plant, controller, dict(settings["env_kwargs"]), seed, sampled)
+
+
+def held_episodes(
+    env_id: str,
+    env_kwargs: Mapping[str, Any],
+    controller: Callable[[np.ndarray], Any],
+    seeds: Sequence[int],
+) -> dict[str, list]:
+    """One deterministic episode of ``controller`` (observation -> action) per seed, from
+    ``reset(seed=seed)`` of ``gymnasium.make(env_id, **env_kwargs)`` to its time limit or
+    termination: the ``returns``, ``held`` (truncated, not terminated) and ``steps`` of each."""
+    env = make_gym_env(env_id, env_kwargs)
+    record: dict[str, list] = {"returns": [], "held": [], "steps": []}
+    for seed in seeds:
+        observation, _ = env.reset(seed=int(seed))
+        total, steps = 0.0, 0
+        while True:
+            action = np.asarray(controller(observation), dtype=float)
+            observation, reward, terminated, truncated, _ = env.step(action)
+            total, steps = total + float(reward), steps + 1
+            if terminated or truncated:
+                break
+        record["returns"].append(total)
+        record["held"].append(bool(truncated and not terminated))
+        record["steps"].append(steps)
+    env.close()
+    return record

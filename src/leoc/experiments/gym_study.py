@@ -1,4 +1,9 @@
-r"""A study of LEOC on MuJoCo's inverted pendulums (gymnasium), at growing start noise.
+r"""A study of LEOC on MuJoCo's inverted pendulums (gymnasium), at growing start noise, and on
+gymnasium's ``Pendulum-v1`` against leoc's own pendulum.
+
+``Pendulum-v1`` among the study's envs (the default) runs :mod:`leoc.experiments.gym_pendulum`
+instead of the grid below: SAC and the SAC hybrid trained on gymnasium's env through the adapter
+and on leoc's pendulum (the same dynamics), and whether they agree within seed noise.
 
 For each env (default ``InvertedPendulum-v5`` and ``InvertedDoublePendulum-v5``), each start
 noise (the env's own ``reset_noise_scale``, 0.5 and 0.8), each controller of
@@ -53,7 +58,19 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from leoc.evaluation.gym_response import gym_comparison, load_gym_run, lqr_controller
+from leoc.evaluation.gym_response import (
+    gym_comparison,
+    held_episodes,
+    load_gym_run,
+    lqr_controller,
+)
+from leoc.experiments.gym_pendulum import (
+    PENDULUM_ARMS,
+    PENDULUM_CONTROLLERS,
+    PENDULUM_ENV,
+    PENDULUM_PROFILES,
+    pendulum_agreement,
+)
 from leoc.gym_adapter import state_access
 from leoc.io import read_json_object, write_json_atomic
 from leoc.names import (
@@ -67,6 +84,7 @@ from leoc.sb3.gym import GymPlant, gym_plant, make_gym_env, train_gym
 
 __all__ = [
     "EVAL_SEED_OFFSET",
+    "PENDULUM_KEY",
     "RECORD_FILE",
     "RETURN_FRACTION",
     "RUNS_FOLDER",
@@ -87,6 +105,8 @@ __all__ = [
 
 #: The study's numbers, in the study folder.
 STUDY_FILE = "study.json"
+#: ``study.json``'s entry of the ``Pendulum-v1`` part (:mod:`leoc.experiments.gym_pendulum`).
+PENDULUM_KEY = "pendulum_v1"
 #: The folder of the runs, in the study folder (``runs/ENV/NOISE/CONTROLLER/seedK``).
 RUNS_FOLDER = "runs"
 #: A run's evaluation record, in its run folder.
@@ -240,33 +260,6 @@ def recoverable_seeds(
             f"{len(kept) + len(skipped)} seeds, expected {episodes}"
         )
     return kept, skipped
-
-
-def held_episodes(
-    env_id: str,
-    env_kwargs: Mapping[str, Any],
-    controller: Callable[[np.ndarray], Any],
-    seeds: Sequence[int],
-) -> dict[str, list]:
-    """One deterministic episode of ``controller`` (observation -> action) per seed, from
-    ``reset(seed=seed)`` of ``gymnasium.make(env_id, **env_kwargs)`` to its time limit or
-    termination: the ``returns``, ``held`` (truncated, not terminated) and ``steps`` of each."""
-    env = make_gym_env(env_id, env_kwargs)
-    record: dict[str, list] = {"returns": [], "held": [], "steps": []}
-    for seed in seeds:
-        observation, _ = env.reset(seed=int(seed))
-        total, steps = 0.0, 0
-        while True:
-            action = np.asarray(controller(observation), dtype=float)
-            observation, reward, terminated, truncated, _ = env.step(action)
-            total, steps = total + float(reward), steps + 1
-            if terminated or truncated:
-                break
-        record["returns"].append(total)
-        record["held"].append(bool(truncated and not terminated))
-        record["steps"].append(steps)
-    env.close()
-    return record
 
 
 def maximum_return(plant: GymPlant, env_kwargs: Mapping[str, Any]) -> float:
@@ -446,6 +439,8 @@ def _study_plan(out: Path, profile: str, seed: int, counts: dict[str, int | None
         "out": Path(out),
         "profile": chosen._replace(episodes=episodes),
         "seeds": [int(seed) + k for k in range(count)],
+        "evaluation_seeds": evaluation_seeds(seed, episodes),
+        "pendulum_profile": PENDULUM_PROFILES[profile],
         "steps": budget,
         "done": 0,
     }
@@ -455,6 +450,31 @@ def _check_noises(noises: Sequence[str]) -> None:
     """Refuse a bad start noise before any run (:func:`noise_kwargs`)."""
     for noise in noises:
         noise_kwargs(noise)
+
+
+def _study_total(plan: dict[str, Any], envs: Sequence[str], noises: Sequence[str]) -> int:
+    """The number of runs of the study (the progress lines' denominator)."""
+    grid = [env_id for env_id in envs if env_id != PENDULUM_ENV]
+    total = len(grid) * len(noises) * len(GYM_STUDY_CONTROLLERS) * len(plan["seeds"])
+    if PENDULUM_ENV in envs:
+        total += len(PENDULUM_ARMS) * len(PENDULUM_CONTROLLERS) * len(plan["seeds"])
+    return total
+
+
+def _study_head(plan: dict[str, Any], command: str) -> dict[str, Any]:
+    """``study.json``'s settings, before any env's entry."""
+    chosen = plan["profile"]
+    return {
+        "command": command,
+        "profile": chosen.name,
+        "total_steps": plan["steps"],
+        "seeds": plan["seeds"],
+        "episodes": chosen.episodes,
+        "settings": json.loads(json.dumps(chosen.settings)),
+        "zoo_steps": ZOO_STEPS,
+        "zoo_source": ZOO_SOURCE,
+        "envs": {},
+    }
 
 
 def run_gym_study(
@@ -479,10 +499,13 @@ def run_gym_study(
     profile : {"smoke", "full"}
         :data:`STUDY_PROFILES`; ``seeds``, ``steps`` and ``episodes`` override its number of
         seeds, its SAC budget (environment steps per run) and its evaluation episodes per run.
+        ``Pendulum-v1`` trains at the pendulum's own budget
+        (:data:`~leoc.experiments.gym_pendulum.PENDULUM_PROFILES`), not ``steps``.
     seed : int
         The seed base: training seeds ``seed, seed + 1, ...``; every other seed follows.
     envs, noises : sequences of str
-        Gymnasium ids; start noises (``"default"`` or a ``reset_noise_scale``).
+        Gymnasium ids; start noises (``"default"`` or a ``reset_noise_scale``). ``Pendulum-v1``
+        among the ids runs :mod:`leoc.experiments.gym_pendulum` (no start noises) instead.
     command : str
         The command line that made the study, written in the report.
     echo : callable
@@ -496,20 +519,12 @@ def run_gym_study(
     _check_noises(noises)
     counts = {"seeds": seeds, "steps": steps, "episodes": episodes}
     plan = _study_plan(Path(out), profile, seed, counts)
-    plan["total"] = len(envs) * len(noises) * len(GYM_STUDY_CONTROLLERS) * len(plan["seeds"])
-    chosen = plan["profile"]
-    study: dict[str, Any] = {
-        "command": command,
-        "profile": chosen.name,
-        "total_steps": plan["steps"],
-        "seeds": plan["seeds"],
-        "episodes": chosen.episodes,
-        "settings": json.loads(json.dumps(chosen.settings)),
-        "zoo_steps": ZOO_STEPS,
-        "zoo_source": ZOO_SOURCE,
-        "envs": {},
-    }
+    plan["total"] = _study_total(plan, envs, noises)
+    study = _study_head(plan, command)
     for env_id in envs:
+        if env_id == PENDULUM_ENV:
+            study[PENDULUM_KEY] = pendulum_agreement(plan, echo)
+            continue
         study["envs"][env_id] = {noise: _noise_entry(env_id, noise, plan, echo) for noise in noises}
     write_json_atomic(plan["out"] / STUDY_FILE, study, indent=1)
     from leoc.experiments.gym_study_report import write_study_report

@@ -15,6 +15,8 @@ from leoc.experiments.markdown import markdown_table
 from leoc.io import save_figure_atomic, write_text_atomic
 
 __all__ = [
+    "AGREEMENT_WORDS",
+    "ARM_LABELS",
     "CONTROLLER_LABELS",
     "README_FILE",
     "figure_name",
@@ -105,7 +107,7 @@ def _header(study: Mapping[str, Any]) -> list[str]:
     steps, zoo = study["total_steps"], study["zoo_steps"]
     seeds = study["seeds"]
     return [
-        "# LEOC on MuJoCo's inverted pendulums (gymnasium)",
+        "# LEOC on gymnasium's pendulums: MuJoCo's inverted pendulums and Pendulum-v1",
         "",
         "Made by:",
         "",
@@ -119,7 +121,9 @@ def _header(study: Mapping[str, Any]) -> list[str]:
         "",
         f"**Budget**: {steps} environment steps per SAC run, {steps / zoo:.3g} of the zoo's "
         f"{zoo} (`n_timesteps`): far smaller than the budget those settings were tuned for, so "
-        "the learned controllers here are not the zoo's.",
+        "the learned controllers here are not the zoo's. The zoo publishes no SAC figure for "
+        "either MuJoCo inverted pendulum (its `benchmark.md` has no such row), so none stands "
+        "beside these tables.",
         "",
         "Held share: the share of the seeded evaluation episodes (from "
         "`reset(seed=b + 20000 + j)`, b the study's seed base, for the first values of j whose "
@@ -132,6 +136,98 @@ def _header(study: Mapping[str, Any]) -> list[str]:
         "and skipped, when the env terminates at its first step under each of the operating "
         "action and the two extreme actions (the pole starts past the termination angle): "
         "such an episode ends at step 1 whatever the controller does.",
+        "",
+    ]
+
+
+#: How the report words a :func:`~leoc.experiments.stats.improvement_verdict` of the
+#: ``gymnasium`` arm against the ``leoc`` arm.
+AGREEMENT_WORDS = {
+    "equal": "agree (equal scores)",
+    "unresolved": "agree within seed noise",
+    "above": "differ: gymnasium higher",
+    "below": "differ: gymnasium lower",
+}
+#: How the report names the two paths of the ``Pendulum-v1`` part.
+ARM_LABELS = {"leoc": "leoc's pendulum (train_ddpg)", "gymnasium": "Pendulum-v1 (train_gym)"}
+
+
+def _agreement_cell(verdict: Mapping[str, Any]) -> str:
+    """P(a gymnasium seed above a leoc seed) [95% interval]: the verdict in words."""
+    word, _, small = verdict["verdict"].partition(" (")
+    text = AGREEMENT_WORDS.get(word, word) + (f" ({small}" if small else "")
+    if verdict["ci_low"] is None:
+        return f"{verdict['probability']:.2f} (no interval): {text}"
+    return (
+        f"{verdict['probability']:.2f} [{verdict['ci_low']:.2f}, {verdict['ci_high']:.2f}]: {text}"
+    )
+
+
+def _pendulum_tables(entry: Mapping[str, Any]) -> list[str]:
+    """The ``Pendulum-v1`` part's two tables: each path's scores, then their agreement."""
+    rows, verdicts = [], []
+    for controller, data in entry["controllers"].items():
+        label = CONTROLLER_LABELS.get(controller, controller)
+        for arm, runs in data["runs"].items():
+            returns = [run["mean_return"] for run in runs]
+            shares = [run["held_share"] for run in runs]
+            rows.append(
+                [
+                    label,
+                    ARM_LABELS.get(arm, arm),
+                    _mean_std(returns),
+                    ", ".join(f"{value:.1f}" for value in returns),
+                    _mean_std(shares),
+                    ", ".join(f"{value:.2f}" for value in shares),
+                ]
+            )
+        agreement = data["agreement"]
+        verdicts.append(
+            [label, *(_agreement_cell(agreement[task]) for task in ("mean_return", "held_share"))]
+        )
+    headers = (
+        "controller",
+        "trained on",
+        "return on Pendulum-v1 (mean ± std)",
+        "per seed",
+        "swing-up held share (mean ± std)",
+        "per seed",
+    )
+    agreement_headers = (
+        "controller",
+        "return: P(gymnasium seed > leoc seed) [95% CI]",
+        "swing-up held share: P(gymnasium seed > leoc seed) [95% CI]",
+    )
+    return [*markdown_table(headers, rows), "", *markdown_table(agreement_headers, verdicts)]
+
+
+def _pendulum_section(entry: Mapping[str, Any]) -> list[str]:
+    """The report's ``Pendulum-v1`` part (:mod:`leoc.experiments.gym_pendulum`)."""
+    zoo = entry["zoo"]
+    return [
+        "## Pendulum-v1 through the adapter against leoc's own pendulum",
+        "",
+        "The same dynamics and reward, trained by two paths with the same learner and settings "
+        f"(leoc's pendulum SAC, {entry['total_steps']} steps, final policy: "
+        f"`{json.dumps(entry['settings'], sort_keys=True)}`): leoc's pendulum system "
+        "(`train_ddpg`, its swing-up starts) and gymnasium's `Pendulum-v1` through the adapter "
+        "(`train_gym`, the env's own starts anywhere on the circle; the LQR on central "
+        "differences of the env's step). The hybrid is the paper's relevance without the floor. "
+        f"Every final controller is evaluated on the same {len(entry['evaluation_seeds'])} "
+        "episodes of each task: the return of `Pendulum-v1`'s own episodes "
+        "(`reset(seed=b + 20000 + j)`), and the share of leoc's swing-up starts (drawn from "
+        "the same seeds) swung up and held within 5 degrees for the last 50 steps.",
+        "",
+        *_pendulum_tables(entry),
+        "",
+        "Agreement: P(a seed trained on `Pendulum-v1` scores above a seed trained on leoc's "
+        "pendulum) with its 95% stratified-bootstrap interval; an interval holding 0.5 is "
+        "agreement within seed noise. The training starts differ between the paths (each env "
+        "defines its own), so a difference is not the dynamics alone.",
+        "",
+        f"rl-baselines3-zoo's published SAC on `Pendulum-v1`: {zoo['mean_reward']:.1f} ± "
+        f"{zoo['std_reward']:.1f} (one agent trained {zoo['n_timesteps']} steps with the zoo's "
+        f"settings, {zoo['eval_episodes']} episodes; {zoo['source']}).",
         "",
     ]
 
@@ -152,6 +248,9 @@ def study_markdown(study: Mapping[str, Any]) -> str:
                 *_table(entry),
                 "",
             ]
+    pendulum = study.get("pendulum_v1")
+    if pendulum is not None:
+        lines += _pendulum_section(pendulum)
     seconds = sum(
         run["wall_seconds"]
         for noises in study["envs"].values()
@@ -159,6 +258,13 @@ def study_markdown(study: Mapping[str, Any]) -> str:
         for data in entry["controllers"].values()
         for run in data["runs"]
     )
+    if pendulum is not None:
+        seconds += sum(
+            run["wall_seconds"]
+            for data in pendulum["controllers"].values()
+            for runs in data["runs"].values()
+            for run in runs
+        )
     lines += [
         f"Wall time of the runs (training and evaluation, this machine): {seconds:.0f} s.",
         "",

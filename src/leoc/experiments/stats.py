@@ -390,6 +390,45 @@ def _resampled_improvements(
     return np.concatenate(blocks)
 
 
+#: Score differences at most this large are nil (:func:`interval_verdict`): the scores compared
+#: there are shares of held episodes or mean returns, so anything smaller is a sum's rounding,
+#: not a difference.
+NIL_DIFFERENCE = 1e-9
+
+
+def interval_verdict(differences: Any, low: float | None, high: float | None, tie: float) -> str:
+    """``equal`` where every score difference is nil (within :data:`NIL_DIFFERENCE`), else
+    ``above`` or ``below`` where the interval ``[low, high]`` excludes ``tie``, ``unresolved``
+    where it holds it; without an interval (fewer than :data:`MIN_RUNS_FOR_INTERVAL` seeds), the
+    sign of the mean difference, marked ``(n < 3)``."""
+    differences = np.asarray(differences, dtype=float)
+    if np.all(np.abs(differences) <= NIL_DIFFERENCE):
+        return "equal"
+    if low is None or high is None:
+        mean = float(differences.mean())
+        if abs(mean) <= NIL_DIFFERENCE:
+            return f"unresolved (n < {MIN_RUNS_FOR_INTERVAL})"
+        return f"{'above' if mean > 0 else 'below'} (n < {MIN_RUNS_FOR_INTERVAL})"
+    if low > tie:
+        return "above"
+    return "below" if high < tie else "unresolved"
+
+
+def improvement_verdict(x: Any, y: Any) -> dict[str, Any]:
+    """P(a run of X scores above a run of Y) with its 95% interval
+    (:func:`probability_of_improvement`; X and Y unpaired, one task) and the verdict of
+    :func:`interval_verdict` against 0.5: ``above`` or ``below`` where the interval excludes
+    0.5, ``unresolved`` where the seeds cannot tell them apart, ``equal`` for identical scores."""
+    estimate = probability_of_improvement(x, y)
+    differences = np.subtract.outer(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    return {
+        "probability": estimate.probability,
+        "ci_low": estimate.ci_low,
+        "ci_high": estimate.ci_high,
+        "verdict": interval_verdict(differences.ravel(), estimate.ci_low, estimate.ci_high, 0.5),
+    }
+
+
 def curve_bands(
     curves: Any,
     *,

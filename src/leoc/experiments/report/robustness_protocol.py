@@ -23,7 +23,8 @@ from leoc.experiments.markdown import markdown_table
 from leoc.experiments.report.base import FMT, Report, Rows, Section, Study, label, ordered
 from leoc.experiments.stats import (
     MIN_RUNS_FOR_INTERVAL,
-    probability_of_improvement,
+    improvement_verdict,
+    interval_verdict,
     stratified_bootstrap_ci,
 )
 from leoc.names import CONTROLLER_KINDS, LINEAR, parse_controller
@@ -225,44 +226,8 @@ def _versus_lqr(hybrid: list[float], lqr: float) -> dict[str, Any]:
         "difference": float(differences.mean()),
         "ci_low": low,
         "ci_high": high,
-        "verdict": _verdict(differences, low, high, 0.0),
+        "verdict": interval_verdict(differences, low, high, 0.0),
     }
-
-
-def _versus_baseline(hybrid: list[float], baseline: list[float]) -> dict[str, Any]:
-    """P(a hybrid seed scores above a baseline seed) with its 95% interval
-    (:func:`leoc.experiments.stats.probability_of_improvement`), and the verdict: ``above`` or
-    ``below`` where the interval excludes 0.5, else ``unresolved`` (``equal`` for identical
-    scores)."""
-    estimate = probability_of_improvement(hybrid, baseline)
-    differences = np.subtract.outer(np.asarray(hybrid), np.asarray(baseline)).ravel()
-    return {
-        "probability": estimate.probability,
-        "ci_low": estimate.ci_low,
-        "ci_high": estimate.ci_high,
-        "verdict": _verdict(differences, estimate.ci_low, estimate.ci_high, 0.5),
-    }
-
-
-#: Score differences at most this large are nil: scores are shares of held episodes (multiples
-#: of 1 / episodes), so anything smaller is a sum's rounding, not a difference.
-_NIL = 1e-9
-
-
-def _verdict(differences: np.ndarray, low: float | None, high: float | None, tie: float) -> str:
-    """``equal`` where every score difference is nil (within :data:`_NIL`), else ``above`` or
-    ``below`` where the interval ``[low, high]`` excludes ``tie``; without an interval (fewer
-    than 3 seeds), the sign of the mean difference, marked ``(n < 3)``."""
-    if np.all(np.abs(differences) <= _NIL):
-        return "equal"
-    if low is None or high is None:
-        mean = float(differences.mean())
-        if abs(mean) <= _NIL:
-            return "unresolved (n < 3)"
-        return f"{'above' if mean > 0 else 'below'} (n < 3)"
-    if low > tie:
-        return "above"
-    return "below" if high < tie else "unresolved"
 
 
 def _matched_levels(
@@ -372,7 +337,7 @@ def protocol_verdicts(evaluations: Evaluations) -> Rows:
                     row["versus_lqr"] = _versus_lqr(near, value)
                 if baseline is not None:
                     theirs = [_score(r, name) for r in by_controller[baseline]]
-                    row["versus_baseline"] = _versus_baseline(mine, theirs)
+                    row["versus_baseline"] = improvement_verdict(mine, theirs)
                 rows.append(row)
     return rows
 
