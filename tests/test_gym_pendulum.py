@@ -15,6 +15,7 @@ import torch
 from leoc.experiments import gym_pendulum
 from leoc.experiments.gym_study import PENDULUM_KEY, run_gym_study
 from leoc.experiments.gym_study_report import write_study_report
+from leoc.experiments.publish import publish
 
 SEEDS = list(range(20_000, 20_008))
 #: leoc's pendulum swing-up start: hanging (theta = pi), +/- 10 degrees and +/- 0.1 rad/s.
@@ -109,10 +110,12 @@ def test_both_arms_train_with_leocs_pendulum_sac_settings() -> None:
 
 @pytest.mark.slow
 @pytest.mark.usefixtures("single_thread")
-def test_smoke_part_records_agreement_and_report(tmp_path) -> None:
+def test_smoke_part_records_agreement_and_report(tmp_path, monkeypatch) -> None:
     """A smoke study of the Pendulum-v1 part: every arm x controller has its record; the
     agreement is P(gymnasium seed > leoc seed) of those records, counted here; a rerun trains
-    nothing (the records are reused) and the report regenerates byte for byte."""
+    nothing (the records are reused) and the report regenerates byte for byte. ``leoc
+    publish`` carries the records without the models, and the same study on the copy trains
+    nothing and gives the same numbers (a checkpoint of a study carried to another machine)."""
     options = {"envs": ["Pendulum-v1"], "seeds": 2, "episodes": 2, "command": "leoc x"}
     study = run_gym_study(tmp_path, "smoke", **options)
     entry = study[PENDULUM_KEY]
@@ -133,3 +136,14 @@ def test_smoke_part_records_agreement_and_report(tmp_path) -> None:
     write_study_report(tmp_path)
     assert (tmp_path / "README.md").read_bytes() == readme
     assert b"## Pendulum-v1 through the adapter" in readme
+    copy = tmp_path.parent / f"{tmp_path.name}-published"
+    assert publish(tmp_path, copy) == copy / "README.md"
+    names = {path.name for path in copy.rglob("*") if path.is_file()}
+    assert names == {"README.md", "study.json", "evaluation.json", "config.json", "design.json"}
+    monkeypatch.setattr(gym_pendulum, "_train", lambda *args: pytest.fail("retrained a run"))
+    carried = run_gym_study(copy, "smoke", **options)
+    assert json.dumps(carried, sort_keys=True) == json.dumps(study, sort_keys=True)
+    (copy / "study.json").unlink()  # a study still running: its finished runs only
+    partial = tmp_path.parent / f"{tmp_path.name}-partial"
+    assert publish(copy, partial) == partial
+    assert not (partial / "study.json").exists() and len(list(partial.rglob("evaluation.json")))
