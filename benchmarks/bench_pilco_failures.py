@@ -4,7 +4,9 @@ For each system x PILCO controller x seed: trains the run exactly as ``leoc repr
 under the profile (default ``paper``: its budget, leoc's defaults; the ROA hybrid on its
 certified LQR) into ``OUT/SYSTEM/CONTROLLER/seedN/train`` (resumed where a run stopped), then
 prints, per run, the diagnosis of :func:`leoc.pilco.diagnose.diagnose_run` (held, or the class
-of the failure with its evidence) and the count per class. Only the training: no evaluation,
+of the failure with its evidence) and the count per class; then, for the runs whose final
+controller is kept, :func:`leoc.pilco.diagnose.horizon_check`: the episodes that were up at the
+prediction horizon's end and are not held at the episode's end. Only the training: no evaluation,
 proof or protocol. ``--report-only`` prints the table of what ``OUT`` holds.
 
 Usage::
@@ -31,7 +33,7 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from leoc.pilco.diagnose import describe, diagnose_run
+from leoc.pilco.diagnose import describe, describe_horizon, diagnose_run, horizon_check
 
 PILCO_CONTROLLERS = ("pilco_baseline", "pilco_hybrid", "pilco_hybrid_roa")
 
@@ -129,6 +131,16 @@ def main() -> None:
         if (train_dir / "curve.json").is_file():
             diagnoses[key] = diagnose_run(train_dir)
     print(describe(diagnoses))
+    # The final controllers that the runs kept, replayed against the horizon (runs published
+    # without their controllers are left out).
+    checks = {
+        key: horizon_check(Path(args.out) / key / "train")
+        for key in diagnoses
+        if (Path(args.out) / key / "train" / "controller.pt").is_file()
+    }
+    if checks:
+        print()
+        print(describe_horizon(checks))
 
 
 if __name__ == "__main__":

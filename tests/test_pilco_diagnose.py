@@ -17,9 +17,11 @@ from leoc.pilco.diagnose import (
     NEAR_BUDGET,
     PROGRESS_RATIO,
     SATURATED_SHARE,
+    HorizonCheck,
     describe,
     diagnose_curve,
     diagnose_run,
+    up_and_held,
 )
 
 HORIZON = 40
@@ -186,3 +188,26 @@ def test_the_published_studies_print_what_their_records_hold(study, arm, seeds) 
     assert len(runs) == seeds
     table = describe({str(r.parent.relative_to(folder)): diagnose_run(r) for r in runs})
     assert table in (PILCO_STUDIES / study / "README.md").read_text(encoding="utf-8")
+
+
+def test_up_at_the_horizon_and_held_at_the_end() -> None:
+    """Episodes written by hand on the pendulum (theta in degrees, hold band 5, held: within it
+    for the last 50 steps): up at the horizon's step and staying (held), up there and let go,
+    up only one step later (not up: the step is the horizon's last), a terminated one, and up
+    from the horizon's step exactly."""
+    import numpy as np
+
+    from leoc.systems import make_system
+
+    system, steps, horizon = make_system("pendulum"), 160, 80
+    theta = np.full((5, steps + 1), np.radians(30.0))
+    theta[0, 60:] = np.radians(1.0)  # up from step 60 to the end
+    theta[1, 60:100] = np.radians(1.0)  # up from step 60, let go at step 100
+    theta[2, horizon + 1 :] = np.radians(1.0)  # up from the step after the horizon's
+    theta[3, 60:] = np.radians(1.0)  # as the first, but terminated
+    theta[4, horizon:] = np.radians(1.0)  # up from the horizon's step itself
+    states = np.stack([theta, np.zeros_like(theta)], axis=-1)
+    up, held = up_and_held(system, states, [False, False, False, True, False], horizon)
+    assert up == [True, True, False, True, True]
+    assert held == [True, False, True, False, True]
+    assert HorizonCheck(horizon, up, held).let_go == 2

@@ -312,3 +312,20 @@ def test_a_run_saved_before_its_first_iteration_has_no_model_to_load(references,
     obs = torch.as_tensor(ref.obs, dtype=DTYPE)
     with torch.no_grad():  # the controller alone still loads
         _assert_close(load_pilco_controller(tmp_path)(obs).numpy(), ref.actions, "controller")
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_horizon_check_replays_the_runs_last_evaluation(references, kind) -> None:
+    """:func:`leoc.pilco.diagnose.horizon_check` replays the saved controller from the
+    evaluation starts: its held episodes are those the trainer's last evaluation recorded, and
+    its horizon is the run's ``horizon * action_repeat`` simulator steps."""
+    from leoc.pilco import load_pilco_run
+    from leoc.pilco.diagnose import horizon_check
+
+    ref = references[kind]
+    check = horizon_check(ref.run_dir)
+    last = ref.result.curve[-1]
+    assert check.held == [step is not None for step in last["hold_steps"]]
+    config = load_pilco_run(ref.run_dir).config
+    assert check.horizon_steps == config.horizon * config.action_repeat
+    assert len(check.up) == config.eval_episodes

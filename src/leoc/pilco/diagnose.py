@@ -43,6 +43,14 @@ the hybrid's relevance widths. :func:`diagnose_run` reads them and puts a run in
 
 The classes are checked in this order; the thresholds are choices (stated with each constant),
 so :func:`describe` prints the evidence next to the class.
+
+**Beyond the horizon.** PILCO optimises the cost of ``horizon`` decisions (the pendulum's 40 at
+2 x 0.05 s: 4 s) while its evaluation episodes are longer (200 steps: 10 s) and ask the
+pendulum to be held at their end. A policy can swing up and hold inside the horizon, so that
+its predicted and realised costs are those of the runs that hold, and then let go: the curve
+cannot tell it from ``local optimum`` or ``partial``. :func:`horizon_check` replays a run's final
+controller from its evaluation starts and counts the episodes that were within the hold band
+at the horizon's last simulator step and are not held at the episode's end.
 """
 
 from __future__ import annotations
@@ -53,6 +61,8 @@ from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
+
+import numpy as np
 
 __all__ = [
     "BIAS_SHARE",
@@ -65,9 +75,13 @@ __all__ = [
     "RECENT",
     "SATURATED_SHARE",
     "Diagnosis",
+    "HorizonCheck",
     "describe",
+    "describe_horizon",
     "diagnose_curve",
     "diagnose_run",
+    "horizon_check",
+    "up_and_held",
 ]
 
 #: The classes, in the order they are checked.
@@ -256,3 +270,76 @@ def describe(diagnoses: Mapping[str, Diagnosis]) -> str:
     counts = Counter(found.kind for found in diagnoses.values())
     summary = ", ".join(f"{kind} {counts[kind]}" for kind in DIAGNOSES if counts[kind])
     return "\n".join([*lines, "", f"{len(diagnoses)} runs: {summary or 'none'}"])
+
+
+class HorizonCheck(NamedTuple):
+    """A final controller's evaluation episodes against PILCO's prediction horizon
+    (:func:`horizon_check`): the horizon's length in simulator steps, and per episode whether
+    the main coordinate was within the hold band at that step (``up``) and whether the episode
+    is held at its end (``held``)."""
+
+    horizon_steps: int
+    up: list[bool]
+    held: list[bool]
+
+    @property
+    def let_go(self) -> int:
+        """Episodes up at the horizon's end and not held at the episode's end."""
+        return sum(up and not held for up, held in zip(self.up, self.held, strict=True))
+
+
+def up_and_held(system: Any, states: Any, terminated: Any, step: int) -> tuple[list, list]:
+    """Per episode of ``states`` (B, T + 1, S; the start first): within ``system``'s hold band
+    after ``step`` simulator steps (a terminated episode that ended before then is not), and
+    held at its end (:meth:`~leoc.systems.System.hold_step`)."""
+    states = np.asarray(states)
+    up, held = [], []
+    for i in range(states.shape[0]):
+        episode = states[i]
+        ended = bool(terminated[i])
+        inside = step < episode.shape[0] and abs(
+            float(system.main_coordinate(episode[step : step + 1])[0])
+        ) <= float(system.hold_band)
+        up.append(bool(inside))
+        held.append(system.hold_step(episode[1:], terminated=ended) is not None)
+    return up, held
+
+
+def horizon_check(train_dir: str | Path) -> HorizonCheck:
+    """:class:`HorizonCheck` of the PILCO run in ``train_dir``: its saved controller replayed
+    on its plant from its evaluation starts (those of the training's evaluations), the
+    horizon ``horizon * action_repeat`` simulator steps.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``train_dir`` holds no saved controller.
+    """
+    from leoc.pilco.checkpoint import load_pilco_run
+    from leoc.systems.rollout import simulate
+    from leoc.training import evaluation_starts
+
+    run = load_pilco_run(train_dir)
+    config = run.config
+    starts = evaluation_starts(run.system, config.seed, config.eval_episodes)
+    batch = simulate(run.system, run.controller, starts)
+    steps = int(config.horizon) * int(config.action_repeat)
+    up, held = up_and_held(run.system, batch.states, batch.terminated, steps)
+    return HorizonCheck(steps, up, held)
+
+
+def describe_horizon(checks: Mapping[str, HorizonCheck]) -> str:
+    """A markdown table of :func:`horizon_check` per run (``checks``: run name -> check): the
+    horizon in simulator steps, the episodes up at its end, held at their end, and let go."""
+    lines = [
+        "| run | horizon (simulator steps) | up at the horizon's end | held at the end | let go "
+        "after the horizon |",
+        "|---|---|---|---|---|",
+    ]
+    for name, check in checks.items():
+        episodes = len(check.up)
+        lines.append(
+            f"| {name} | {check.horizon_steps} | {sum(check.up)}/{episodes} | "
+            f"{sum(check.held)}/{episodes} | {check.let_go}/{episodes} |"
+        )
+    return "\n".join(lines)
