@@ -318,7 +318,9 @@ def test_a_run_saved_before_its_first_iteration_has_no_model_to_load(references,
 def test_horizon_check_replays_the_runs_last_evaluation(references, kind) -> None:
     """:func:`leoc.pilco.diagnose.horizon_check` replays the saved controller from the
     evaluation starts: its held episodes are those the trainer's last evaluation recorded, and
-    its horizon is the run's ``horizon * action_repeat`` simulator steps."""
+    its horizon is the run's ``horizon * action_repeat`` simulator steps. Its predicted cost
+    over the horizon is the one the trainer logged; over the episode's decisions (more than
+    the horizon's, each costing more than 0) it is larger."""
     from leoc.pilco import load_pilco_run
     from leoc.pilco.diagnose import horizon_check
 
@@ -329,3 +331,7 @@ def test_horizon_check_replays_the_runs_last_evaluation(references, kind) -> Non
     config = load_pilco_run(ref.run_dir).config
     assert check.horizon_steps == config.horizon * config.action_repeat
     assert len(check.up) == config.eval_episodes
+    assert check.predicted == pytest.approx(last["predicted_cost"], rel=1e-9)
+    assert check.episode_decisions == config.episode_steps // config.action_repeat
+    assert check.episode_decisions > config.horizon
+    assert check.predicted_episode > check.predicted

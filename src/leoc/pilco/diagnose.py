@@ -276,11 +276,17 @@ class HorizonCheck(NamedTuple):
     """A final controller's evaluation episodes against PILCO's prediction horizon
     (:func:`horizon_check`): the horizon's length in simulator steps, and per episode whether
     the main coordinate was within the hold band at that step (``up``) and whether the episode
-    is held at its end (``held``)."""
+    is held at its end (``held``); and the run's GP model's predicted cost of the policy over
+    the horizon (``predicted``, what the optimisation saw) and over the evaluation episode's
+    decisions (``predicted_episode``: does the model see the let-go?), ``episode_decisions``
+    of them (None, both, where they are not computed)."""
 
     horizon_steps: int
     up: list[bool]
     held: list[bool]
+    predicted: float | None = None
+    predicted_episode: float | None = None
+    episode_decisions: int | None = None
 
     @property
     def let_go(self) -> int:
@@ -315,7 +321,12 @@ def horizon_check(train_dir: str | Path) -> HorizonCheck:
     FileNotFoundError
         If ``train_dir`` holds no saved controller.
     """
+    import dataclasses
+
+    import torch
+
     from leoc.pilco.checkpoint import load_pilco_run
+    from leoc.pilco.objective import predict_policy
     from leoc.systems.rollout import simulate
     from leoc.training import evaluation_starts
 
@@ -325,21 +336,35 @@ def horizon_check(train_dir: str | Path) -> HorizonCheck:
     batch = simulate(run.system, run.controller, starts)
     steps = int(config.horizon) * int(config.action_repeat)
     up, held = up_and_held(run.system, batch.states, batch.terminated, steps)
-    return HorizonCheck(steps, up, held)
+    decisions = int(batch.states.shape[1] - 1) // int(config.action_repeat)
+    costs = []
+    for horizon in (int(config.horizon), decisions):
+        longer = dataclasses.replace(config, horizon=horizon)
+        with torch.no_grad():
+            prediction = predict_policy(run.policy, run.model, run.system, longer)
+        costs.append(float(prediction.total_cost))
+    return HorizonCheck(steps, up, held, costs[0], costs[1], decisions)
 
 
 def describe_horizon(checks: Mapping[str, HorizonCheck]) -> str:
     """A markdown table of :func:`horizon_check` per run (``checks``: run name -> check): the
-    horizon in simulator steps, the episodes up at its end, held at their end, and let go."""
+    horizon in simulator steps, the episodes up at its end, held at their end, and let go; the
+    predicted cost over the horizon and over the episode's decisions."""
     lines = [
         "| run | horizon (simulator steps) | up at the horizon's end | held at the end | let go "
-        "after the horizon |",
-        "|---|---|---|---|---|",
+        "after the horizon | predicted cost, horizon | predicted cost, whole episode |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, check in checks.items():
         episodes = len(check.up)
+        episode = (
+            "-"
+            if check.predicted_episode is None
+            else f"{check.predicted_episode:.2f} ({check.episode_decisions} decisions)"
+        )
+        horizon = "-" if check.predicted is None else f"{check.predicted:.2f}"
         lines.append(
             f"| {name} | {check.horizon_steps} | {sum(check.up)}/{episodes} | "
-            f"{sum(check.held)}/{episodes} | {check.let_go}/{episodes} |"
+            f"{sum(check.held)}/{episodes} | {check.let_go}/{episodes} | {horizon} | {episode} |"
         )
     return "\n".join(lines)
