@@ -30,7 +30,7 @@ import argparse
 import dataclasses
 import json
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
+import signal
 from pathlib import Path
 
 from leoc.pilco.diagnose import describe, describe_horizon, diagnose_run, horizon_check
@@ -82,6 +82,31 @@ def _overrides(parser: argparse.ArgumentParser, text: str | None) -> dict | None
     return overrides
 
 
+def _stop(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _train_all(keys: list[str], args: argparse.Namespace, overrides: dict | None) -> None:
+    """Train the runs ``keys`` on ``args.jobs`` worker processes, in order. SIGTERM (or Ctrl-C)
+    stops the workers too (a run resumes from its last finished iteration when the same command
+    runs again); a process pool's workers would otherwise finish their runs orphaned."""
+    signal.signal(signal.SIGTERM, _stop)
+    pool = multiprocessing.get_context("spawn").Pool(args.jobs)
+    try:
+        pending = {
+            key: pool.apply_async(_train, (key, args.profile, args.out, overrides)) for key in keys
+        }
+        for key, result in pending.items():
+            result.get()
+            print(f"trained {key}", flush=True)
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.close()
+        pool.join()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True, help="folder of the runs (resumed)")
@@ -117,14 +142,7 @@ def main() -> None:
             f"{PILCO_CONTROLLERS}, found {unknown + malformed}"
         )
     if not args.report_only:
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(args.jobs, mp_context=context) as pool:
-            futures = {
-                key: pool.submit(_train, key, args.profile, args.out, overrides) for key in keys
-            }
-            for key, future in futures.items():
-                future.result()
-                print(f"trained {key}", flush=True)
+        _train_all(keys, args, overrides)
     diagnoses = {}
     for key in keys:
         train_dir = Path(args.out) / key / "train"
