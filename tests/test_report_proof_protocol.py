@@ -19,6 +19,7 @@ from leoc.experiments.report import PROVED_REGION_CHECK, Report, Study
 from leoc.experiments.report import proved_regions as proved_section
 from leoc.experiments.report import robustness_protocol as protocol_section
 from leoc.experiments.report.base import label
+from leoc.experiments.stats import improvement_verdict
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
@@ -480,12 +481,14 @@ def test_the_verdicts_compare_each_hybrid_with_its_lqr_and_its_baseline_by_hand(
 
 
 def test_a_verdict_without_an_interval_whose_mean_difference_is_zero_is_unresolved() -> None:
-    """Two hybrid seeds (0.75, 0.25) against one baseline seed (0.5): one win and one loss,
+    """The protocol's verdict against a baseline
+    (:func:`leoc.experiments.stats.improvement_verdict`). Two hybrid seeds (0.75, 0.25)
+    against one baseline seed (0.5): one win and one loss,
     mean difference 0 but not every score equal: neither above nor below (n < 3); a mean
     above or below 0 keeps its sign."""
-    tied = protocol_section._versus_baseline([0.75, 0.25], [0.5])
+    tied = improvement_verdict([0.75, 0.25], [0.5])
     assert tied["probability"] == pytest.approx(0.5)
     assert tied["verdict"] == "unresolved (n < 3)"
-    assert protocol_section._versus_baseline([0.75, 0.5], [0.5])["verdict"] == "above (n < 3)"
-    assert protocol_section._versus_baseline([0.25, 0.5], [0.5])["verdict"] == "below (n < 3)"
-    assert protocol_section._versus_baseline([0.5, 0.5], [0.5])["verdict"] == "equal"
+    assert improvement_verdict([0.75, 0.5], [0.5])["verdict"] == "above (n < 3)"
+    assert improvement_verdict([0.25, 0.5], [0.5])["verdict"] == "below (n < 3)"
+    assert improvement_verdict([0.5, 0.5], [0.5])["verdict"] == "equal"
